@@ -1,0 +1,184 @@
+"""Mesh generators for the paper's shapes: box and cylinder beams, a T and a Y.
+
+Every generator builds hexahedra and splits each into 5 tets around a central tet. The
+vertices of a hex mesh whose edge graph is bipartite get a global 2-coloring; each hex's
+central tet joins its four color-0 corners, so neighboring hexes split their shared face along
+the same diagonal and the split alternates (mirrors) from cell to cell. Unlike the 6-tet split
+with all diagonals one way, this keeps the symmetry of the cell grid: a beam with an even
+number of cells across a mid-plane is mirror-symmetric about it, so a symmetric load gives a
+symmetric answer. Lengths are in m; beams run along +x from x = 0.
+"""
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import breadth_first_order
+
+from .mesh import TetMesh
+
+# hex corner numbering: 0-3 bottom face (cyclic), 4-7 top face, 4 above 0
+_HEX_EDGES = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
+                       [0, 4], [1, 5], [2, 6], [3, 7]])
+_NEIGHBORS = np.array([[1, 3, 4], [0, 2, 5], [1, 3, 6], [2, 0, 7],
+                       [5, 7, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]])
+_CLASS = (np.array([0, 2, 5, 7]), np.array([1, 3, 4, 6]))
+
+
+def hexes_to_tets(points, hexes):
+    """Split hexahedra (k, 8) into 5 tets each (central tet on color-0 corners); a TetMesh.
+
+    Raises ValueError if the hex edge graph is not bipartite (no conforming 5-tet split).
+    """
+    points = np.asarray(points, dtype=float)
+    hexes = np.asarray(hexes, dtype=np.int64)
+    label = _two_color(points.shape[0], hexes[:, _HEX_EDGES].reshape(-1, 2))
+    central_first = label[hexes[:, 0]] == 0
+    tets = np.empty((hexes.shape[0], 5, 4), np.int64)
+    for flag, (central, corners) in ((True, _CLASS), (False, _CLASS[::-1])):
+        sel = central_first == flag
+        h = hexes[sel]
+        tets[sel, 0] = h[:, central]
+        for k, c in enumerate(corners):
+            tets[sel, k + 1, 0] = h[:, c]
+            tets[sel, k + 1, 1:] = h[:, _NEIGHBORS[c]]
+    return TetMesh(points, tets.reshape(-1, 4), fix_orientation=True)
+
+
+def _two_color(n, edges):
+    """0/1 label per vertex with every edge joining different labels."""
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    graph = (graph + graph.T).tocsr()
+    label = -np.ones(n, np.int64)
+    for start in range(n):
+        if label[start] >= 0:
+            continue
+        order, pred = breadth_first_order(graph, start, directed=False)
+        label[start] = 0
+        for v in order[1:]:
+            label[v] = 1 - label[pred[v]]
+    if (label[edges[:, 0]] == label[edges[:, 1]]).any():
+        raise ValueError("hexes: the hex edge graph is not bipartite; no conforming 5-tet split")
+    return label
+
+
+def _extrude(section, quads, heights, axis):
+    """Hexes from a quad mesh section (p, 2) swept through the given heights along axis.
+
+    The section's two coordinates fill the other two axes in increasing order.
+    """
+    p = section.shape[0]
+    layers = len(heights)
+    other = [a for a in range(3) if a != axis]
+    pts = np.empty((layers * p, 3))
+    pts[:, axis] = np.repeat(heights, p)
+    pts[:, other[0]] = np.tile(section[:, 0], layers)
+    pts[:, other[1]] = np.tile(section[:, 1], layers)
+    offsets = np.arange(layers - 1)[:, None, None] * p
+    hexes = np.concatenate([quads[None] + offsets, quads[None] + offsets + p], axis=2)
+    return pts, hexes.reshape(-1, 8)
+
+
+def _grid_quads(nu, nv, keep=None):
+    """Quads of a (nu x nv)-cell grid with vertex (i, j) at index i (nv + 1) + j."""
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    base = (i * (nv + 1) + j).ravel()
+    quads = np.stack([base, base + nv + 1, base + nv + 2, base + 1], axis=1)
+    return quads if keep is None else quads[keep.ravel()]
+
+
+def _check_cells(cells, name, count):
+    cells = tuple(int(c) for c in np.atleast_1d(cells))
+    if len(cells) != count or min(cells) < 1:
+        raise ValueError(f"{name}: expected {count} positive cell counts, got {cells}")
+    return cells
+
+
+def box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2)):
+    """Box beam [0, L] x [-W/2, W/2] x [-H/2, H/2] with size (L, W, H) in m, split into
+    cells (nx, ny, nz) hexes of 5 tets each (5 nx ny nz tets). Even ny and nz keep the mesh
+    mirror-symmetric about the y = 0 and z = 0 planes."""
+    nx, ny, nz = _check_cells(cells, "cells", 3)
+    L, W, H = (float(s) for s in size)
+    if min(L, W, H) <= 0:
+        raise ValueError(f"size: all dimensions must be > 0 m, got {size}")
+    v, w = np.meshgrid(np.linspace(-W / 2, W / 2, ny + 1), np.linspace(-H / 2, H / 2, nz + 1),
+                       indexing="ij")
+    section = np.stack([v.ravel(), w.ravel()], axis=1)
+    pts, hexes = _extrude(section, _grid_quads(ny, nz), np.linspace(0, L, nx + 1), axis=0)
+    return hexes_to_tets(pts, hexes)
+
+
+def cylinder_beam(length=0.1, radius=0.01, cells_along=10, section_cells=2, rings=1):
+    """Cylinder beam along x from 0 to length, radius in m.
+
+    The cross-section is an O-grid: a square core of section_cells^2 quads (half-width
+    radius/2) surrounded by `rings` layers of 4 section_cells quads reaching the circle
+    (rings=0: the core itself is mapped onto the disk). Tets: 5 cells_along (section_cells^2
+    + 4 section_cells rings). An even section_cells keeps the mesh mirror-symmetric.
+    """
+    n = _check_cells(section_cells, "section_cells", 1)[0]
+    nx = _check_cells(cells_along, "cells_along", 1)[0]
+    if int(rings) < 0:
+        raise ValueError(f"rings: must be >= 0, got {rings}")
+    if length <= 0 or radius <= 0:
+        raise ValueError(f"length, radius: must be > 0 m, got {length}, {radius}")
+    a = radius / 2 if rings else radius
+    u, v = np.meshgrid(np.linspace(-a, a, n + 1), np.linspace(-a, a, n + 1), indexing="ij")
+    core = np.stack([u.ravel(), v.ravel()], axis=1)
+    quads = [_grid_quads(n, n)]
+    i = np.concatenate([np.arange(n), np.full(n, n), np.arange(n, 0, -1), np.zeros(n, int)])
+    j = np.concatenate([np.zeros(n, int), np.arange(n), np.full(n, n), np.arange(n, 0, -1)])
+    rim = i * (n + 1) + j  # core perimeter, counter-clockwise
+    p = core[rim]
+    on_circle = p * (radius / np.linalg.norm(p, axis=1))[:, None]
+    if rings == 0:
+        r_inf = np.abs(core).max(axis=1)
+        r_2 = np.linalg.norm(core, axis=1)
+        scale = np.divide(r_inf, r_2, out=np.ones_like(r_2), where=r_2 > 0)
+        section = core * scale[:, None]
+    else:
+        layers = [p + (t / rings) * (on_circle - p) for t in range(1, rings + 1)]
+        section = np.concatenate([core] + layers)
+        index = [rim] + [core.shape[0] + t * 4 * n + np.arange(4 * n) for t in range(rings)]
+        for t in range(rings):
+            inner, outer = index[t], index[t + 1]
+            quads.append(np.stack([inner, np.roll(inner, -1), np.roll(outer, -1), outer], 1))
+    pts, hexes = _extrude(section, np.concatenate(quads), np.linspace(0, length, nx + 1), 0)
+    return hexes_to_tets(pts, hexes)
+
+
+def _masked_section(width, height, cell, inside):
+    """Structured quads of a (width x height) rectangle centered on x = 0 from z = 0, keeping
+    the cells whose center (x, z) satisfies inside(x, z); unused vertices removed."""
+    nu, nv = int(round(width / cell)), int(round(height / cell))
+    if nu < 1 or nv < 1 or abs(nu * cell - width) > 1e-9 * width or \
+            abs(nv * cell - height) > 1e-9 * height:
+        raise ValueError(f"cell: {cell} m must divide width {width} m and height {height} m")
+    u, v = np.meshgrid(np.linspace(-width / 2, width / 2, nu + 1), np.linspace(0, height, nv + 1),
+                       indexing="ij")
+    cu, cv = np.meshgrid(-width / 2 + cell * (np.arange(nu) + 0.5), cell * (np.arange(nv) + 0.5),
+                         indexing="ij")
+    quads = _grid_quads(nu, nv, keep=inside(cu, cv))
+    used, quads = np.unique(quads, return_inverse=True)
+    section = np.stack([u.ravel(), v.ravel()], axis=1)[used]
+    return section, quads.reshape(-1, 4)
+
+
+def t_shape(width=0.1, height=0.08, bar=0.02, stem=0.02, depth=0.02, cell=0.01):
+    """A T in the x-z plane extruded along y over [-depth/2, depth/2]: a top bar of the given
+    width and thickness `bar` on a stem of width `stem`, standing on z = 0. Cubic cells of
+    edge `cell` (m); keep width / cell and stem / cell even for x-mirror symmetry."""
+    section, quads = _masked_section(
+        width, height, cell, lambda x, z: (z > height - bar) | (np.abs(x) < stem / 2))
+    ny = max(1, int(round(depth / cell)))
+    pts, hexes = _extrude(section, quads, np.linspace(-depth / 2, depth / 2, ny + 1), axis=1)
+    return hexes_to_tets(pts, hexes)
+
+
+def y_shape(width=0.1, height=0.08, bar=0.02, stem=0.02, depth=0.02, cell=0.01, angle=35.0):
+    """A Y: the T of t_shape with both arms bent upward by `angle` degrees from the horizontal
+    (vertices with |x| > stem/2 rise by (|x| - stem/2) tan(angle))."""
+    if not 0 <= angle < 80:
+        raise ValueError(f"angle: expected degrees in [0, 80), got {angle}")
+    mesh = t_shape(width, height, bar, stem, depth, cell)
+    X = mesh.vertices.copy()
+    X[:, 2] += np.maximum(np.abs(X[:, 0]) - stem / 2, 0.0) * np.tan(np.radians(angle))
+    return TetMesh(X, mesh.tets)

@@ -1,0 +1,145 @@
+"""Newton's method with backtracking line search on a scene's potential G.
+
+Unknowns are the free vertex components; fixed ones stay at their prescribed positions.
+Converged means |dG/dx|_free <= max(rtol * scale, atol), with scale = max(|dG/dx(x0)|_free,
+|f_ext|_free) (N). The result is never NaN: a failure returns the last iterate, converged=False
+and a message saying why.
+
+Hessian choice (`projection`):
+- "adaptive" (default): the true Hessian wherever it gives a usable descent direction (its
+  factorization succeeds, the step is finite and descends, the line search makes progress);
+  otherwise the PSD-projected one (see anisofem.kernels), which is kept until the relative
+  residual drops below ADAPTIVE_RETURN. Near a stable equilibrium the true Hessian is positive
+  definite even though compressed elements are indefinite on their own, so convergence ends
+  quadratically.
+- "always": the projected Hessian at every iteration (robust, but only linear convergence
+  near equilibria that have compressed elements).
+- "never": the true Hessian only (fails where it is indefinite).
+"""
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import linsolve
+
+ADAPTIVE_RETURN = 1e-3
+ARMIJO = 1e-4
+MIN_STEP = 1e-10
+
+
+class ConvergenceWarning(RuntimeWarning):
+    """Newton's method stopped without reaching its tolerance."""
+
+
+@dataclass
+class NewtonResult:
+    """Outcome of a Newton solve.
+
+    x: (n, 3) final positions, m. converged: whether the tolerance was met. iterations: Newton
+    iterations taken. residuals: relative free-gradient norms, one per iterate (the first is the
+    start). energy: G(x), J. projected: iterations that used the projected Hessian.
+    message: why it stopped. seconds: wall time.
+    """
+    x: np.ndarray
+    converged: bool
+    iterations: int
+    residuals: list = field(default_factory=list)
+    energy: float = float("nan")
+    projected: int = 0
+    message: str = ""
+    seconds: float = 0.0
+
+    def __repr__(self):
+        return (f"NewtonResult(converged={self.converged}, iterations={self.iterations}, "
+                f"residual={self.residuals[-1]:.3g}, projected={self.projected}, "
+                f"message={self.message!r})")
+
+
+_PROJECTIONS = ("adaptive", "always", "never")
+
+
+def minimize(potential, x0, *, rtol=1e-8, atol=0.0, max_iter=100, projection="adaptive",
+             linear_solver="auto", warn=True):
+    """Minimize potential (an anisofem.potential.Potential) from x0 (n, 3), fixed components
+    already at their prescribed positions. Returns a NewtonResult."""
+    if projection not in _PROJECTIONS:
+        raise ValueError(f"projection: expected one of {_PROJECTIONS}, got {projection!r}")
+    if not (rtol >= 0 and atol >= 0 and (rtol > 0 or atol > 0)):
+        raise ValueError(f"rtol, atol: must be >= 0 and not both 0, got {rtol}, {atol}")
+    if int(max_iter) < 0:
+        raise ValueError(f"max_iter: must be >= 0, got {max_iter}")
+    t0 = time.perf_counter()
+    scene = potential.scene
+    free = ~scene.fixed_mask
+    solver = linsolve.make(linear_solver, scene.n_free)
+    layout = scene.layout(solver.layout)
+    x = np.array(x0, dtype=float)
+    energy, grad = potential.energy_gradient(x)
+    g = grad[free]
+    scale = max(np.linalg.norm(g), np.linalg.norm(scene.external_force[free]))
+    tol = max(rtol * scale, atol)
+    res = [np.linalg.norm(g) / scale if scale > 0 else 0.0]
+    use_projected = projection == "always"
+    n_projected = 0
+    message = "max_iter reached"
+    converged = False
+    it = 0
+    while True:
+        if np.linalg.norm(g) <= tol:
+            converged, message = True, "converged"
+            break
+        if it >= max_iter:
+            break
+        step = None
+        for projected in ([True] if use_projected else [False, True] if projection == "adaptive"
+                          else [False]):
+            step = _newton_step(potential, x, energy, g, free, layout, solver, projected)
+            if step is not None:
+                break
+            if projection == "adaptive":
+                use_projected = True
+        it += 1
+        if step is None:
+            message = "no descent direction: the line search stalled"
+            break
+        x, energy, grad, projected = step
+        n_projected += projected
+        g = grad[free]
+        res.append(np.linalg.norm(g) / scale)
+        if projection == "adaptive" and use_projected and res[-1] < ADAPTIVE_RETURN:
+            use_projected = False
+    result = NewtonResult(x=x, converged=converged, iterations=it, residuals=res, energy=energy,
+                          projected=n_projected, message=message,
+                          seconds=time.perf_counter() - t0)
+    if warn and not converged:
+        warnings.warn(f"Newton did not converge: {message} after {it} iterations, relative "
+                      f"residual {res[-1]:.3g}", ConvergenceWarning, stacklevel=3)
+    return result
+
+
+def _newton_step(potential, x, energy, g, free, layout, solver, projected):
+    """One damped Newton step; (x, energy, gradient, projected) or None if no progress."""
+    _, _, data = potential.hessian_data(x, layout, project=projected, want_grad=False)
+    try:
+        p = -solver.factor(layout, data)(g)
+    except linsolve.FactorizationError:
+        return None
+    slope = float(np.dot(p, g))
+    if not np.isfinite(p).all() or slope >= -1e-14 * np.linalg.norm(p) * np.linalg.norm(g):
+        return None
+    gnorm = np.linalg.norm(g)
+    noise = 1e-13 * max(abs(energy), 1e-300)
+    alpha = 1.0
+    while alpha >= MIN_STEP:
+        xt = x.copy()
+        xt[free] += alpha * p
+        et, gt = potential.energy_gradient(xt)
+        if et <= energy + ARMIJO * alpha * slope:
+            return xt, et, gt, projected
+        # below round-off the energy cannot rank the points: accept if the gradient shrinks
+        if abs(et - energy) <= noise and np.linalg.norm(gt[free]) < gnorm:
+            return xt, et, gt, projected
+        alpha *= 0.5
+    return None

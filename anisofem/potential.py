@@ -1,0 +1,122 @@
+"""The (incremental) potential of a scene, its gradient and Hessian: the public functions that
+are also the network's loss.
+
+Statics:          G(x) = sum_e Psi_e(x) - f_ext . x
+Backward Euler:   G(x) = 1/(2 dt^2) (x - x_hat)^T M (x - x_hat) + sum_e Psi_e(x) - f_ext . x,
+                  with x_hat = x_n + dt v_n and the lumped mass matrix M.
+Positions x are (n, 3) in m, energies in J, gradients in N, Hessians in N/m.
+"""
+import numpy as np
+
+from . import kernels
+from ._validate import as_float_array, as_scalar
+from .scene import Scene
+
+
+class Potential:
+    """G of a scene, statics (x_hat = dt = None) or one backward-Euler step."""
+
+    def __init__(self, scene, x_hat=None, dt=None):
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
+        if (x_hat is None) != (dt is None):
+            raise ValueError("x_hat, dt: give both (backward Euler) or neither (statics)")
+        self.scene = scene
+        self.dynamic = dt is not None
+        if self.dynamic:
+            self.dt = as_scalar(dt, "dt")
+            if self.dt <= 0:
+                raise ValueError(f"dt: the time step must be > 0 s, got {self.dt}")
+            self.x_hat = check_positions(scene, x_hat, "x_hat")
+            self.mass_over_dt2 = scene.masses / self.dt ** 2
+
+    def terms(self, x):
+        """Energy terms in J: isotropic, fiber, external, kinetic, total; and per-element
+        elastic energies (m,) under "elements"."""
+        e_iso, e_fib, _ = kernels.assemble(x, self.scene.elements)
+        out = {"isotropic": float(e_iso.sum()), "fiber": float(e_fib.sum()),
+               "external": -float(np.vdot(self.scene.external_force, x)),
+               "kinetic": self._kinetic(x)}
+        out["total"] = out["isotropic"] + out["fiber"] + out["external"] + out["kinetic"]
+        out["elements"] = e_iso + e_fib
+        return out
+
+    def energy(self, x):
+        """G(x) in J."""
+        return self.terms(x)["total"]
+
+    def energy_gradient(self, x):
+        """(G(x) in J, dG/dx (n, 3) in N)."""
+        e_iso, e_fib, grad = kernels.assemble(x, self.scene.elements, want_grad=True)
+        value = float(e_iso.sum() + e_fib.sum()) - float(np.vdot(self.scene.external_force, x))
+        grad -= self.scene.external_force
+        if self.dynamic:
+            value += self._kinetic(x)
+            grad += self.mass_over_dt2[:, None] * (x - self.x_hat)
+        return value, grad
+
+    def hessian_data(self, x, layout, project=False, want_grad=True):
+        """Assemble d2G/dx2 into layout (a CsrLayout or DenseLayout over some DOFs).
+
+        Returns (G, gradient (n, 3) or None, data) where layout.matrix(data) is the Hessian.
+        project: use the PSD-projected element Hessians (see anisofem.kernels).
+        """
+        data = layout.zeros()
+        e_iso, e_fib, grad = kernels.assemble(
+            x, self.scene.elements, want_grad=want_grad, want_hess=True, project=project,
+            hess_map=layout.map, hess_data=data)
+        value = float(e_iso.sum() + e_fib.sum()) - float(np.vdot(self.scene.external_force, x))
+        if want_grad:
+            grad -= self.scene.external_force
+        if self.dynamic:
+            value += self._kinetic(x)
+            if want_grad:
+                grad += self.mass_over_dt2[:, None] * (x - self.x_hat)
+            data[layout.diag] += np.repeat(self.mass_over_dt2, 3)[layout.dofs]
+        return value, grad, data
+
+    def _kinetic(self, x):
+        if not self.dynamic:
+            return 0.0
+        dx = x - self.x_hat
+        return 0.5 * float(np.einsum("i,ij,ij->", self.mass_over_dt2, dx, dx))
+
+
+def check_positions(scene, x, name="x"):
+    """x as a finite (n, 3) float64 array."""
+    return as_float_array(x, name, shape=(scene.mesh.n_vertices, 3))
+
+
+def energy(scene, x, x_hat=None, dt=None, split=False):
+    """Potential G(x) in J (statics, or backward Euler with x_hat and dt).
+
+    split=True returns a dict with the terms "isotropic", "fiber", "external", "kinetic" and
+    "total" (external = -f_ext . x; kinetic = 0 in statics).
+    """
+    pot = Potential(scene, x_hat, dt)
+    terms = pot.terms(check_positions(scene, x))
+    if split:
+        terms.pop("elements")
+        return terms
+    return terms["total"]
+
+
+def gradient(scene, x, x_hat=None, dt=None):
+    """dG/dx, (n, 3) in N, for every vertex (fixed ones included)."""
+    return Potential(scene, x_hat, dt).energy_gradient(check_positions(scene, x))[1]
+
+
+def hessian(scene, x, x_hat=None, dt=None, project=False):
+    """d2G/dx2 as a scipy.sparse CSR matrix (3n, 3n) in N/m, DOF 3 i + c for vertex i, axis c.
+
+    project=True returns the PSD-projected Hessian Newton uses away from equilibrium.
+    """
+    layout = scene.full_layout
+    _, _, data = Potential(scene, x_hat, dt).hessian_data(
+        check_positions(scene, x), layout, project=project, want_grad=False)
+    return layout.matrix(data)
+
+
+def element_energy(scene, x):
+    """(m,) elastic energy of each tet in J (isotropic + fiber)."""
+    return Potential(scene).terms(check_positions(scene, x))["elements"]

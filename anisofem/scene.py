@@ -1,0 +1,206 @@
+"""A scene: mesh + material + boundary conditions + dead loads, with the per-element data the
+kernels need, precomputed once."""
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from ._validate import as_float_array, as_index_array, check_shape, per_element
+from .assembly import CsrLayout, DenseLayout
+from .material import Material
+from .mesh import TetMesh
+
+
+@dataclass(frozen=True)
+class ElementData:
+    """Arrays the element kernels read (see anisofem.kernels), one row per tet."""
+    tets: np.ndarray          # (m, 4) int64
+    grads: np.ndarray         # (m, 4, 3) shape-function gradients, 1/m
+    volumes: np.ndarray       # (m,) rest volumes, m^3
+    mu: np.ndarray            # (m,) Pa
+    lam: np.ndarray           # (m,) Pa
+    kappa: np.ndarray         # (m,) Pa
+    fiber: np.ndarray         # (m, 3) unit fiber directions
+    has_fiber: bool           # False: the fiber term is skipped entirely
+    serial_order: np.ndarray  # (m,) int64
+    color_order: np.ndarray   # (m,) int64, tets grouped by color
+    color_ptr: np.ndarray     # (colors + 1,) int64
+
+
+class Scene:
+    """What is simulated: a mesh, its material, what is held and what loads it.
+
+    Parameters
+    ----------
+    mesh : TetMesh.
+    material : Material (default: Material.paper(), no fibers).
+    fixed : Dirichlet vertices: None, vertex indices (k,), a per-vertex bool mask (n,), or a
+        per-component bool mask (n, 3) (rollers, symmetry planes).
+    fixed_positions : where the fixed components are held, m: (n, 3), or (k, 3) when fixed is
+        given as k indices. Default: their rest positions.
+    gravity : acceleration (3,) in m/s^2, adds density * gravity to the body force.
+    body_force : force density b in N/m^3, (3,) or (m, 3); b v / 4 goes to each tet vertex.
+    nodal_force : (n, 3) forces in N applied to vertices.
+    traction : surface load t in N/m^2 on traction_faces, (3,) or (k, 3), per rest area; t
+        area / 3 goes to each face vertex (dead load: fixed in direction and magnitude).
+    traction_faces : (k, 3) vertex triples, which must be boundary faces of the mesh (see
+        TetMesh.faces_where).
+
+    Vertices that no tet uses are held in place. All loads are dead loads: the external force
+    vector is constant, f_ext (n, 3), and enters the potential as -f_ext . x.
+    """
+
+    def __init__(self, mesh, material=None, *, fixed=None, fixed_positions=None, gravity=None,
+                 body_force=None, nodal_force=None, traction=None, traction_faces=None):
+        if not isinstance(mesh, TetMesh):
+            raise TypeError(f"mesh: expected an anisofem.TetMesh, got {type(mesh).__name__}")
+        material = Material.paper() if material is None else material
+        if not isinstance(material, Material):
+            raise TypeError(f"material: expected an anisofem.Material, got "
+                            f"{type(material).__name__}")
+        self.mesh = mesh
+        self.material = material
+        n, m = mesh.n_vertices, mesh.n_tets
+        self._params = material.per_element(m)
+        self.fixed_mask = self._fixed_mask(fixed)
+        self.fixed_positions = self._fixed_positions(fixed, fixed_positions)
+        vol = mesh.rest_volumes
+        self.masses = _to_vertices(mesh, self._params["density"] * vol / 4.0)
+        b = np.zeros((m, 3))
+        if gravity is not None:
+            g = as_float_array(gravity, "gravity", shape=(3,))
+            b += self._params["density"][:, None] * g
+        if body_force is not None:
+            b += per_element(body_force, "body_force", m, width=3)
+        f = np.zeros((n, 3))
+        for i in range(3):
+            f[:, i] = _to_vertices(mesh, b[:, i] * vol / 4.0)
+        if nodal_force is not None:
+            f += as_float_array(nodal_force, "nodal_force", shape=(n, 3))
+        if traction is not None or traction_faces is not None:
+            f += _traction_force(mesh, traction, traction_faces)
+        self.external_force = f
+        for arr in (self.fixed_mask, self.fixed_positions, self.masses, self.external_force):
+            arr.setflags(write=False)
+
+    def _fixed_mask(self, fixed):
+        n = self.mesh.n_vertices
+        mask = np.zeros((n, 3), bool)
+        if fixed is not None:
+            arr = np.asarray(fixed)
+            if arr.dtype == bool:
+                if arr.shape == (n,):
+                    mask[arr] = True
+                elif arr.shape == (n, 3):
+                    mask |= arr
+                else:
+                    raise ValueError(f"fixed: a bool mask must have shape ({n},) or ({n}, 3), "
+                                     f"got {arr.shape}")
+            else:
+                idx = as_index_array(arr, "fixed", shape=(None,))
+                if idx.size and (idx.min() < 0 or idx.max() >= n):
+                    raise ValueError(f"fixed: vertex index out of range [0, {n})")
+                if np.unique(idx).size != idx.size:
+                    raise ValueError("fixed: repeated vertex indices")
+                mask[idx] = True
+        mask[self.mesh.unreferenced] = True
+        return mask
+
+    def _fixed_positions(self, fixed, positions):
+        x = self.mesh.vertices.copy()
+        if positions is None:
+            return x
+        pos = as_float_array(positions, "fixed_positions")
+        n = self.mesh.n_vertices
+        if pos.shape == (n, 3):
+            x[self.fixed_mask] = pos[self.fixed_mask]
+            return x
+        if fixed is not None and np.asarray(fixed).dtype != bool:
+            idx = np.asarray(fixed)
+            check_shape(pos, "fixed_positions", (idx.size, 3))
+            x[idx] = pos
+            return x
+        raise ValueError(f"fixed_positions: expected shape ({n}, 3), or (k, 3) with fixed "
+                         f"given as k indices; got {pos.shape}")
+
+    @cached_property
+    def dof_map(self):
+        """(n, 3) int64: index of each free vertex component among the unknowns, -1 if fixed."""
+        free = ~self.fixed_mask
+        dof = np.full(free.shape, -1, np.int64)
+        dof[free] = np.arange(free.sum())
+        return dof
+
+    @property
+    def n_free(self):
+        """Number of unknowns (free vertex components)."""
+        return int((~self.fixed_mask).sum())
+
+    @cached_property
+    def elements(self):
+        p = self._params
+        order, ptr = self.mesh.coloring
+        kappa = p["kappa"]
+        return ElementData(
+            tets=np.ascontiguousarray(self.mesh.tets, dtype=np.int64),
+            grads=self.mesh.shape_gradients, volumes=self.mesh.rest_volumes,
+            mu=p["mu"], lam=p["lam"], kappa=kappa, fiber=p["fiber"],
+            has_fiber=bool((kappa > 0).any()),
+            serial_order=np.arange(self.mesh.n_tets, dtype=np.int64),
+            color_order=order, color_ptr=ptr)
+
+    def layout(self, kind):
+        """The Hessian layout over the free DOFs: kind "csr" or "dense" (cached)."""
+        cache = self.__dict__.setdefault("_layouts", {})
+        if kind not in cache:
+            cls = {"csr": CsrLayout, "dense": DenseLayout}[kind]
+            cache[kind] = cls(self.elements.tets, self.dof_map)
+        return cache[kind]
+
+    @cached_property
+    def full_layout(self):
+        """CSR layout over all 3n DOFs (for the public hessian())."""
+        n = self.mesh.n_vertices
+        return CsrLayout(self.elements.tets, np.arange(3 * n, dtype=np.int64).reshape(n, 3))
+
+    def check_static(self):
+        """Raise ValueError unless fixed components remove the rigid translations."""
+        held = self.fixed_mask.copy()
+        held[self.mesh.unreferenced] = False
+        if not held.any():
+            raise ValueError("fixed: a static scene needs fixed vertices (with none, the "
+                             "equilibrium is not unique: the body can translate and rotate)")
+        missing = [c for c in range(3) if not held[:, c].any()]
+        if missing:
+            raise ValueError(f"fixed: no vertex is held along axis {missing}: the static "
+                             f"equilibrium is not unique (free rigid translation)")
+
+    def initial_positions(self):
+        """(n, 3) rest positions with fixed components at their prescribed positions."""
+        return self.fixed_positions.copy()
+
+
+def _to_vertices(mesh, per_tet):
+    """Sum a per-tet scalar (m,) onto its four vertices: (n,)."""
+    out = np.zeros(mesh.n_vertices)
+    np.add.at(out, mesh.tets.ravel(), np.repeat(per_tet, 4))
+    return out
+
+
+def _traction_force(mesh, traction, faces):
+    if traction is None or faces is None:
+        raise ValueError("traction, traction_faces: give both (N/m^2 and the boundary faces)")
+    faces = as_index_array(faces, "traction_faces", shape=(None, 3))
+    k = faces.shape[0]
+    t = per_element(traction, "traction", k, width=3)
+    boundary = {tuple(f) for f in np.sort(mesh.boundary_faces, axis=1).tolist()}
+    for i, f in enumerate(np.sort(faces, axis=1).tolist()):
+        if tuple(f) not in boundary:
+            raise ValueError(f"traction_faces: face {i} {faces[i].tolist()} is not a boundary "
+                             f"face of the mesh")
+    X = mesh.vertices[faces]
+    area = 0.5 * np.linalg.norm(np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), axis=1)
+    f = np.zeros((mesh.n_vertices, 3))
+    for c in range(3):
+        np.add.at(f[:, c], faces.ravel(), np.repeat(t[:, c] * area / 3.0, 3))
+    return f

@@ -1,0 +1,1 @@
+"""anisognn: graph network surrogate (not built yet, see issue 3)."""
