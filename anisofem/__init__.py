@@ -7,3 +7,4 @@ from .scene import Scene
 from .meshgen import box_beam, cylinder_beam, hexes_to_tets, t_shape, y_shape
 from .newton import ConvergenceWarning, NewtonResult
 from .solve import Rollout, StepResult, default_scene, simulate, solve, step
+from . import metrics

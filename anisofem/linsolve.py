@@ -5,9 +5,12 @@ Each solver is a class with `layout` ("dense" or "csr", the Hessian layout it re
 the matrix is singular or (for Cholesky) not positive definite.
 
 - "dense":   LAPACK Cholesky (scipy.linalg.cho_factor); fastest below about 10^3 unknowns.
-- "superlu": scipy's SuperLU with the minimum-degree ordering on A^T + A and symmetric
-             pivoting; scipy's default (COLAMD ordering, partial pivoting) is kept as
-             "superlu-colamd" for comparison.
+- "superlu": scipy's SuperLU with the minimum-degree ordering on A^T + A and diagonal
+             pivoting. With a symmetric permutation and diagonal pivots, U's diagonal is D of
+             A = L D L^T, so its signs give the inertia: like Cholesky, the factorization is
+             refused unless the matrix is positive definite (Newton then knows to project).
+             scipy's default (COLAMD ordering, partial pivoting, no definiteness check) is kept
+             as "superlu-colamd" for comparison.
 - "cholmod": CHOLMOD sparse Cholesky from scikit-sparse, used only if it is installed.
 - "auto":    dense up to DENSE_MAX unknowns, then cholmod if importable, else superlu.
 """
@@ -55,6 +58,11 @@ class SuperLU:
             lu = spla.splu(_csc(layout, data), **kwargs)
         except RuntimeError as err:
             raise FactorizationError(str(err)) from None
+        if self.symmetric:
+            if not np.array_equal(lu.perm_r, lu.perm_c):
+                raise FactorizationError("superlu: off-diagonal pivoting (matrix indefinite)")
+            if not (lu.U.diagonal() > 0).all():
+                raise FactorizationError("superlu: matrix not positive definite")
         return lu.solve
 
 

@@ -2,16 +2,19 @@
 
 Unknowns are the free vertex components; fixed ones stay at their prescribed positions.
 Converged means |dG/dx|_free <= max(rtol * scale, atol), with scale = max(|dG/dx(x0)|_free,
-|f_ext|_free) (N). The result is never NaN: a failure returns the last iterate, converged=False
+|f_ext|_free) in N. The default atol is the round-off level of the gradient,
+ROUNDOFF * E_max * l^2 * sqrt(unknowns) (l: mean rest edge length), below which the gradient
+cannot be resolved; pass atol=0 to insist on rtol alone. The result is never NaN: a failure returns the last iterate, converged=False
 and a message saying why.
 
 Hessian choice (`projection`):
-- "adaptive" (default): the true Hessian wherever it gives a usable descent direction (its
-  factorization succeeds, the step is finite and descends, the line search makes progress);
-  otherwise the PSD-projected one (see anisofem.kernels), which is kept until the relative
-  residual drops below ADAPTIVE_RETURN. Near a stable equilibrium the true Hessian is positive
-  definite even though compressed elements are indefinite on their own, so convergence ends
-  quadratically.
+- "adaptive" (default): each iteration first tries the true Hessian; it is used when it is
+  positive definite (the Cholesky-type factorization succeeds) and its step makes progress in
+  the line search; otherwise the iteration uses the PSD-projected Hessian (see
+  anisofem.kernels). Near a stable equilibrium the assembled true Hessian is positive definite
+  even though compressed elements are indefinite on their own, so convergence ends
+  quadratically; and requiring definiteness keeps Newton from converging to saddle points
+  (a buckled beam's straight state).
 - "always": the projected Hessian at every iteration (robust, but only linear convergence
   near equilibria that have compressed elements).
 - "never": the true Hessian only (fails where it is indefinite).
@@ -24,7 +27,7 @@ import numpy as np
 
 from . import linsolve
 
-ADAPTIVE_RETURN = 1e-3
+ROUNDOFF = 1e-14
 ARMIJO = 1e-4
 MIN_STEP = 1e-10
 
@@ -60,13 +63,13 @@ class NewtonResult:
 _PROJECTIONS = ("adaptive", "always", "never")
 
 
-def minimize(potential, x0, *, rtol=1e-8, atol=0.0, max_iter=100, projection="adaptive",
+def minimize(potential, x0, *, rtol=1e-8, atol=None, max_iter=100, projection="adaptive",
              linear_solver="auto", warn=True):
     """Minimize potential (an anisofem.potential.Potential) from x0 (n, 3), fixed components
     already at their prescribed positions. Returns a NewtonResult."""
     if projection not in _PROJECTIONS:
         raise ValueError(f"projection: expected one of {_PROJECTIONS}, got {projection!r}")
-    if not (rtol >= 0 and atol >= 0 and (rtol > 0 or atol > 0)):
+    if not (rtol >= 0 and (atol is None or atol >= 0)) or rtol == atol == 0:
         raise ValueError(f"rtol, atol: must be >= 0 and not both 0, got {rtol}, {atol}")
     if int(max_iter) < 0:
         raise ValueError(f"max_iter: must be >= 0, got {max_iter}")
@@ -79,9 +82,11 @@ def minimize(potential, x0, *, rtol=1e-8, atol=0.0, max_iter=100, projection="ad
     energy, grad = potential.energy_gradient(x)
     g = grad[free]
     scale = max(np.linalg.norm(g), np.linalg.norm(scene.external_force[free]))
+    if atol is None:
+        atol = ROUNDOFF * scene.force_unit * np.sqrt(scene.n_free)
     tol = max(rtol * scale, atol)
     res = [np.linalg.norm(g) / scale if scale > 0 else 0.0]
-    use_projected = projection == "always"
+    choices = {"adaptive": (False, True), "always": (True,), "never": (False,)}[projection]
     n_projected = 0
     message = "max_iter reached"
     converged = False
@@ -93,13 +98,10 @@ def minimize(potential, x0, *, rtol=1e-8, atol=0.0, max_iter=100, projection="ad
         if it >= max_iter:
             break
         step = None
-        for projected in ([True] if use_projected else [False, True] if projection == "adaptive"
-                          else [False]):
+        for projected in choices:
             step = _newton_step(potential, x, energy, g, free, layout, solver, projected)
             if step is not None:
                 break
-            if projection == "adaptive":
-                use_projected = True
         it += 1
         if step is None:
             message = "no descent direction: the line search stalled"
@@ -108,8 +110,6 @@ def minimize(potential, x0, *, rtol=1e-8, atol=0.0, max_iter=100, projection="ad
         n_projected += projected
         g = grad[free]
         res.append(np.linalg.norm(g) / scale)
-        if projection == "adaptive" and use_projected and res[-1] < ADAPTIVE_RETURN:
-            use_projected = False
     result = NewtonResult(x=x, converged=converged, iterations=it, residuals=res, energy=energy,
                           projected=n_projected, message=message,
                           seconds=time.perf_counter() - t0)
@@ -139,7 +139,7 @@ def _newton_step(potential, x, energy, g, free, layout, solver, projected):
         if et <= energy + ARMIJO * alpha * slope:
             return xt, et, gt, projected
         # below round-off the energy cannot rank the points: accept if the gradient shrinks
-        if abs(et - energy) <= noise and np.linalg.norm(gt[free]) < gnorm:
+        if abs(et - energy) <= noise and np.linalg.norm(gt[free]) < 0.5 * gnorm:
             return xt, et, gt, projected
         alpha *= 0.5
     return None

@@ -137,6 +137,15 @@ class Scene:
         return int((~self.fixed_mask).sum())
 
     @cached_property
+    def force_unit(self):
+        """Largest elastic modulus times the mean squared rest edge length, N: the force that
+        strains an element by 100%."""
+        p = self._params
+        modulus = float(np.max(2 * p["mu"] + np.abs(p["lam"]) + 8 * p["kappa"]))
+        X = self.mesh.vertices[self.mesh.edges]
+        return modulus * float(((X[:, 1] - X[:, 0]) ** 2).sum(1).mean())
+
+    @cached_property
     def elements(self):
         p = self._params
         order, ptr = self.mesh.coloring

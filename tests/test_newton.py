@@ -1,0 +1,91 @@
+"""Newton: quadratic convergence, the adaptive Hessian choice, linear solvers, failures."""
+import warnings
+
+import numpy as np
+import pytest
+
+import anisofem as af
+
+
+def test_quadratic_convergence_near_the_solution(beam):
+    result = af.solve(beam, rtol=1e-10)
+    print("relative residuals:", ["%.3e" % r for r in result.residuals])
+    assert result.converged and result.projected == 0
+    r = result.residuals
+    # steps near the solution and above round-off (1e-10): log r_k / log r_{k-1} >= 1.8
+    tail = [k for k in range(1, len(r)) if r[k - 1] < 1e-1 and r[k] > 1e-10]
+    assert len(tail) >= 2
+    for k in tail:
+        assert np.log(r[k]) / np.log(r[k - 1]) > 1.8
+
+
+def test_projecting_every_iteration_converges_only_linearly(beam):
+    adaptive = af.solve(beam, rtol=1e-10)
+    always = af.solve(beam, rtol=1e-10, projection="always")
+    print("iterations: adaptive", adaptive.iterations, "always projected", always.iterations)
+    assert always.converged and always.projected == always.iterations
+    assert always.iterations > adaptive.iterations + 5
+    assert np.abs(always.x - adaptive.x).max() < 1e-8
+
+
+@pytest.mark.parametrize("solver", ["dense", "superlu", "superlu-colamd"])
+def test_linear_solvers_agree(beam, solver):
+    ref = af.solve(beam, linear_solver="dense", rtol=1e-10)
+    res = af.solve(beam, linear_solver=solver, rtol=1e-10)
+    assert res.converged
+    assert np.abs(res.x - ref.x).max() < 1e-9
+
+
+def buckling_scene():
+    """Beam ends pushed 30% together: the straight state is a saddle, the answer buckles."""
+    mesh = af.box_beam(cells=(10, 2, 2))
+    X = mesh.vertices
+    lo, hi = np.flatnonzero(X[:, 0] == 0), np.flatnonzero(X[:, 0] > 0.0999)
+    fixed = np.concatenate([lo, hi])
+    pos = X[fixed].copy()
+    pos[len(lo):, 0] -= 0.03
+    scene = af.Scene(mesh, fixed=fixed, fixed_positions=pos)
+    x0 = scene.initial_positions()
+    x0[:, 0] = 0.7 * X[:, 0]
+    x0[:, 2] += 1e-4 * np.sin(np.pi * X[:, 0] / 0.1)
+    return scene, x0
+
+
+@pytest.mark.parametrize("solver", ["dense", "superlu"])
+def test_buckling_needs_the_projected_fallback(solver):
+    scene, x0 = buckling_scene()
+    result = af.solve(scene, x0=x0, linear_solver=solver)
+    assert result.converged and result.projected > 0
+    assert result.x[:, 2].max() > 0.01  # buckled sideways by about a centimetre
+    # a minimum, not the saddle: the true Hessian at the answer is positive definite
+    H = af.hessian(scene, result.x).toarray()
+    free = ~scene.fixed_mask.ravel()
+    assert np.linalg.eigvalsh(H[np.ix_(free, free)]).min() > 0
+    straight = af.energy(scene, x0 * [1, 1, 0] + [0, 0, 1] * scene.mesh.vertices)
+    assert result.energy < straight
+    with pytest.warns(af.ConvergenceWarning):
+        never = af.solve(scene, x0=x0, linear_solver=solver, projection="never")
+    assert not never.converged and np.isfinite(never.x).all()
+
+
+def test_stall_is_reported_not_returned_as_success(beam):
+    with pytest.warns(af.ConvergenceWarning):
+        result = af.solve(beam, rtol=1e-30, atol=0)  # below round-off: the search stalls
+    assert not result.converged
+    assert "stalled" in result.message
+    assert np.isfinite(result.x).all() and result.residuals[-1] < 1e-9
+
+
+def test_max_iter_is_reported(beam):
+    with pytest.warns(af.ConvergenceWarning):
+        result = af.solve(beam, max_iter=2)
+    assert not result.converged and result.iterations == 2
+    assert result.message == "max_iter reached"
+
+
+def test_step_from_equilibrium_stays_put(beam):
+    scene = af.default_scene(beam)
+    static = af.solve(scene, rtol=1e-12).x
+    res = af.step(scene, static, np.zeros_like(static), 0.02)
+    assert res.converged and res.newton.iterations <= 1
+    assert np.abs(res.x - static).max() < 1e-12
