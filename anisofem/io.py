@@ -1,0 +1,62 @@
+"""Reading meshes and writing results through meshio (.msh, .vtu, .xdmf and the rest of
+meshio's formats). Results carry fields a person can open in ParaView: point data
+"displacement" (m), cell data "fiber_direction", "fiber_stiffness" (Pa), "energy" (J per tet),
+"energy_density" (J/m^3) and "volume_change" (det F - 1)."""
+import os
+import tempfile
+
+import meshio
+import numpy as np
+
+from .mesh import TetMesh
+from .metrics import volume_change
+from .potential import check_positions, element_energy
+
+
+def read_mesh(path, **mesh_options):
+    """The tetrahedra of a mesh file as a TetMesh (other cell types are ignored).
+
+    mesh_options go to TetMesh (fix_orientation, unreferenced). Lower-dimensional cells
+    (surface triangles, lines) are common in .msh files, and the vertices only they use are
+    dropped unless unreferenced is given.
+    """
+    m = meshio.read(os.fspath(path))
+    tets = [c.data for c in m.cells if c.type == "tetra"]
+    if not tets:
+        raise ValueError(f"path: {path} holds no tetra cells (found "
+                         f"{sorted({c.type for c in m.cells})})")
+    mesh_options.setdefault("unreferenced", "drop")
+    return TetMesh(m.points[:, :3], np.concatenate(tets).astype(np.int64), **mesh_options)
+
+
+def write_mesh(path, mesh, x=None, scene=None):
+    """Write the rest mesh with the state x (n, 3) as the point field "displacement" (x - X; in
+    ParaView, "Warp By Vector" shows the deformed shape); the format follows the extension.
+    With a scene, the energy and fiber fields of the module docstring are added. The file is
+    written under a temporary name in the same folder, then renamed (atomic)."""
+    path = os.fspath(path)
+    x = mesh.vertices if x is None else check_positions(scene, x) if scene else np.asarray(x)
+    points = {"displacement": x - mesh.vertices}
+    cells = {"volume_change": [volume_change(mesh, x)]}
+    if scene is not None:
+        energy = element_energy(scene, x)
+        cells["energy"] = [energy]
+        cells["energy_density"] = [energy / mesh.rest_volumes]
+        cells["fiber_direction"] = [scene.elements.fiber]
+        cells["fiber_stiffness"] = [scene.elements.kappa]
+    out = meshio.Mesh(mesh.vertices, [("tetra", np.asarray(mesh.tets))], point_data=points,
+                      cell_data=cells)
+    folder, name = os.path.split(os.path.abspath(path))
+    ext = os.path.splitext(name)[1]
+    # XDMF keeps its arrays inline (one file to move around); .msh is binary Gmsh 2.2 (meshio
+    # cannot read back the fields of its ASCII .msh output with numpy 2)
+    kwargs = {".xdmf": {"data_format": "XML"},
+              ".msh": {"file_format": "gmsh22", "binary": True}}.get(ext, {})
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=ext, dir=folder)
+    os.close(fd)
+    try:
+        meshio.write(tmp, out, **kwargs)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
