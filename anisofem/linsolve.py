@@ -20,7 +20,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 #: "auto" uses dense Cholesky up to this many unknowns.
-DENSE_MAX = 750
+DENSE_MAX = 450
 
 
 class FactorizationError(RuntimeError):

@@ -30,10 +30,21 @@ class Potential:
             self.x_hat = check_positions(scene, x_hat, "x_hat")
             self.mass_over_dt2 = scene.masses / self.dt ** 2
 
+    def _elastic(self, x, want_grad=False, layout=None, project=False):
+        """Elastic part: (e_iso (m,), e_fib (m,), gradient (n, 3) or None, Hessian data or
+        None); the Hessian is added into layout.zeros() when a layout is given."""
+        if layout is None:
+            return kernels.assemble(x, self.scene.elements, want_grad=want_grad) + (None,)
+        data = layout.zeros()
+        e_iso, e_fib, grad = kernels.assemble(
+            x, self.scene.elements, want_grad=want_grad, want_hess=True, project=project,
+            hess_map=layout.map, hess_data=data)
+        return e_iso, e_fib, grad, data
+
     def terms(self, x):
         """Energy terms in J: isotropic, fiber, external, kinetic, total; and per-element
         elastic energies (m,) under "elements"."""
-        e_iso, e_fib, _ = kernels.assemble(x, self.scene.elements)
+        e_iso, e_fib, _, _ = self._elastic(x)
         out = {"isotropic": float(e_iso.sum()), "fiber": float(e_fib.sum()),
                "external": -float(np.vdot(self.scene.external_force, x)),
                "kinetic": self._kinetic(x)}
@@ -47,13 +58,7 @@ class Potential:
 
     def energy_gradient(self, x):
         """(G(x) in J, dG/dx (n, 3) in N)."""
-        e_iso, e_fib, grad = kernels.assemble(x, self.scene.elements, want_grad=True)
-        value = float(e_iso.sum() + e_fib.sum()) - float(np.vdot(self.scene.external_force, x))
-        grad -= self.scene.external_force
-        if self.dynamic:
-            value += self._kinetic(x)
-            grad += self.mass_over_dt2[:, None] * (x - self.x_hat)
-        return value, grad
+        return self._evaluate(x, want_grad=True)[:2]
 
     def hessian_data(self, x, layout, project=False, want_grad=True):
         """Assemble d2G/dx2 into layout (a CsrLayout or DenseLayout over some DOFs).
@@ -61,10 +66,10 @@ class Potential:
         Returns (G, gradient (n, 3) or None, data) where layout.matrix(data) is the Hessian.
         project: use the PSD-projected element Hessians (see anisofem.kernels).
         """
-        data = layout.zeros()
-        e_iso, e_fib, grad = kernels.assemble(
-            x, self.scene.elements, want_grad=want_grad, want_hess=True, project=project,
-            hess_map=layout.map, hess_data=data)
+        return self._evaluate(x, want_grad, layout, project)
+
+    def _evaluate(self, x, want_grad, layout=None, project=False):
+        e_iso, e_fib, grad, data = self._elastic(x, want_grad, layout, project)
         value = float(e_iso.sum() + e_fib.sum()) - float(np.vdot(self.scene.external_force, x))
         if want_grad:
             grad -= self.scene.external_force
@@ -72,7 +77,8 @@ class Potential:
             value += self._kinetic(x)
             if want_grad:
                 grad += self.mass_over_dt2[:, None] * (x - self.x_hat)
-            data[layout.diag] += np.repeat(self.mass_over_dt2, 3)[layout.dofs]
+            if layout is not None:
+                data[layout.diag] += np.repeat(self.mass_over_dt2, 3)[layout.dofs]
         return value, grad, data
 
     def _kinetic(self, x):

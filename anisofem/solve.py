@@ -53,12 +53,13 @@ class StepResult:
         return self.newton.converged
 
 
-def step(scene, x, v, dt, **newton):
+def step(scene, x, v, dt, a_guess=None, **newton):
     """One backward-Euler step of length dt (s) from positions x and velocities v (n, 3).
 
-    Minimizes G(y) = 1/(2 dt^2) |y - x - dt v|_M^2 + elastic(y) - f_ext . y from y = x + dt v;
-    returns StepResult with v_new = (x_new - x) / dt. Fixed components end at their prescribed
-    positions.
+    Minimizes G(y) = 1/(2 dt^2) |y - x - dt v|_M^2 + elastic(y) - f_ext . y, starting from
+    y = x + dt v + dt^2 a_guess (a_guess: (n, 3) expected acceleration in m/s^2, default 0;
+    simulate passes the previous step's). Returns StepResult with v_new = (x_new - x) / dt.
+    Fixed components end at their prescribed positions.
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
@@ -68,7 +69,9 @@ def step(scene, x, v, dt, **newton):
     if dt <= 0:
         raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
     x_hat = x + dt * v
-    result = minimize(Potential(scene, x_hat, dt), _with_fixed(scene, x_hat), **newton)
+    start = x_hat if a_guess is None else x_hat + dt ** 2 * check_positions(scene, a_guess,
+                                                                           "a_guess")
+    result = minimize(Potential(scene, x_hat, dt), _with_fixed(scene, start), **newton)
     return StepResult(result.x, (result.x - x) / dt, result)
 
 
@@ -95,11 +98,13 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, **newton):
                     else check_positions(scene, x0, "x0"))
     v = np.zeros_like(x) if v0 is None else check_positions(scene, v0, "v0")
     xs, vs, results = [x], [v], []
+    a = None
     for k in range(steps):
-        res = step(scene, x, v, dt, **newton)
+        res = step(scene, x, v, dt, a, **newton)
         results.append(res)
         if not res.converged:
             break
+        a = (res.v - v) / dt
         x, v = res.x, res.v
         xs.append(x)
         vs.append(v)

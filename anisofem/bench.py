@@ -1,0 +1,158 @@
+"""`python -m anisofem bench`: assembly and solve speed of the numba kernels against the plain
+numpy implementation (anisofem.reference_numpy), measured in the same run, and the linear
+solvers at the largest size. Prints tables and writes JSON (atomically)."""
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from . import linsolve, reference_numpy
+from .meshgen import box_beam
+from .newton import minimize
+from .potential import Potential
+from .solve import default_scene, simulate, solve, step
+
+#: cells (nx, ny, nz) of box beams of about 10^2, 10^3, 10^4 and 10^5 tets (5 per cell)
+SIZES = {"1e2": (5, 2, 2), "1e3": (10, 4, 5), "1e4": (25, 8, 10), "1e5": (50, 20, 20)}
+
+
+def best_time(fn, repeat, budget=2.0):
+    """Least wall time of fn() over up to `repeat` runs (stops early past budget seconds)."""
+    best, start = np.inf, time.perf_counter()
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+        if time.perf_counter() - start > budget:
+            break
+    return best
+
+
+def bench_assembly(scene, x):
+    """Gradient + projected Hessian (free DOFs, CSR): numba vs numpy, seconds."""
+    pot = Potential(scene)
+    layout = scene.layout("csr")
+    numba_s = best_time(lambda: pot.hessian_data(x, layout, project=True), 20)
+
+    def numpy_version():
+        reference_numpy.elastic_energy_gradient(scene, x)
+        reference_numpy.elastic_hessian(scene, x, project=True)
+    numpy_s = best_time(numpy_version, 5, budget=20.0)
+    return numba_s, numpy_s
+
+
+def bench_size(label, cells, with_numpy_solve):
+    mesh = box_beam(cells=cells)
+    scene = default_scene(mesh)
+    solve(scene)  # compile and build the patterns
+    x = scene.initial_positions() + 1e-4 * np.sin(mesh.vertices * 200)
+    numba_s, numpy_s = bench_assembly(scene, x)
+    t0 = time.perf_counter()
+    res = solve(scene)
+    solve_s = time.perf_counter() - t0
+    row = {"size": label, "tets": mesh.n_tets, "unknowns": scene.n_free,
+           "assembly_numba_s": numba_s, "assembly_numpy_s": numpy_s,
+           "assembly_speedup": numpy_s / numba_s, "elements_per_s": mesh.n_tets / numba_s,
+           "solve_s": solve_s, "newton_iterations": res.iterations,
+           "converged": res.converged, "linear_solver": type(linsolve.make(
+               "auto", scene.n_free)).__name__}
+    if with_numpy_solve:
+        x0 = scene.initial_positions()
+        minimize(reference_numpy.NumpyPotential(scene), x0)  # warm up
+        t0 = time.perf_counter()
+        ref = minimize(reference_numpy.NumpyPotential(scene), x0)
+        row.update(solve_numpy_s=time.perf_counter() - t0, newton_iterations_numpy=ref.iterations)
+    return row
+
+
+def bench_small_dynamics(cells=(5, 2, 2), steps=50):
+    """Per-step time of backward Euler on the 100-tet cantilever: the mean over a rollout from
+    rest, and one step from rest."""
+    scene = default_scene(box_beam(cells=cells))
+    simulate(scene, 3)
+    t0 = time.perf_counter()
+    roll = simulate(scene, steps)
+    mean_s = (time.perf_counter() - t0) / steps
+    x = scene.initial_positions()
+    first_s = best_time(lambda: step(scene, x, np.zeros_like(x), 0.02), 20)
+    iters = np.mean([s.newton.iterations for s in roll.steps])
+    return {"step_mean_s": mean_s, "step_from_rest_s": first_s, "newton_per_step": iters}
+
+
+def bench_linear_solvers(cells):
+    """One factorization of the projected cantilever Hessian per sparse solver, seconds."""
+    scene = default_scene(box_beam(cells=cells))
+    layout = scene.layout("csr")
+    _, _, data = Potential(scene).hessian_data(scene.initial_positions(), layout, True)
+    out = {}
+    names = ["superlu", "superlu-colamd"] + (["cholmod"] if linsolve.cholmod_available()
+                                             else [])
+    for name in names:
+        solver = linsolve.make(name, scene.n_free)
+        out[name] = best_time(lambda: solver.factor(layout, data.copy()), 2, budget=60.0)
+    return out
+
+
+def first_solve_in_new_process():
+    """Wall time of a new Python process that imports anisofem and solves the 100-tet
+    cantilever (numba cache warm after this run), seconds."""
+    code = ("import anisofem as af; r = af.solve(af.box_beam(cells=(5, 2, 2))); "
+            "assert r.converged")
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", code], check=True)
+    return time.perf_counter() - t0
+
+
+def run(sizes=tuple(SIZES), out="bench_anisofem.json"):
+    rows = []
+    for label in sizes:
+        rows.append(bench_size(label, SIZES[label], with_numpy_solve=label != "1e5"))
+        print(f"  measured {label} ...", file=sys.stderr, flush=True)
+    report = {"assembly_and_static_solve": rows, "dynamics_100_tets": bench_small_dynamics(),
+              "first_solve_new_process_s": first_solve_in_new_process(),
+              "factorization_s": bench_linear_solvers(SIZES[sizes[-1]]),
+              "factorization_size": sizes[-1], "threads": _threads()}
+    print_report(report)
+    if out:
+        write_json_atomic(out, report)
+        print(f"\nwrote {out}")
+    return report
+
+
+def _threads():
+    import numba
+    return numba.get_num_threads()
+
+
+def print_report(r):
+    print(f"Gradient + projected Hessian assembly and static cantilever solve "
+          f"({r['threads']} threads)")
+    print(f"{'tets':>7} {'unknowns':>8} | {'numba ms':>9} {'numpy ms':>9} {'speedup':>7} "
+          f"{'Melem/s':>7} | {'solve ms':>9} {'its':>3} {'numpy solve ms':>14} {'its':>3}")
+    for row in r["assembly_and_static_solve"]:
+        npy = (f"{1e3 * row['solve_numpy_s']:14.1f} {row['newton_iterations_numpy']:3d}"
+               if "solve_numpy_s" in row else f"{'-':>14} {'-':>3}")
+        print(f"{row['tets']:7d} {row['unknowns']:8d} | {1e3 * row['assembly_numba_s']:9.2f} "
+              f"{1e3 * row['assembly_numpy_s']:9.2f} {row['assembly_speedup']:7.1f} "
+              f"{row['elements_per_s'] / 1e6:7.2f} | {1e3 * row['solve_s']:9.1f} "
+              f"{row['newton_iterations']:3d} {npy}")
+    d = r["dynamics_100_tets"]
+    print(f"\nBackward Euler, 100-tet cantilever, dt = 0.02 s: {1e3 * d['step_mean_s']:.2f} ms "
+          f"per step over a rollout from rest ({d['newton_per_step']:.1f} Newton iterations), "
+          f"{1e3 * d['step_from_rest_s']:.2f} ms for the first step")
+    print(f"New process to first solve (numba cache warm): "
+          f"{r['first_solve_new_process_s']:.2f} s")
+    print(f"One factorization at {r['factorization_size']} tets: " + ", ".join(
+        f"{k} {v:.2f} s" for k, v in r["factorization_s"].items()))
+
+
+def write_json_atomic(path, obj):
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".json", dir=folder)
+    with os.fdopen(fd, "w") as f:
+        json.dump(obj, f, indent=2, default=float)
+    os.replace(tmp, path)

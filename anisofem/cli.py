@@ -1,0 +1,102 @@
+"""Command line: `python -m anisofem {mesh,solve,bench}`.
+
+  python -m anisofem mesh box --cells 10 2 2 -o beam.msh
+  python -m anisofem solve beam.msh --fixed x-min --gravity 0 0 -9.81 --fiber 1 0 0 \\
+      --kappa 1e5 -o beam.vtu
+  python -m anisofem bench --json bench_anisofem.json
+"""
+import argparse
+import sys
+
+import numpy as np
+
+from . import bench, meshgen
+from .io import read_mesh, write_mesh
+from .material import Material
+from .metrics import end_vertices, tip_displacement
+from .scene import Scene
+from .solve import simulate, solve
+
+_SHAPES = {"box": lambda a: meshgen.box_beam(a.size, a.cells),
+           "cylinder": lambda a: meshgen.cylinder_beam(a.size[0], a.size[1] / 2, a.cells[0],
+                                                       a.cells[1], a.rings),
+           "t": lambda a: meshgen.t_shape(),
+           "y": lambda a: meshgen.y_shape()}
+
+
+def _fixed(mesh, spec):
+    """'x-min', 'y-max', ...: the vertices on that end of the mesh."""
+    try:
+        axis, side = spec.split("-")
+        return end_vertices(mesh, "xyz".index(axis), side)
+    except ValueError:
+        raise SystemExit(f"--fixed: expected AXIS-SIDE like x-min or z-max, got {spec!r}")
+
+
+def _parser():
+    p = argparse.ArgumentParser(prog="python -m anisofem", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="command", required=True)
+    m = sub.add_parser("mesh", help="generate a mesh of one of the paper's shapes")
+    m.add_argument("shape", choices=sorted(_SHAPES))
+    m.add_argument("--size", type=float, nargs=3, default=(0.1, 0.02, 0.02),
+                   help="box: length width height; cylinder: length diameter (m)")
+    m.add_argument("--cells", type=int, nargs="+", default=(10, 2, 2),
+                   help="box: nx ny nz; cylinder: along section")
+    m.add_argument("--rings", type=int, default=1, help="cylinder: O-grid rings")
+    m.add_argument("-o", "--output", required=True)
+    s = sub.add_parser("solve", help="static equilibrium or a backward-Euler rollout")
+    s.add_argument("mesh", help="a mesh file meshio reads (.msh, .vtu, .xdmf, ...)")
+    s.add_argument("-o", "--output", required=True, help="result file (.vtu, .xdmf, .msh)")
+    s.add_argument("--fixed", default="x-min", help="end held fixed: AXIS-SIDE (x-min)")
+    s.add_argument("--gravity", type=float, nargs=3, default=(0.0, 0.0, -9.81),
+                   metavar=("GX", "GY", "GZ"), help="m/s^2")
+    s.add_argument("--young", type=float, default=1e5, help="Pa")
+    s.add_argument("--poisson", type=float, default=0.48)
+    s.add_argument("--density", type=float, default=1000.0, help="kg/m^3")
+    s.add_argument("--fiber", type=float, nargs=3, default=(1.0, 0.0, 0.0),
+                   help="unit fiber direction")
+    s.add_argument("--kappa", type=float, default=0.0, help="fiber stiffness, Pa")
+    s.add_argument("--steps", type=int, default=0,
+                   help="backward-Euler steps instead of statics (writes the last state)")
+    s.add_argument("--dt", type=float, default=0.02, help="s")
+    s.add_argument("--rtol", type=float, default=1e-8)
+    b = sub.add_parser("bench", help="speed of the kernels and solvers (table + JSON)")
+    b.add_argument("--sizes", nargs="+", default=list(bench.SIZES), choices=list(bench.SIZES))
+    b.add_argument("--json", default="bench_anisofem.json")
+    return p
+
+
+def main(argv=None):
+    args = _parser().parse_args(argv)
+    if args.command == "mesh":
+        mesh = _SHAPES[args.shape](args)
+        write_mesh(args.output, mesh)
+        print(f"{mesh} -> {args.output}")
+    elif args.command == "solve":
+        mesh = read_mesh(args.mesh)
+        scene = Scene(mesh, Material(args.young, args.poisson, args.density,
+                                     np.asarray(args.fiber) / np.linalg.norm(args.fiber),
+                                     args.kappa),
+                      fixed=_fixed(mesh, args.fixed), gravity=args.gravity)
+        if args.steps:
+            roll = simulate(scene, args.steps, args.dt, rtol=args.rtol)
+            x, ok = roll.positions[-1], roll.converged
+            print(f"{len(roll.positions) - 1} steps, converged: {ok}")
+        else:
+            res = solve(scene, rtol=args.rtol)
+            x, ok = res.x, res.converged
+            print(f"{res.iterations} Newton iterations, converged: {ok}, relative residual "
+                  f"{res.residuals[-1]:.2e}")
+        print("tip displacement (m):", np.array2string(tip_displacement(mesh, x),
+                                                       precision=6))
+        write_mesh(args.output, mesh, x, scene)
+        print(f"-> {args.output}")
+        return 0 if ok else 1
+    else:
+        bench.run(tuple(args.sizes), args.json)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
