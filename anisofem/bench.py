@@ -48,7 +48,7 @@ def bench_assembly(scene, x):
 def bench_size(label, cells, with_numpy_solve):
     mesh = box_beam(cells=cells)
     scene = default_scene(mesh)
-    solve(scene)  # compile and build the patterns
+    solve(scene, max_iter=1, warn=False)  # compile and build the patterns
     x = scene.initial_positions() + 1e-4 * np.sin(mesh.vertices * 200)
     numba_s, numpy_s = bench_assembly(scene, x)
     t0 = time.perf_counter()
