@@ -21,6 +21,12 @@ def element_dofs(tets, dof_map):
     return dof_map[tets].reshape(tets.shape[0], 12)
 
 
+def _entry_dofs(tets, dof_map):
+    """(k unknowns, rows (m, 144), cols (m, 144)): the unknowns of each element-matrix entry."""
+    ed = element_dofs(tets, dof_map)
+    return int(dof_map.max()) + 1, np.repeat(ed, 12, axis=1), np.tile(ed, (1, 12))
+
+
 class CsrLayout:
     """CSR pattern of the Hessian restricted to the unknowns of dof_map.
 
@@ -32,10 +38,7 @@ class CsrLayout:
     kind = "csr"
 
     def __init__(self, tets, dof_map):
-        k = int(dof_map.max()) + 1
-        ed = element_dofs(tets, dof_map)
-        rows = np.repeat(ed, 12, axis=1)
-        cols = np.tile(ed, (1, 12))
+        k, rows, cols = _entry_dofs(tets, dof_map)
         valid = (rows >= 0) & (cols >= 0)
         keys = rows.astype(np.int64) * k + cols
         unique, inverse = np.unique(keys[valid], return_inverse=True)
@@ -63,10 +66,7 @@ class DenseLayout:
     kind = "dense"
 
     def __init__(self, tets, dof_map):
-        k = int(dof_map.max()) + 1
-        ed = element_dofs(tets, dof_map)
-        rows = np.repeat(ed, 12, axis=1)
-        cols = np.tile(ed, (1, 12))
+        k, rows, cols = _entry_dofs(tets, dof_map)
         self.map = np.where((rows >= 0) & (cols >= 0), rows * k + cols, -1).astype(np.int64)
         self.diag = np.arange(k, dtype=np.int64) * (k + 1)
         self.dofs = unknown_dofs(dof_map)

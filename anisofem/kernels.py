@@ -208,22 +208,9 @@ def _element_hessian(G, v, m_e, l_e, k_e, d, F, S, Fd, project, Sg, B, q, He):
 
 
 @njit(cache=True)
-def _run_energy(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber, e_iso,
-                e_fib):
-    """Energies of elements order[lo:hi] (J)."""
-    F = np.empty((3, 3))
-    S = np.empty((3, 3))
-    Fd = np.empty(3)
-    for idx in range(lo, hi):
-        e = order[idx]
-        e_iso[e], e_fib[e], _ = _stress(e, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber,
-                                        F, S, Fd)
-
-
-@njit(cache=True)
 def _run_gradient(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber, e_iso,
-                  e_fib, grad):
-    """Energies and gradient contributions of elements order[lo:hi]."""
+                  e_fib, grad, want_grad):
+    """Energies (J) and, if want_grad, gradient contributions of elements order[lo:hi]."""
     F = np.empty((3, 3))
     S = np.empty((3, 3))
     Fd = np.empty(3)
@@ -231,7 +218,8 @@ def _run_gradient(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_
         e = order[idx]
         e_iso[e], e_fib[e], _ = _stress(e, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber,
                                         F, S, Fd)
-        _scatter_gradient(e, tets, grads[e], vol[e], F, S, grad)
+        if want_grad:
+            _scatter_gradient(e, tets, grads[e], vol[e], F, S, grad)
 
 
 @njit(cache=True)
@@ -266,13 +254,10 @@ def _run_hessian(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_f
 @njit(cache=True)
 def _run_range(mode, lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber,
                e_iso, e_fib, grad, want_grad, project, hess_map, hess_data):
-    """mode 0: energies, 1: + gradient, 2: + Hessian (gradient if want_grad)."""
+    """mode 0: energies (+ gradient if want_grad), 2: + Hessian."""
     if mode == 0:
-        _run_energy(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber, e_iso,
-                    e_fib)
-    elif mode == 1:
         _run_gradient(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber,
-                      e_iso, e_fib, grad)
+                      e_iso, e_fib, grad, want_grad)
     else:
         _run_hessian(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber,
                      e_iso, e_fib, grad, want_grad, project, hess_map, hess_data)
@@ -308,7 +293,7 @@ def assemble(x, elements, *, want_grad=False, want_hess=False, project=False, he
     grad = np.zeros_like(x) if want_grad else _EMPTY_GRAD
     if not want_hess:
         hess_map, hess_data = _EMPTY_MAP, _EMPTY_DATA
-    mode = 2 if want_hess else 1 if want_grad else 0
+    mode = 2 if want_hess else 0
     args = (mode, x, elements.tets, elements.grads, elements.volumes, elements.mu, elements.lam,
             elements.kappa, elements.fiber, elements.has_fiber, e_iso, e_fib, grad, want_grad,
             project, hess_map, hess_data)
