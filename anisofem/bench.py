@@ -8,6 +8,7 @@ import sys
 import tempfile
 import time
 
+import numba
 import numpy as np
 
 from . import linsolve, reference_numpy
@@ -115,17 +116,12 @@ def run(sizes=tuple(SIZES), out="bench_anisofem.json"):
     report = {"assembly_and_static_solve": rows, "dynamics_100_tets": bench_small_dynamics(),
               "first_solve_new_process_s": first_solve_in_new_process(),
               "factorization_s": bench_linear_solvers(SIZES[sizes[-1]]),
-              "factorization_size": sizes[-1], "threads": _threads()}
+              "factorization_size": sizes[-1], "threads": numba.get_num_threads()}
     print_report(report)
     if out:
         write_json_atomic(out, report)
         print(f"\nwrote {out}")
     return report
-
-
-def _threads():
-    import numba
-    return numba.get_num_threads()
 
 
 def print_report(r):

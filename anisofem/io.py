@@ -8,9 +8,10 @@ import tempfile
 import meshio
 import numpy as np
 
+from ._validate import as_float_array
 from .mesh import TetMesh
 from .metrics import volume_change
-from .potential import check_positions, element_energy
+from .potential import element_energy
 
 
 def read_mesh(path, **mesh_options):
@@ -35,7 +36,7 @@ def write_mesh(path, mesh, x=None, scene=None):
     With a scene, the energy and fiber fields of the module docstring are added. The file is
     written under a temporary name in the same folder, then renamed (atomic)."""
     path = os.fspath(path)
-    x = mesh.vertices if x is None else check_positions(scene, x) if scene else np.asarray(x)
+    x = mesh.vertices if x is None else as_float_array(x, "x", shape=mesh.vertices.shape)
     points = {"displacement": x - mesh.vertices}
     cells = {"volume_change": [volume_change(mesh, x)]}
     if scene is not None:

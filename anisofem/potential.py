@@ -29,6 +29,7 @@ class Potential:
                 raise ValueError(f"dt: the time step must be > 0 s, got {self.dt}")
             self.x_hat = check_positions(scene, x_hat, "x_hat")
             self.mass_over_dt2 = scene.masses / self.dt ** 2
+            self._mass_per_dof = np.repeat(self.mass_over_dt2, 3)
 
     def _elastic(self, x, want_grad=False, layout=None, project=False):
         """Elastic part: (e_iso (m,), e_fib (m,), gradient (n, 3) or None, Hessian data or
@@ -78,7 +79,7 @@ class Potential:
             if want_grad:
                 grad += self.mass_over_dt2[:, None] * (x - self.x_hat)
             if layout is not None:
-                data[layout.diag] += np.repeat(self.mass_over_dt2, 3)[layout.dofs]
+                data[layout.diag] += self._mass_per_dof[layout.dofs]
         return value, grad, data
 
     def _kinetic(self, x):

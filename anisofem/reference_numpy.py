@@ -23,21 +23,29 @@ def _deformation(scene, x):
 
 def elastic_energy_gradient(scene, x):
     """(elastic energy in J, gradient (n, 3) in N)."""
-    el = scene.elements
     F, S, psi = _deformation(scene, x)
+    return float((scene.elements.volumes * psi).sum()), _gradient(scene, x, F, S)
+
+
+def _gradient(scene, x, F, S):
+    el = scene.elements
     P = F @ S
     ge = el.volumes[:, None, None] * np.einsum("eij,eaj->eai", P, el.grads)
     grad = np.zeros_like(x)
     for i in range(3):
         grad[:, i] = np.bincount(el.tets.ravel(), ge[:, :, i].ravel(), minlength=x.shape[0])
-    return float((el.volumes * psi).sum()), grad
+    return grad
 
 
 def element_hessians(scene, x, project=True):
     """(m, 144) element Hessians, row-major 12x12 per tet, N/m; project: clamp negative
     principal stresses in the geometric part (the same projection as the numba kernels)."""
-    el = scene.elements
     F, S, _ = _deformation(scene, x)
+    return _hessians(scene, F, S, project)
+
+
+def _hessians(scene, F, S, project):
+    el = scene.elements
     if project:
         w, V = np.linalg.eigh(S)
         S = np.einsum("eik,ek,ejk->eij", V, np.maximum(w, 0.0), V)
@@ -48,10 +56,9 @@ def element_hessians(scene, x, project=True):
     geo = np.einsum("eai,eij,ebj->eab", G, S, G)
     Fd = np.einsum("eij,ej->ei", F, el.fiber)
     s = np.einsum("eai,ei->ea", G, el.fiber)
-    mu, lam, k = el.mu[:, None, None, None, None], el.lam[:, None, None, None, None], \
-        el.kappa[:, None, None, None, None]
+    mu, lam, k = (a[:, None, None, None, None] for a in (el.mu, el.lam, el.kappa))
     H = (mu * np.einsum("ebi,eak->eaibk", q, q) + lam * np.einsum("eai,ebk->eaibk", q, q)
-         + el.mu[:, None, None, None, None] * np.einsum("eik,eab->eaibk", B, gg)
+         + mu * np.einsum("eik,eab->eaibk", B, gg)
          + np.einsum("eab,ik->eaibk", geo, np.eye(3))
          + 8 * k * np.einsum("ea,eb,ei,ek->eaibk", s, s, Fd, Fd))
     return (H * el.volumes[:, None, None, None, None]).reshape(-1, 144)
@@ -74,10 +81,10 @@ class NumpyPotential(Potential):
     def _elastic(self, x, want_grad=False, layout=None, project=False):
         F, S, psi = _deformation(self.scene, x)
         e = self.scene.elements.volumes * psi
-        grad = elastic_energy_gradient(self.scene, x)[1] if want_grad else None
+        grad = _gradient(self.scene, x, F, S) if want_grad else None
         if layout is None:
             return e, np.zeros_like(e), grad, None
-        H = element_hessians(self.scene, x, project)
+        H = _hessians(self.scene, F, S, project)
         keep = layout.map >= 0
         data = np.bincount(layout.map[keep], H[keep], minlength=layout.zeros().size)
         return e, np.zeros_like(e), grad, data

@@ -60,6 +60,7 @@ class Scene:
                             f"{type(material).__name__}")
         self.mesh = mesh
         self.material = material
+        self._layouts = {}
         n, m = mesh.n_vertices, mesh.n_tets
         self._params = material.per_element(m)
         self.fixed_mask = self._fixed_mask(fixed)
@@ -160,11 +161,10 @@ class Scene:
 
     def layout(self, kind):
         """The Hessian layout over the free DOFs: kind "csr" or "dense" (cached)."""
-        cache = self.__dict__.setdefault("_layouts", {})
-        if kind not in cache:
+        if kind not in self._layouts:
             cls = {"csr": CsrLayout, "dense": DenseLayout}[kind]
-            cache[kind] = cls(self.elements.tets, self.dof_map)
-        return cache[kind]
+            self._layouts[kind] = cls(self.elements.tets, self.dof_map)
+        return self._layouts[kind]
 
     @cached_property
     def full_layout(self):

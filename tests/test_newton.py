@@ -1,5 +1,4 @@
 """Newton: quadratic convergence, the adaptive Hessian choice, linear solvers, failures."""
-import warnings
 
 import numpy as np
 import pytest
