@@ -10,11 +10,8 @@ def as_float_array(value, name, shape=None):
     shape: tuple with None for a free dimension, or None for any shape.
     """
     arr = np.asarray(value)
-    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating)
-                                   or np.issubdtype(arr.dtype, np.integer)):
+    if arr.dtype.kind not in "fiu":  # bool, complex, object, strings...
         raise TypeError(f"{name}: expected a real-valued numeric array, got dtype {arr.dtype}")
-    if np.issubdtype(arr.dtype, np.bool_):
-        raise TypeError(f"{name}: expected a real-valued numeric array, got dtype bool")
     arr = np.array(arr, dtype=np.float64, order="C")
     if shape is not None:
         check_shape(arr, name, shape)
@@ -27,7 +24,7 @@ def as_float_array(value, name, shape=None):
 def as_index_array(value, name, shape=None):
     """value as an int64 array; floats (even integral ones) and bools are a TypeError."""
     arr = np.asarray(value)
-    if not np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.bool_):
+    if arr.dtype.kind not in "iu":
         raise TypeError(f"{name}: expected an integer array, got dtype {arr.dtype}")
     arr = np.array(arr, dtype=np.int64, order="C")
     if shape is not None:

@@ -278,6 +278,28 @@ def _run_colors(nthreads, order, color_ptr, mode, x, tets, grads, vol, mu, lam, 
                        has_fiber, e_iso, e_fib, grad, want_grad, project, hess_map, hess_data)
 
 
+@njit(cache=True)
+def loads_and_inertia(x, f_ext, mass_over_dt2, x_hat, grad):
+    """Energies of the external load, -f_ext . x, and of inertia,
+    1/2 sum_i m_i/dt^2 |x_i - x_hat_i|^2 (0 when mass_over_dt2 is empty: statics), in J;
+    their gradient is added to grad unless grad is empty. x, f_ext, x_hat, grad: (n, 3)."""
+    external = 0.0
+    kinetic = 0.0
+    dynamic = mass_over_dt2.shape[0] > 0
+    with_grad = grad.shape[0] > 0
+    for i in range(x.shape[0]):
+        for c in range(3):
+            external -= f_ext[i, c] * x[i, c]
+            g = -f_ext[i, c]
+            if dynamic:
+                dx = x[i, c] - x_hat[i, c]
+                kinetic += 0.5 * mass_over_dt2[i] * dx * dx
+                g += mass_over_dt2[i] * dx
+            if with_grad:
+                grad[i, c] += g
+    return external, kinetic
+
+
 def assemble(x, elements, *, want_grad=False, want_hess=False, project=False, hess_map=None,
              hess_data=None):
     """Element energies, and optionally the assembled elastic gradient and Hessian.
@@ -290,21 +312,20 @@ def assemble(x, elements, *, want_grad=False, want_hess=False, project=False, he
     m = elements.tets.shape[0]
     e_iso = np.empty(m)
     e_fib = np.empty(m)
-    grad = np.zeros_like(x) if want_grad else _EMPTY_GRAD
+    grad = np.zeros_like(x) if want_grad else EMPTY_GRAD
     if not want_hess:
         hess_map, hess_data = _EMPTY_MAP, _EMPTY_DATA
     mode = 2 if want_hess else 0
     args = (mode, x, elements.tets, elements.grads, elements.volumes, elements.mu, elements.lam,
             elements.kappa, elements.fiber, elements.has_fiber, e_iso, e_fib, grad, want_grad,
             project, hess_map, hess_data)
-    nthreads = numba.get_num_threads()
-    if m < PARALLEL_MIN_ELEMENTS or nthreads == 1:
+    if m < PARALLEL_MIN_ELEMENTS or numba.get_num_threads() == 1:
         _run_range(mode, 0, m, elements.serial_order, *args[1:])
     else:
-        _run_colors(nthreads, elements.color_order, elements.color_ptr, *args)
+        _run_colors(numba.get_num_threads(), elements.color_order, elements.color_ptr, *args)
     return e_iso, e_fib, (grad if want_grad else None)
 
 
-_EMPTY_GRAD = np.empty((0, 3))
+EMPTY_GRAD = np.empty((0, 3))
 _EMPTY_MAP = np.empty((0, 144), dtype=np.int64)
 _EMPTY_DATA = np.empty(0)

@@ -19,6 +19,7 @@ Hessian choice (`projection`):
   near equilibria that have compressed elements).
 - "never": the true Hessian only (fails where it is indefinite).
 """
+import math
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -74,25 +75,40 @@ def minimize(potential, x0, *, rtol=1e-8, atol=None, max_iter=100, projection="a
     if int(max_iter) < 0:
         raise ValueError(f"max_iter: must be >= 0, got {max_iter}")
     t0 = time.perf_counter()
+    solver = linsolve.make(linear_solver, potential.scene.n_free)
+    with solver.threads():
+        x, converged, it, res, energy, n_projected, message = _iterate(
+            potential, x0, solver, rtol, atol, max_iter, projection)
+    result = NewtonResult(x=x, converged=converged, iterations=it, residuals=res, energy=energy,
+                          projected=n_projected, message=message,
+                          seconds=time.perf_counter() - t0)
+    if warn and not converged:
+        warnings.warn(f"Newton did not converge: {message} after {it} iterations, relative "
+                      f"residual {res[-1]:.3g}", ConvergenceWarning, stacklevel=3)
+    return result
+
+
+def _iterate(potential, x0, solver, rtol, atol, max_iter, projection):
+    """The Newton loop of minimize: (x, converged, iterations, residuals, energy, projected
+    iterations, message)."""
     scene = potential.scene
     free = ~scene.fixed_mask
-    solver = linsolve.make(linear_solver, scene.n_free)
     layout = scene.layout(solver.layout)
     x = np.array(x0, dtype=float)
     energy, grad = potential.energy_gradient(x)
     g = grad[free]
-    scale = max(np.linalg.norm(g), np.linalg.norm(scene.external_force[free]))
+    scale = max(_norm(g), _norm(scene.external_force[free]))
     if atol is None:
         atol = ROUNDOFF * scene.force_unit * np.sqrt(scene.n_free)
     tol = max(rtol * scale, atol)
-    res = [np.linalg.norm(g) / scale if scale > 0 else 0.0]
+    res = [_norm(g) / scale if scale > 0 else 0.0]
     choices = {"adaptive": (False, True), "always": (True,), "never": (False,)}[projection]
     n_projected = 0
     message = "max_iter reached"
     converged = False
     it = 0
     while True:
-        if np.linalg.norm(g) <= tol:
+        if _norm(g) <= tol:
             converged, message = True, "converged"
             break
         if it >= max_iter:
@@ -109,14 +125,13 @@ def minimize(potential, x0, *, rtol=1e-8, atol=None, max_iter=100, projection="a
         x, energy, grad, projected = step
         n_projected += projected
         g = grad[free]
-        res.append(np.linalg.norm(g) / scale)
-    result = NewtonResult(x=x, converged=converged, iterations=it, residuals=res, energy=energy,
-                          projected=n_projected, message=message,
-                          seconds=time.perf_counter() - t0)
-    if warn and not converged:
-        warnings.warn(f"Newton did not converge: {message} after {it} iterations, relative "
-                      f"residual {res[-1]:.3g}", ConvergenceWarning, stacklevel=3)
-    return result
+        res.append(_norm(g) / scale)
+    return x, converged, it, res, energy, n_projected, message
+
+
+def _norm(v):
+    """Euclidean norm of a 1-D float array (cheaper than np.linalg.norm on small ones)."""
+    return math.sqrt(float(np.dot(v, v)))
 
 
 def _newton_step(potential, x, energy, g, free, layout, solver, projected):
@@ -127,19 +142,20 @@ def _newton_step(potential, x, energy, g, free, layout, solver, projected):
     except linsolve.FactorizationError:
         return None
     slope = float(np.dot(p, g))
-    if not np.isfinite(p).all() or slope >= -1e-14 * np.linalg.norm(p) * np.linalg.norm(g):
+    gnorm = _norm(g)
+    if not math.isfinite(slope) or slope >= -1e-14 * _norm(p) * gnorm:
         return None
-    gnorm = np.linalg.norm(g)
     noise = 1e-13 * max(abs(energy), 1e-300)
     alpha = 1.0
     while alpha >= MIN_STEP:
         xt = x.copy()
         xt[free] += alpha * p
         et, gt = potential.energy_gradient(xt)
-        if et <= energy + ARMIJO * alpha * slope:
-            return xt, et, gt, projected
-        # below round-off the energy cannot rank the points: accept if the gradient shrinks
-        if abs(et - energy) <= noise and np.linalg.norm(gt[free]) < 0.5 * gnorm:
+        if abs(et - energy) <= noise:
+            # below round-off the energy cannot rank the points: accept if the gradient halves
+            if _norm(gt[free]) < 0.5 * gnorm:
+                return xt, et, gt, projected
+        elif et <= energy + ARMIJO * alpha * slope:
             return xt, et, gt, projected
         alpha *= 0.5
     return None

@@ -13,6 +13,9 @@ from ._validate import as_float_array, as_scalar
 from .scene import Scene
 
 
+_NO_MASS = np.empty(0)
+
+
 class Potential:
     """G of a scene, statics (x_hat = dt = None) or one backward-Euler step."""
 
@@ -23,6 +26,8 @@ class Potential:
             raise ValueError("x_hat, dt: give both (backward Euler) or neither (statics)")
         self.scene = scene
         self.dynamic = dt is not None
+        # statics: no inertia (empty arrays, which the load kernel reads as "no inertia")
+        self.x_hat, self.mass_over_dt2 = kernels.EMPTY_GRAD, _NO_MASS
         if self.dynamic:
             self.dt = as_scalar(dt, "dt")
             if self.dt <= 0:
@@ -46,9 +51,9 @@ class Potential:
         """Energy terms in J: isotropic, fiber, external, kinetic, total; and per-element
         elastic energies (m,) under "elements"."""
         e_iso, e_fib, _, _ = self._elastic(x)
+        external, kinetic = self._loads(x, kernels.EMPTY_GRAD)
         out = {"isotropic": float(e_iso.sum()), "fiber": float(e_fib.sum()),
-               "external": -float(np.vdot(self.scene.external_force, x)),
-               "kinetic": self._kinetic(x)}
+               "external": external, "kinetic": kinetic}
         out["total"] = out["isotropic"] + out["fiber"] + out["external"] + out["kinetic"]
         out["elements"] = e_iso + e_fib
         return out
@@ -71,22 +76,16 @@ class Potential:
 
     def _evaluate(self, x, want_grad, layout=None, project=False):
         e_iso, e_fib, grad, data = self._elastic(x, want_grad, layout, project)
-        value = float(e_iso.sum() + e_fib.sum()) - float(np.vdot(self.scene.external_force, x))
-        if want_grad:
-            grad -= self.scene.external_force
-        if self.dynamic:
-            value += self._kinetic(x)
-            if want_grad:
-                grad += self.mass_over_dt2[:, None] * (x - self.x_hat)
-            if layout is not None:
-                data[layout.diag] += self._mass_per_dof[layout.dofs]
+        external, kinetic = self._loads(x, grad if want_grad else kernels.EMPTY_GRAD)
+        value = float(e_iso.sum()) + float(e_fib.sum()) + external + kinetic
+        if self.dynamic and layout is not None:
+            data[layout.diag] += self._mass_per_dof[layout.dofs]
         return value, grad, data
 
-    def _kinetic(self, x):
-        if not self.dynamic:
-            return 0.0
-        dx = x - self.x_hat
-        return 0.5 * float(np.einsum("i,ij,ij->", self.mass_over_dt2, dx, dx))
+    def _loads(self, x, grad):
+        """(external, kinetic) energies in J; adds their gradient to grad unless it is empty."""
+        return kernels.loads_and_inertia(x, self.scene.external_force, self.mass_over_dt2,
+                                         self.x_hat, grad)
 
 
 def check_positions(scene, x, name="x"):

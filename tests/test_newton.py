@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import anisofem as af
+from anisofem import linsolve
 
 
 def test_quadratic_convergence_near_the_solution(beam):
@@ -27,7 +28,11 @@ def test_projecting_every_iteration_converges_only_linearly(beam):
     assert np.abs(always.x - adaptive.x).max() < 1e-8
 
 
-@pytest.mark.parametrize("solver", ["dense", "superlu", "superlu-colamd"])
+CHOLMOD = pytest.param("cholmod", marks=pytest.mark.skipif(
+    not linsolve.cholmod_available(), reason="scikit-sparse (CHOLMOD) not installed"))
+
+
+@pytest.mark.parametrize("solver", ["dense", "superlu", "superlu-colamd", CHOLMOD])
 def test_linear_solvers_agree(beam, solver):
     ref = af.solve(beam, linear_solver="dense", rtol=1e-10)
     res = af.solve(beam, linear_solver=solver, rtol=1e-10)
@@ -50,7 +55,7 @@ def buckling_scene():
     return scene, x0
 
 
-@pytest.mark.parametrize("solver", ["dense", "superlu"])
+@pytest.mark.parametrize("solver", ["dense", "superlu", CHOLMOD])
 def test_buckling_needs_the_projected_fallback(solver):
     scene, x0 = buckling_scene()
     result = af.solve(scene, x0=x0, linear_solver=solver)
