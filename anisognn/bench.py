@@ -1,0 +1,66 @@
+"""`python -m anisognn bench`: per-step cost of the network (inference), of the physics loss
+(anisofem energy + gradient) and of one training iteration, on box-beam cantilevers of about
+100 and 1,000 tets, for a small configuration and the paper's, both aggregations. Prints a
+table and writes JSON (atomically)."""
+import time
+
+import numpy as np
+import torch
+
+from anisofem import box_beam, default_scene
+from anisofem.bench import best_time, write_json_atomic
+
+from .model import GraphNet, ModelConfig
+from .sampler import Sample
+from .train import batch_loss, make_batch
+
+MESHES = {"1e2": (5, 2, 2), "1e3": (10, 4, 5)}
+CONFIGS = {"small (64 wide, 8 steps)": dict(latent=64, steps=8),
+           "paper (128 wide, 15 steps)": dict(latent=128, steps=15)}
+
+
+def bench_case(cells, model_kwargs, aggregation):
+    scene = default_scene(box_beam(cells=cells))
+    x = scene.initial_positions()
+    batch = make_batch([Sample(scene, x, np.zeros_like(x))], 0.02, "cpu")
+    model = GraphNet(ModelConfig(aggregation=aggregation, **model_kwargs))
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-5)
+
+    def inference():
+        with torch.no_grad():
+            model(batch.x, batch.v, batch.f_ext, batch.graph)
+
+    def loss_only():
+        batch.potential.energy_gradient(x)
+
+    def iteration():
+        loss, _ = batch_loss(model, batch, 0.02)
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+    return {"tets": scene.mesh.n_tets, "edges": int(batch.graph.n_edges),
+            "inference_s": best_time(inference, 30),
+            "loss_s": best_time(loss_only, 30),
+            "iteration_s": best_time(iteration, 10)}
+
+
+def run(out="bench_anisognn.json"):
+    rows = []
+    for label, kwargs in CONFIGS.items():
+        for aggregation in ("directional", "sum"):
+            for size, cells in MESHES.items():
+                row = bench_case(cells, kwargs, aggregation)
+                row.update(config=label, aggregation=aggregation)
+                rows.append(row)
+    report = {"rows": rows, "torch_threads": torch.get_num_threads()}
+    print(f"anisognn per step on the CPU ({report['torch_threads']} torch threads), batch of 1")
+    print(f"{'config':27} {'aggregation':11} {'tets':>5} | {'inference ms':>12} "
+          f"{'loss ms':>8} {'train it ms':>11} {'loss share':>10}")
+    for r in rows:
+        print(f"{r['config']:27} {r['aggregation']:11} {r['tets']:5d} | "
+              f"{1e3 * r['inference_s']:12.2f} {1e3 * r['loss_s']:8.3f} "
+              f"{1e3 * r['iteration_s']:11.2f} {r['loss_s'] / r['iteration_s']:10.1%}")
+    if out:
+        write_json_atomic(out, report)
+        print(f"\nwrote {out}")
+    return report

@@ -1,0 +1,68 @@
+"""The physics loss: anisofem's backward-Euler incremental potential of the predicted next
+positions, with anisofem's hand-derived gradient as the backward pass (one implementation of
+the physics; nothing here re-derives it in torch).
+
+For one scene with state (x_n, v_n), the network's acceleration a gives
+x_{n+1} = x_n + dt v_n + dt^2 a (held components at their prescribed positions), and
+
+    G(x_{n+1}) = 1/(2 dt^2) |x_{n+1} - x_n - dt v_n|_M^2 + Psi(x_{n+1}) - f_ext . x_{n+1}   (J)
+
+whose minimizer is the backward-Euler step. A batch is a disjoint union of scenes; the loss
+is sum_i weight_i G_i over its scenes.
+"""
+import numpy as np
+import torch
+
+from anisofem.potential import Potential
+
+
+class BatchPotential:
+    """The incremental potentials of the scenes of a batch, on their slices of the stacked
+    (N, 3) positions. potentials: anisofem Potentials (one per scene, same order as the batch);
+    weights: (scenes,) multipliers of each G_i (default 1)."""
+
+    def __init__(self, potentials, weights=None):
+        self.potentials = list(potentials)
+        sizes = [p.scene.mesh.n_vertices for p in self.potentials]
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)])
+        self.weights = np.ones(len(sizes)) if weights is None else np.asarray(weights, float)
+
+    @classmethod
+    def backward_euler(cls, scenes, x, v, dt, weights=None):
+        """Potentials of one backward-Euler step from stacked x, v (N, 3) numpy float64."""
+        pots, start = [], 0
+        for scene in scenes:
+            n = scene.mesh.n_vertices
+            pots.append(Potential(scene, x[start:start + n] + dt * v[start:start + n], dt))
+            start += n
+        return cls(pots, weights)
+
+    def energy_gradient(self, x):
+        """(sum_i w_i G_i in J, gradient (N, 3) in N) at stacked positions x (N, 3) float64."""
+        total, grad = 0.0, np.empty_like(x)
+        for w, pot, lo, hi in zip(self.weights, self.potentials, self.offsets[:-1],
+                                  self.offsets[1:]):
+            e, g = pot.energy_gradient(x[lo:hi])
+            total += w * e
+            grad[lo:hi] = w * g
+        return total, grad
+
+
+class _PotentialFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, x_next, batch_potential):
+        x64 = x_next.detach().to("cpu", torch.float64).numpy()
+        energy, grad = batch_potential.energy_gradient(x64)
+        ctx.save_for_backward(torch.from_numpy(grad).to(x_next.device, x_next.dtype))
+        return x_next.new_tensor(energy)
+
+    @staticmethod
+    def backward(ctx, grad_output):
+        (grad,) = ctx.saved_tensors
+        return grad_output * grad, None
+
+
+def potential_loss(x_next, batch_potential):
+    """sum_i w_i G_i(x_next) as a scalar tensor (x_next's dtype and device), J; its gradient
+    with respect to x_next (N, 3) is anisofem's."""
+    return _PotentialFunction.apply(x_next, batch_potential)

@@ -1,0 +1,165 @@
+"""The graph network: encode, process (message passing with directional or plain-sum
+aggregation), decode to end-of-step accelerations (paper section 3.1).
+
+Inputs per vertex: Dirichlet flags (3, one per component, not normalized), velocity (3, m/s),
+mass (1, kg), external force (3, N). Inputs per directed edge (sender s -> receiver r): unit
+rest vector and rest length (4), unit current vector x_s - x_r and current length (4), fiber
+feature (3, Pa). All but the flags are normalized with statistics stored as buffers.
+
+Processor step l (paper eq. 3):
+    e <- e + f_e^l([e, v_s, v_r])
+    v <- v + f_v^l([v, A(e)])
+with A the aggregation over the edges each vertex receives:
+    "directional": A = [sum_j w_x,j e_j, sum_j w_y,j e_j, sum_j w_z,j e_j] (paper eq. 4 weights),
+    "sum":         A = sum_j e_j (MeshGraphNets).
+The aggregation gathers each vertex's incoming edges from a padded table and contracts them
+with their weights in one batched matmul: no scatter, so it exports to ONNX as Gather + MatMul,
+which onnxruntime runs deterministically (scatter-add with repeated indices does not; see
+export/README.md). f_e's first layer is split into an edge part and per-vertex sender and
+receiver parts, computed once per vertex and then gathered (the same function as one layer on
+the concatenation, with about a third fewer FLOPs).
+"""
+from dataclasses import asdict, dataclass
+
+import torch
+from torch import nn
+
+AGGREGATIONS = ("directional", "sum")
+VERTEX_FLAGS = 3   # Dirichlet flags per component
+VERTEX_REAL = 7    # velocity 3, mass 1, external force 3
+EDGE_FEATURES = 11  # rest unit 3 + length 1, current unit 3 + length 1, fiber 3
+
+
+@dataclass
+class ModelConfig:
+    """Network shape. Paper defaults: latent 128, 2 hidden layers, 15 steps, SiLU, LayerNorm
+    on every MLP but the decoder. dt (s) is the time step the model is trained for."""
+    latent: int = 128
+    hidden_layers: int = 2
+    steps: int = 15
+    aggregation: str = "directional"
+    dt: float = 0.02
+
+    def __post_init__(self):
+        if self.aggregation not in AGGREGATIONS:
+            raise ValueError(f"aggregation: expected one of {AGGREGATIONS}, got "
+                             f"{self.aggregation!r}")
+        for name in ("latent", "hidden_layers", "steps"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"{name}: expected a positive integer, got {value!r}")
+        if not self.dt > 0:
+            raise ValueError(f"dt: expected a time step > 0 s, got {self.dt!r}")
+
+    def to_dict(self):
+        return asdict(self)
+
+
+class Normalizer(nn.Module):
+    """(x - mean) / std per channel; the statistics are buffers (saved with the model)."""
+
+    def __init__(self, channels):
+        super().__init__()
+        self.register_buffer("mean", torch.zeros(channels))
+        self.register_buffer("std", torch.ones(channels))
+
+    def fit(self, samples, floor=1e-8):
+        """Set the statistics from samples (k, channels); std floored at floor * max std."""
+        samples = samples.to(self.mean)
+        std = samples.std(dim=0)
+        self.mean.copy_(samples.mean(dim=0))
+        self.std.copy_(torch.clamp(std, min=floor * float(std.max()) + 1e-30))
+
+    def forward(self, x):
+        return (x - self.mean) / self.std
+
+
+def mlp(inputs, width, outputs, hidden_layers, layer_norm):
+    """Linear-SiLU stack with hidden_layers hidden layers of `width`, optional LayerNorm."""
+    layers, size = [], inputs
+    for _ in range(hidden_layers):
+        layers += [nn.Linear(size, width), nn.SiLU()]
+        size = width
+    layers.append(nn.Linear(size, outputs))
+    if layer_norm:
+        layers.append(nn.LayerNorm(outputs))
+    return nn.Sequential(*layers)
+
+
+class EdgeUpdate(nn.Module):
+    """f_e([e, v_s, v_r]) with the first layer split: W_e e + (W_s v)[s] + (W_r v)[r] + b."""
+
+    def __init__(self, latent, hidden_layers):
+        super().__init__()
+        self.edge = nn.Linear(latent, latent)
+        self.sender = nn.Linear(latent, latent, bias=False)
+        self.receiver = nn.Linear(latent, latent, bias=False)
+        self.rest = nn.Sequential(nn.SiLU(), mlp(latent, latent, latent, hidden_layers - 1,
+                                                 layer_norm=True))
+
+    def forward(self, e, v, senders, receivers):
+        h = self.edge(e) + self.sender(v)[senders] + self.receiver(v)[receivers]
+        return self.rest(h)
+
+
+class GraphNet(nn.Module):
+    """Encode-process-decode network mapping a state on a Graph to accelerations (n, 3) m/s^2."""
+
+    def __init__(self, config=None):
+        super().__init__()
+        self.config = config or ModelConfig()
+        c = self.config
+        L, H = c.latent, c.hidden_layers
+        self.vertex_norm = Normalizer(VERTEX_REAL)
+        self.edge_norm = Normalizer(EDGE_FEATURES)
+        self.register_buffer("accel_scale", torch.ones(()))
+        self.vertex_encoder = mlp(VERTEX_FLAGS + VERTEX_REAL, L, L, H, layer_norm=True)
+        self.edge_encoder = mlp(EDGE_FEATURES, L, L, H, layer_norm=True)
+        channels = 3 if c.aggregation == "directional" else 1
+        self.edge_updates = nn.ModuleList(EdgeUpdate(L, H) for _ in range(c.steps))
+        self.vertex_updates = nn.ModuleList(
+            mlp(L * (1 + channels), L, L, H, layer_norm=True) for _ in range(c.steps))
+        self.decoder = mlp(L, L, 3, H, layer_norm=False)
+        # start from "no acceleration beyond what the inputs imply": a zero output layer
+        nn.init.zeros_(self.decoder[-1].weight)
+        nn.init.zeros_(self.decoder[-1].bias)
+
+    def edge_features(self, x, graph):
+        """(E, 11) raw edge inputs: rest unit + length, current unit + length, fiber."""
+        vec = x[graph.senders] - x[graph.receivers]
+        length = torch.linalg.vector_norm(vec, dim=1, keepdim=True)
+        unit = vec / torch.clamp(length, min=1e-12)
+        return torch.cat([graph.rest, unit, length, graph.fiber], dim=1)
+
+    def vertex_features(self, v, f_ext, graph):
+        """(n, 7) raw vertex inputs: velocity, mass, external force."""
+        return torch.cat([v, graph.mass, f_ext], dim=1)
+
+    def aggregation_weights(self, graph):
+        """(n, K, C) weights of each vertex's incoming edges: C = 3 directional, 1 sum."""
+        if self.config.aggregation == "directional":
+            return graph.in_weights
+        return (graph.incoming < graph.n_edges).to(graph.in_weights.dtype).unsqueeze(-1)
+
+    def forward(self, x, v, f_ext, graph):
+        """Accelerations (n, 3) in m/s^2 for positions x (n, 3) m, velocities v (n, 3) m/s and
+        external forces f_ext (n, 3) N on graph (anisognn.graph.Graph)."""
+        vert = self.vertex_encoder(torch.cat(
+            [graph.fixed, self.vertex_norm(self.vertex_features(v, f_ext, graph))], dim=1))
+        edge = self.edge_encoder(self.edge_norm(self.edge_features(x, graph)))
+        weights = self.aggregation_weights(graph).transpose(1, 2)  # (n, C, K)
+        pad = edge.new_zeros((1, edge.shape[1]))
+        for edge_update, vertex_update in zip(self.edge_updates, self.vertex_updates):
+            edge = edge + edge_update(edge, vert, graph.senders, graph.receivers)
+            gathered = torch.cat([edge, pad])[graph.incoming]  # (n, K, L)
+            agg = torch.matmul(weights, gathered).flatten(1)  # (n, C L)
+            vert = vert + vertex_update(torch.cat([vert, agg], dim=1))
+        return self.decoder(vert) * self.accel_scale
+
+
+def integrate(x, v, a, dt, graph):
+    """Backward-Euler update with the predicted end-of-step acceleration a (n, 3):
+    x' = x + dt v + dt^2 a, held components at graph.fixed_positions, v' = (x' - x) / dt."""
+    free = x + dt * v + (dt * dt) * a
+    x_next = torch.where(graph.fixed > 0, graph.fixed_positions, free)
+    return x_next, (x_next - x) / dt

@@ -1,0 +1,58 @@
+"""Inference: roll a trained model forward on an anisofem.Scene."""
+import numpy as np
+import torch
+
+from anisofem import Scene
+from anisofem._validate import as_float_array, as_scalar
+
+from .graph import from_scene
+from .model import GraphNet
+
+
+def check_dt(model, dt):
+    """The model's trained dt (s); a different dt is an error (the network learned one step
+    length)."""
+    trained = model.config.dt
+    if dt is None:
+        return trained
+    dt = as_scalar(dt, "dt")
+    if not np.isclose(dt, trained, rtol=1e-9, atol=0):
+        raise ValueError(f"dt: this model was trained for dt = {trained} s and cannot step "
+                         f"dt = {dt} s")
+    return trained
+
+
+def rollout(model, scene, steps, dt=None, x0=None, v0=None):
+    """Positions of every step, (steps + 1, n, 3) float64 in m, starting at x0 (default rest)
+    with velocities v0 (default 0), under the scene's loads. Held (Dirichlet) components stay at
+    the scene's fixed positions. dt defaults to the model's and must equal it."""
+    if not isinstance(model, GraphNet):
+        raise TypeError(f"model: expected an anisognn GraphNet, got {type(model).__name__}")
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
+    dt = check_dt(model, dt)
+    steps = int(steps)
+    if steps < 0:
+        raise ValueError(f"steps: must be >= 0, got {steps}")
+    n = scene.mesh.n_vertices
+    x = scene.initial_positions() if x0 is None else as_float_array(x0, "x0", (n, 3))
+    v = np.zeros((n, 3)) if v0 is None else as_float_array(v0, "v0", (n, 3))
+    held = scene.fixed_mask
+    x[held] = scene.fixed_positions[held]
+    param = next(model.parameters())
+    graph = from_scene(scene).to(param.device, param.dtype)
+    f_ext = torch.as_tensor(scene.external_force, dtype=param.dtype, device=param.device)
+    out = np.empty((steps + 1, n, 3))
+    out[0] = x
+    with torch.no_grad():
+        for k in range(steps):
+            a = model(torch.as_tensor(x, dtype=param.dtype, device=param.device),
+                      torch.as_tensor(v, dtype=param.dtype, device=param.device), f_ext, graph)
+            x_next = x + dt * v + dt * dt * a.to("cpu", torch.float64).numpy()
+            x_next[held] = scene.fixed_positions[held]
+            if not np.isfinite(x_next).all():
+                raise FloatingPointError(f"rollout: the predicted state is not finite at step "
+                                         f"{k + 1}")
+            v = (x_next - x) / dt
+            x = out[k + 1] = x_next
+    return out

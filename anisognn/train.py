@@ -1,0 +1,351 @@
+"""Self-supervised training on the incremental potential (`python -m anisognn train`).
+
+A run is described by a TOML file with sections [model] (ModelConfig), [sampler]
+(SamplerConfig) and [train] (TrainConfig); see configs/. It writes into `out`:
+- checkpoint.pt: model, optimizer and iteration, written atomically every checkpoint_every
+  iterations and at the end; a run started again with the same out resumes from it exactly
+  (samples depend only on (seed, index), the learning rate only on the iteration);
+- log.jsonl: one JSON object per logged iteration and per evaluation; on resume the lines
+  after the checkpoint are dropped, so the log reads like an uninterrupted run's;
+- model.pt: the final model (anisognn.load reads it).
+A non-finite loss or gradient stops the run with TrainingDiverged; the last good checkpoint is
+kept. Under torchrun (WORLD_SIZE > 1) the run is data parallel with DistributedDataParallel
+(gloo on the CPU, nccl on GPUs); rank r draws samples (i B W + r B + j) at iteration i, and only
+rank 0 writes files.
+"""
+import dataclasses
+import hashlib
+import json
+import math
+import os
+import sys
+import tempfile
+import time
+import tomllib
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.distributed as dist
+
+import anisofem
+from anisofem.potential import Potential
+
+from . import checkpoint
+from .graph import batch as batch_graphs
+from .graph import from_scene
+from .loss import BatchPotential, potential_loss
+from .model import GraphNet, ModelConfig, integrate
+from .sampler import Sampler, SamplerConfig
+
+#: sample streams of a seed: training uses the seed itself, these offsets the others
+NORMALIZATION_STREAM = 1_000_003
+EVALUATION_STREAM = 2_000_003
+
+
+class TrainingDiverged(RuntimeError):
+    """The loss or the gradient became NaN or infinite."""
+
+
+@dataclass
+class TrainConfig:
+    """Optimization and bookkeeping. learning_rate decays by lr_decay every decay_every
+    iterations (continuously); grad_clip bounds the global gradient norm (0: off)."""
+    iterations: int = 1000
+    batch_size: int = 8
+    learning_rate: float = 1e-3
+    lr_decay: float = 0.5
+    decay_every: int = 10000
+    grad_clip: float = 1.0
+    seed: int = 0
+    device: str = "auto"
+    log_every: int = 10
+    eval_every: int = 200
+    eval_samples: int = 16
+    checkpoint_every: int = 100
+    normalization_samples: int = 64
+    out: str = "runs/default"
+
+
+@dataclass
+class RunConfig:
+    model: ModelConfig
+    sampler: SamplerConfig
+    train: TrainConfig
+
+    def to_dict(self):
+        return dataclasses.asdict(self)
+
+
+def load_config(path, **overrides):
+    """RunConfig from a TOML file; overrides set [train] fields (e.g. out=...)."""
+    with open(path, "rb") as f:
+        try:
+            raw = tomllib.load(f)
+        except tomllib.TOMLDecodeError as err:
+            raise ValueError(f"config {path}: not valid TOML: {err}") from None
+    return make_config(raw, source=str(path), **overrides)
+
+
+def make_config(raw, source="config", **overrides):
+    """RunConfig from a dict {"model": {...}, "sampler": {...}, "train": {...}}."""
+    unknown = set(raw) - {"model", "sampler", "train"}
+    if unknown:
+        raise ValueError(f"{source}: unknown sections {sorted(unknown)}; expected model, "
+                         "sampler, train")
+    parts = {}
+    for name, cls in (("model", ModelConfig), ("sampler", SamplerConfig),
+                      ("train", TrainConfig)):
+        values = dict(raw.get(name, {}))
+        if name == "train":
+            values.update(overrides)
+        known = {f.name for f in dataclasses.fields(cls)}
+        bad = set(values) - known
+        if bad:
+            raise ValueError(f"{source}: [{name}] has unknown keys {sorted(bad)}; known: "
+                             f"{sorted(known)}")
+        parts[name] = cls(**values)
+    if not math.isclose(parts["model"].dt, parts["sampler"].dt):
+        raise ValueError(f"{source}: model.dt = {parts['model'].dt} s and sampler.dt = "
+                         f"{parts['sampler'].dt} s must be equal")
+    return RunConfig(**parts)
+
+
+@dataclass
+class Batch:
+    """Network inputs of a batch of samples (tensors on the model's device) and its loss."""
+    graph: object
+    x: torch.Tensor
+    v: torch.Tensor
+    f_ext: torch.Tensor
+    potential: BatchPotential
+
+
+def make_batch(samples, dt, device, dtype=torch.float32, weights=None):
+    """Batch of anisognn.sampler.Samples: one disjoint graph, stacked states, and the
+    incremental potentials of one step of dt from each sample's state."""
+    graph = batch_graphs([from_scene(s.scene, dtype) for s in samples]).to(device)
+    x = np.concatenate([s.x for s in samples])
+    v = np.concatenate([s.v for s in samples])
+    f = np.concatenate([s.scene.external_force for s in samples])
+    pot = BatchPotential.backward_euler([s.scene for s in samples], x, v, dt, weights)
+    return Batch(graph, *(torch.as_tensor(a, dtype=dtype, device=device) for a in (x, v, f)),
+                 pot)
+
+
+def batch_loss(net, batch, dt):
+    """(loss tensor, x_next) of the network net (a GraphNet, possibly wrapped by DDP) on a
+    Batch: sum_i w_i G_i(x_next) with x_next = x + dt v + dt^2 net(...)."""
+    a = net(batch.x, batch.v, batch.f_ext, batch.graph)
+    x_next, _ = integrate(batch.x, batch.v, a, dt, batch.graph)
+    return potential_loss(x_next, batch.potential), x_next
+
+
+def fit_normalization(model, samples):
+    """Set the model's input statistics and acceleration scale from samples (in place)."""
+    g = batch_graphs([from_scene(s.scene, torch.float64) for s in samples])
+    x = torch.as_tensor(np.concatenate([s.x for s in samples]))
+    v = torch.as_tensor(np.concatenate([s.v for s in samples]))
+    f = torch.as_tensor(np.concatenate([s.scene.external_force for s in samples]))
+    model.vertex_norm.fit(model.vertex_features(v, f, g))
+    model.edge_norm.fit(model.edge_features(x, g))
+    accel = f / g.mass
+    model.accel_scale.fill_(float(torch.sqrt((accel ** 2).sum(dim=1).mean())))
+
+
+class Evaluation:
+    """Fixed evaluation samples with their optimal one-step energy decrease (anisofem's
+    Newton step): share = (G(start) - G(net)) / (G(start) - G(newton)), start = x + dt v
+    (zero acceleration). 1 is the optimum; 0 is no better than not accelerating."""
+
+    def __init__(self, samples, dt):
+        self.samples = samples
+        self.dt = dt
+        self.start, self.best = [], []
+        for s in samples:
+            pot = Potential(s.scene, s.x + dt * s.v, dt)
+            start = s.x + dt * s.v
+            start[s.scene.fixed_mask] = s.scene.fixed_positions[s.scene.fixed_mask]
+            self.start.append(pot.energy_gradient(start)[0])
+            newton = anisofem.step(s.scene, s.x, s.v, dt, warn=False)
+            self.best.append(newton.newton.energy)
+
+    def __call__(self, model, device):
+        model.eval()
+        with torch.no_grad():
+            dtype = next(model.parameters()).dtype
+            batch = make_batch(self.samples, self.dt, device, dtype)
+            _, x_next = batch_loss(model, batch, self.dt)
+        model.train()
+        x64 = x_next.to("cpu", torch.float64).numpy()
+        shares = []
+        for pot, lo, hi, g0, gbest in zip(batch.potential.potentials, batch.potential.offsets,
+                                          batch.potential.offsets[1:], self.start, self.best):
+            g = pot.energy_gradient(x64[lo:hi])[0]
+            shares.append((g0 - g) / (g0 - gbest) if g0 > gbest else 1.0)
+        return {"share_of_optimal_decrease": float(np.mean(shares)),
+                "share_median": float(np.median(shares))}
+
+
+def _device(name):
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+def _distributed():
+    """(rank, world size), initializing the process group under torchrun."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world == 1:
+        return 0, 1
+    if not dist.is_initialized():
+        backend = "nccl" if torch.cuda.is_available() else "gloo"
+        dist.init_process_group(backend)
+    return dist.get_rank(), world
+
+
+def parameter_digest(model):
+    """SHA-256 of the model's parameters and buffers (bitwise identity check)."""
+    h = hashlib.sha256()
+    for name, t in sorted(model.state_dict().items()):
+        h.update(name.encode())
+        h.update(t.detach().to("cpu").contiguous().numpy().tobytes())
+    return h.hexdigest()
+
+
+class _Log:
+    """log.jsonl of rank 0: lines appended and flushed; truncated to an iteration on resume."""
+
+    def __init__(self, path, enabled):
+        self.path, self.enabled = path, enabled
+
+    def truncate(self, iteration):
+        if not (self.enabled and os.path.exists(self.path)):
+            return
+        with open(self.path) as f:
+            keep = [line for line in f if line.strip()
+                    and json.loads(line).get("iteration", 0) <= iteration]
+        fd, tmp = tempfile.mkstemp(prefix=".tmp-", dir=os.path.dirname(self.path))
+        with os.fdopen(fd, "w") as f:
+            f.writelines(keep)
+        os.replace(tmp, self.path)
+
+    def write(self, record):
+        if self.enabled:
+            with open(self.path, "a") as f:
+                f.write(json.dumps(record) + "\n")
+
+
+def train(config, progress=True):
+    """Run (or resume) the training described by config (a RunConfig). Returns the model
+    (unwrapped, on its device) and a summary dict."""
+    rank, world = _distributed()
+    tc = config.train
+    device = _device(tc.device)
+    if world > 1 and device.type == "cuda":
+        device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
+    out = tc.out
+    ckpt_path = os.path.join(out, "checkpoint.pt")
+    log = _Log(os.path.join(out, "log.jsonl"), enabled=rank == 0)
+    if rank == 0:
+        os.makedirs(out, exist_ok=True)
+    torch.manual_seed(tc.seed)
+    model = GraphNet(config.model)
+    sampler = Sampler(tc.seed, config.sampler)
+    optimizer = torch.optim.Adam(model.parameters(), lr=tc.learning_rate)
+    start = 0
+    if os.path.exists(ckpt_path):
+        payload = checkpoint.read(ckpt_path)
+        if payload.get("run") != config.to_dict():
+            raise ValueError(f"{ckpt_path}: was written by a different configuration; use "
+                             "another out folder or delete it to start over")
+        model.load_state_dict(payload["model"])
+        optimizer.load_state_dict(payload["optimizer"])
+        start = int(payload["iteration"])
+        log.truncate(start)
+    else:
+        norm = Sampler(tc.seed + NORMALIZATION_STREAM, config.sampler)
+        fit_normalization(model, [norm.sample(i) for i in range(tc.normalization_samples)])
+    model.to(device)
+    net = model
+    if world > 1:
+        net = torch.nn.parallel.DistributedDataParallel(model)
+    evaluation = None
+    if rank == 0 and tc.eval_every > 0:
+        ev = Sampler(tc.seed + EVALUATION_STREAM, config.sampler)
+        evaluation = Evaluation([ev.sample(i) for i in range(tc.eval_samples)], config.model.dt)
+
+    def save(iteration):
+        if rank == 0:
+            checkpoint.save(ckpt_path, model, optimizer=optimizer.state_dict(),
+                            iteration=iteration, run=config.to_dict())
+
+    bar = _Progress(start, tc.iterations, enabled=progress and rank == 0)
+    t0 = time.perf_counter()
+    loss_value = float("nan")
+    for it in range(start, tc.iterations):
+        lr = tc.learning_rate * tc.lr_decay ** (it / tc.decay_every)
+        for group in optimizer.param_groups:
+            group["lr"] = lr
+        first = (it * world + rank) * tc.batch_size
+        samples = [sampler.sample(first + j) for j in range(tc.batch_size)]
+        batch = make_batch(samples, config.model.dt, device,
+                           weights=np.full(tc.batch_size, 1.0 / tc.batch_size))
+        loss, _ = batch_loss(net, batch, config.model.dt)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        grad_norm = torch.nn.utils.clip_grad_norm_(
+            model.parameters(), tc.grad_clip if tc.grad_clip > 0 else float("inf"))
+        loss_value = float(loss.detach())
+        if not (math.isfinite(loss_value) and math.isfinite(float(grad_norm))):
+            log.write({"iteration": it + 1, "event": "diverged", "loss": loss_value,
+                       "grad_norm": float(grad_norm)})
+            raise TrainingDiverged(
+                f"iteration {it + 1}: loss {loss_value}, gradient norm {float(grad_norm)}; "
+                f"stopped. The last good checkpoint is kept: {ckpt_path} (resume from it with "
+                "a smaller learning_rate or grad_clip)")
+        optimizer.step()
+        done = it + 1
+        if done % tc.log_every == 0 or done == tc.iterations:
+            log.write({"iteration": done, "loss": loss_value, "lr": lr,
+                       "grad_norm": float(grad_norm),
+                       "seconds": time.perf_counter() - t0})
+        if evaluation is not None and (done % tc.eval_every == 0 or done == tc.iterations):
+            log.write({"iteration": done, "event": "eval", **evaluation(model, device)})
+        if done % tc.checkpoint_every == 0 or done == tc.iterations:
+            save(done)
+        bar.update(loss_value)
+    bar.close()
+    summary = {"iterations": tc.iterations, "resumed_from": start, "final_loss": loss_value,
+               "digest": parameter_digest(model)}
+    if world > 1:
+        digests = [None] * world
+        dist.all_gather_object(digests, summary["digest"])
+        summary["rank_digests"] = digests
+    if rank == 0:
+        checkpoint.save(os.path.join(out, "model.pt"), model)
+        log.write({"iteration": tc.iterations, "event": "done", **summary})
+    return model, summary
+
+
+class _Progress:
+    """tqdm progress bar when tqdm is installed and enabled, else silent."""
+
+    def __init__(self, start, total, enabled):
+        self.bar = None
+        if enabled:
+            try:
+                from tqdm import tqdm
+            except ImportError:
+                tqdm = None
+            if tqdm is not None:
+                self.bar = tqdm(total=total, initial=start, file=sys.stderr, unit="it")
+
+    def update(self, loss):
+        if self.bar is not None:
+            self.bar.set_postfix(loss=f"{loss:.4g}", refresh=False)
+            self.bar.update(1)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
