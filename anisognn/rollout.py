@@ -41,7 +41,7 @@ def rollout(model, scene, steps, dt=None, x0=None, v0=None):
     x[held] = scene.fixed_positions[held]
     param = next(model.parameters())
     graph = from_scene(scene).to(param.device, param.dtype)
-    f_ext = torch.as_tensor(scene.external_force, dtype=param.dtype, device=param.device)
+    f_ext = torch.tensor(scene.external_force, dtype=param.dtype, device=param.device)
     out = np.empty((steps + 1, n, 3))
     out[0] = x
     with torch.no_grad():
