@@ -10,8 +10,9 @@ import torch
 from anisofem import box_beam, default_scene
 from anisofem.bench import best_time, write_json_atomic
 
+from .graph import from_scene
 from .model import GraphNet, ModelConfig
-from .sampler import Sample
+from .sampler import Sample, Sampler
 from .train import batch_loss, make_batch
 
 MESHES = {"1e2": (5, 2, 2), "1e3": (10, 4, 5)}
@@ -44,6 +45,19 @@ def bench_case(cells, model_kwargs, aggregation):
             "iteration_s": best_time(iteration, 10)}
 
 
+def bench_sampler(count=32):
+    """Mean seconds per training sample (scene, pre-deformation rollout, noise) and per graph
+    built from it."""
+    sampler = Sampler(0)
+    sampler.sample(0)  # compile
+    t0 = time.perf_counter()
+    samples = [sampler.sample(i) for i in range(1, count + 1)]
+    t1 = time.perf_counter()
+    for s in samples:
+        from_scene(s.scene)
+    return {"sample_s": (t1 - t0) / count, "graph_s": (time.perf_counter() - t1) / count}
+
+
 def run(out="bench_anisognn.json"):
     rows = []
     for label, kwargs in CONFIGS.items():
@@ -52,7 +66,7 @@ def run(out="bench_anisognn.json"):
                 row = bench_case(cells, kwargs, aggregation)
                 row.update(config=label, aggregation=aggregation)
                 rows.append(row)
-    report = {"rows": rows, "torch_threads": torch.get_num_threads()}
+    report = {"rows": rows, "sampler": bench_sampler(), "torch_threads": torch.get_num_threads()}
     print(f"anisognn per step on the CPU ({report['torch_threads']} torch threads), batch of 1")
     print(f"{'config':27} {'aggregation':11} {'tets':>5} | {'inference ms':>12} "
           f"{'loss ms':>8} {'train it ms':>11} {'loss share':>10}")
@@ -60,6 +74,9 @@ def run(out="bench_anisognn.json"):
         print(f"{r['config']:27} {r['aggregation']:11} {r['tets']:5d} | "
               f"{1e3 * r['inference_s']:12.2f} {1e3 * r['loss_s']:8.3f} "
               f"{1e3 * r['iteration_s']:11.2f} {r['loss_s'] / r['iteration_s']:10.1%}")
+    sam = report["sampler"]
+    print(f"\nsampler: {1e3 * sam['sample_s']:.1f} ms per training sample, "
+          f"{1e3 * sam['graph_s']:.1f} ms per graph built from it")
     if out:
         write_json_atomic(out, report)
         print(f"\nwrote {out}")
