@@ -108,6 +108,20 @@ def bench_linear_solvers(cells, colamd=True):
     return out
 
 
+def bench_dense_blas_threads(cells=(5, 2, 2)):
+    """One dense Cholesky of the 100-tet cantilever's Hessian with the default number of BLAS
+    threads and with the one thread dense Newton solves use, seconds."""
+    scene = default_scene(box_beam(cells=cells))
+    layout = scene.layout("dense")
+    _, _, data = Potential(scene).hessian_data(scene.initial_positions(), layout,
+                                               want_grad=False)
+    solver = linsolve.DenseCholesky()
+    default_s = best_time(lambda: solver.factor(layout, data.copy()), 200)
+    with solver.threads():
+        one_s = best_time(lambda: solver.factor(layout, data.copy()), 200)
+    return {"unknowns": scene.n_free, "default_threads_s": default_s, "one_thread_s": one_s}
+
+
 def first_solve_in_new_process():
     """Wall time of a new Python process that imports anisofem and solves the 100-tet
     cantilever (numba cache warm after this run), seconds."""
@@ -127,6 +141,7 @@ def run(sizes=tuple(SIZES), out="bench_anisofem.json"):
                      for label in sizes if label in ("1e4", "1e5")}
     report = {"assembly_and_static_solve": rows, "dynamics_100_tets": bench_small_dynamics(),
               "first_solve_new_process_s": first_solve_in_new_process(),
+              "dense_factorization": bench_dense_blas_threads(),
               "factorization_s": factorization, "threads": numba.get_num_threads()}
     print_report(report)
     if out:
@@ -154,6 +169,9 @@ def print_report(r):
           f"{1e3 * d['step_from_rest_s']:.2f} ms for the first step")
     print(f"New process to first solve (numba cache warm): "
           f"{r['first_solve_new_process_s']:.2f} s")
+    b = r["dense_factorization"]
+    print(f"Dense Cholesky, {b['unknowns']} unknowns: {1e6 * b['default_threads_s']:.0f} us "
+          f"with the default BLAS threads, {1e6 * b['one_thread_s']:.0f} us with one")
     for label, times in r["factorization_s"].items():
         print(f"One factorization at {label} tets: " + ", ".join(
             f"{k} {v:.2f} s" for k, v in times.items()))

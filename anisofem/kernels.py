@@ -45,6 +45,17 @@ PARALLEL_MIN_ELEMENTS = 4000
 
 
 @njit(cache=True, inline="always")
+def _rotate_columns(M, p, q, c, s):
+    """Columns p, q of the 3-row matrix M (or rows, given M.T) times the Givens rotation
+    [[c, s], [-s, c]]."""
+    for k in range(3):
+        mkp = M[k, p]
+        mkq = M[k, q]
+        M[k, p] = c * mkp - s * mkq
+        M[k, q] = s * mkp + c * mkq
+
+
+@njit(cache=True, inline="always")
 def _sym3_positive_part(S, out):
     """Write the positive part of the symmetric 3x3 matrix S into out (cyclic Jacobi)."""
     a = S.copy()
@@ -62,21 +73,9 @@ def _sym3_positive_part(S, out):
                 t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
                 c = 1.0 / math.sqrt(t * t + 1.0)
                 s = t * c
-                for k in range(3):
-                    akp = a[k, p]
-                    akq = a[k, q]
-                    a[k, p] = c * akp - s * akq
-                    a[k, q] = s * akp + c * akq
-                for k in range(3):
-                    apk = a[p, k]
-                    aqk = a[q, k]
-                    a[p, k] = c * apk - s * aqk
-                    a[q, k] = s * apk + c * aqk
-                for k in range(3):
-                    vkp = V[k, p]
-                    vkq = V[k, q]
-                    V[k, p] = c * vkp - s * vkq
-                    V[k, q] = s * vkp + c * vkq
+                _rotate_columns(a, p, q, c, s)    # a <- J^T a J
+                _rotate_columns(a.T, p, q, c, s)
+                _rotate_columns(V, p, q, c, s)    # V <- V J
     for i in range(3):
         for j in range(3):
             out[i, j] = 0.0

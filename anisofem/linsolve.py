@@ -7,8 +7,8 @@ a Newton solve runs its factorizations in.
 
 - "dense":   LAPACK Cholesky (potrf/potrs called directly: scipy.linalg.cho_factor's checks
              and copies cost more than the factorization of a 135-unknown system), with one
-             BLAS thread: OpenBLAS' threads make these small factorizations about 2x slower
-             (90 vs 140-210 us at 135 unknowns, measured on 2 cores).
+             BLAS thread: OpenBLAS' threads make these small factorizations slower
+             (`python -m anisofem bench` measures both).
 - "superlu": scipy's SuperLU with the minimum-degree ordering on A^T + A and diagonal
              pivoting. With a symmetric permutation and diagonal pivots, U's diagonal is D of
              A = L D L^T, so its signs give the inertia: like Cholesky, the factorization is

@@ -77,8 +77,6 @@ def batch(graphs):
     """Disjoint union of graphs: vertices and edges concatenated, indices offset, incoming
     tables padded to the widest one (padding index = total edge count)."""
     graphs = list(graphs)
-    if len(graphs) == 1:
-        return graphs[0]
     n_edges = sum(g.n_edges for g in graphs)
     width = max(g.incoming.shape[1] for g in graphs)
     v_off = e_off = 0

@@ -29,7 +29,6 @@ import torch
 import torch.distributed as dist
 
 import anisofem
-from anisofem.potential import Potential
 
 from . import checkpoint
 from .graph import batch as batch_graphs
@@ -158,29 +157,26 @@ class Evaluation:
     Newton step): share = (G(start) - G(net)) / (G(start) - G(newton)), start = x + dt v
     (zero acceleration). 1 is the optimum; 0 is no better than not accelerating."""
 
-    def __init__(self, samples, dt):
-        self.samples = samples
+    def __init__(self, samples, dt, device):
         self.dt = dt
+        self.batch = make_batch(samples, dt, device)  # built once: the samples are fixed
         self.start, self.best = [], []
-        for s in samples:
-            pot = Potential(s.scene, s.x + dt * s.v, dt)
+        for s, pot in zip(samples, self.batch.potential.potentials):
             start = s.x + dt * s.v
             start[s.scene.fixed_mask] = s.scene.fixed_positions[s.scene.fixed_mask]
             self.start.append(pot.energy_gradient(start)[0])
-            newton = anisofem.step(s.scene, s.x, s.v, dt, warn=False)
-            self.best.append(newton.newton.energy)
+            self.best.append(anisofem.step(s.scene, s.x, s.v, dt, warn=False).newton.energy)
 
-    def __call__(self, model, device):
+    def __call__(self, model):
         model.eval()
         with torch.no_grad():
-            dtype = next(model.parameters()).dtype
-            batch = make_batch(self.samples, self.dt, device, dtype)
-            _, x_next = batch_loss(model, batch, self.dt)
+            _, x_next = batch_loss(model, self.batch, self.dt)
         model.train()
         x64 = x_next.to("cpu", torch.float64).numpy()
         shares = []
-        for pot, lo, hi, g0, gbest in zip(batch.potential.potentials, batch.potential.offsets,
-                                          batch.potential.offsets[1:], self.start, self.best):
+        bp = self.batch.potential
+        for pot, lo, hi, g0, gbest in zip(bp.potentials, bp.offsets, bp.offsets[1:], self.start,
+                                          self.best):
             g = pot.energy_gradient(x64[lo:hi])[0]
             shares.append((g0 - g) / (g0 - gbest) if g0 > gbest else 1.0)
         return {"share_of_optimal_decrease": float(np.mean(shares)),
@@ -273,7 +269,8 @@ def train(config, progress=True):
     evaluation = None
     if rank == 0 and tc.eval_every > 0:
         ev = Sampler(tc.seed + EVALUATION_STREAM, config.sampler)
-        evaluation = Evaluation([ev.sample(i) for i in range(tc.eval_samples)], config.model.dt)
+        evaluation = Evaluation([ev.sample(i) for i in range(tc.eval_samples)], config.model.dt,
+                                device)
 
     def save(iteration):
         if rank == 0:
@@ -311,7 +308,7 @@ def train(config, progress=True):
                        "grad_norm": float(grad_norm),
                        "seconds": time.perf_counter() - t0})
         if evaluation is not None and (done % tc.eval_every == 0 or done == tc.iterations):
-            log.write({"iteration": done, "event": "eval", **evaluation(model, device)})
+            log.write({"iteration": done, "event": "eval", **evaluation(model)})
         if done % tc.checkpoint_every == 0 or done == tc.iterations:
             save(done)
         bar.update(loss_value)

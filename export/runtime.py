@@ -31,13 +31,15 @@ import numpy as np
 FIBER_EPS = 1e-12
 
 
+def _tet_edges(tets):
+    """(m, 6, 2) int64 vertex pairs of the six edges of each tet, each pair sorted."""
+    tets = np.asarray(tets, dtype=np.int64)
+    return np.sort(tets[:, [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]], axis=2)
+
+
 def mesh_edges(tets):
     """(k, 2) int64 unique undirected edges (i < j, sorted) of tets (m, 4)."""
-    tets = np.asarray(tets, dtype=np.int64)
-    pairs = tets[:, [0, 0, 0, 1, 1, 2, 1, 2, 3, 2, 3, 3]].reshape(-1, 2, 6)
-    pairs = np.stack([pairs[:, 0].ravel(), pairs[:, 1].ravel()], axis=1)
-    pairs.sort(axis=1)
-    return np.unique(pairs, axis=0)
+    return np.unique(_tet_edges(tets).reshape(-1, 2), axis=0)
 
 
 def directed_edges(edges):
@@ -64,8 +66,7 @@ def edge_fibers(tets, edges, fiber_direction, fiber_stiffness):
     """
     k = edges.shape[0]
     tensor = np.einsum("m,mi,mj->mij", fiber_stiffness, fiber_direction, fiber_direction)
-    local = tets[:, [0, 0, 0, 1, 1, 2, 1, 2, 3, 2, 3, 3]].reshape(-1, 2, 6)
-    ends = np.sort(np.stack([local[:, 0], local[:, 1]], axis=2), axis=2)  # (m, 6, 2)
+    ends = _tet_edges(tets)
     # the index of each tet edge among the unique (sorted) edges
     base = int(tets.max()) + 1
     index = np.searchsorted(edges[:, 0] * base + edges[:, 1], ends[..., 0] * base + ends[..., 1])
