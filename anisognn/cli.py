@@ -24,7 +24,8 @@ def main(argv=None):
             _, summary = train.train(config, progress=not args.no_progress)
         except (ValueError, FileNotFoundError, train.TrainingDiverged) as err:
             sys.exit(f"error: {err}")
-        print(f"done: {summary['iterations']} iterations, final loss {summary['final_loss']:.6g}"
-              f" J, model in {config.train.out}/model.pt")
+        if summary["rank"] == 0:
+            print(f"done: {summary['iterations']} iterations, final loss {summary['final_loss']:.6g}"
+                  f" J, model in {config.train.out}/model.pt")
     else:
         bench.run(out=args.json)

@@ -13,6 +13,7 @@ kept. Under torchrun (WORLD_SIZE > 1) the run is data parallel with DistributedD
 (gloo on the CPU, nccl on GPUs); rank r draws samples (i B W + r B + j) at iteration i, and only
 rank 0 writes files.
 """
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -189,15 +190,24 @@ def _device(name):
     return torch.device(name)
 
 
+@contextlib.contextmanager
 def _distributed():
-    """(rank, world size), initializing the process group under torchrun."""
+    """Yields (rank, world size). Under torchrun (WORLD_SIZE > 1) it initializes the process
+    group unless the caller already did, and destroys the group it made on the way out (a
+    gloo group left to interpreter exit aborts the process: "terminate called without an
+    active exception")."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
     if world == 1:
-        return 0, 1
-    if not dist.is_initialized():
-        backend = "nccl" if torch.cuda.is_available() else "gloo"
-        dist.init_process_group(backend)
-    return dist.get_rank(), world
+        yield 0, 1
+        return
+    owned = not dist.is_initialized()
+    if owned:
+        dist.init_process_group("nccl" if torch.cuda.is_available() else "gloo")
+    try:
+        yield dist.get_rank(), world
+    finally:
+        if owned:
+            dist.destroy_process_group()
 
 
 def parameter_digest(model):
@@ -234,8 +244,12 @@ class _Log:
 
 def train(config, progress=True):
     """Run (or resume) the training described by config (a RunConfig). Returns the model
-    (unwrapped, on its device) and a summary dict."""
-    rank, world = _distributed()
+    (unwrapped, on its device) and a summary dict (with "rank": only rank 0 writes files)."""
+    with _distributed() as (rank, world):
+        return _train(config, progress, rank, world)
+
+
+def _train(config, progress, rank, world):
     tc = config.train
     device = _device(tc.device)
     if world > 1 and device.type == "cuda":
@@ -313,7 +327,7 @@ def train(config, progress=True):
             save(done)
         bar.update(loss_value)
     bar.close()
-    summary = {"iterations": tc.iterations, "resumed_from": start, "final_loss": loss_value,
+    summary = {"rank": rank, "iterations": tc.iterations, "resumed_from": start, "final_loss": loss_value,
                "digest": parameter_digest(model)}
     if world > 1:
         digests = [None] * world

@@ -111,9 +111,13 @@ def test_two_process_torchrun_keeps_ranks_identical(tmp_path):
     config = write_config(tmp_path / "ddp.toml", raw)
     out = str(tmp_path / "ddp")
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    subprocess.run([sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2",
-                    "--master_port", "29517", "-m", "anisognn", "train", "--config", config,
-                    "--out", out, "--no-progress"], cwd=ROOT, env=env, check=True, timeout=300)
+    run = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone",
+                          "--nproc_per_node", "2", "-m", "anisognn", "train", "--config", config,
+                          "--out", out, "--no-progress"],
+                         cwd=ROOT, env=env, timeout=300, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert "terminate called" not in run.stderr       # process group torn down before exit
+    assert run.stdout.count("done:") == 1             # only rank 0 reports
     done = read_log(out)[-1]
     assert done["event"] == "done" and len(done["rank_digests"]) == 2
     assert done["rank_digests"][0] == done["rank_digests"][1] == done["digest"]
