@@ -1,8 +1,10 @@
-"""`python -m anisognn train --config FILE [--out DIR]` and `python -m anisognn bench`."""
+"""`python -m anisognn train --config FILE [--out DIR]`, `python -m anisognn evaluate MODEL...`
+and `python -m anisognn bench`."""
 import argparse
+import os
 import sys
 
-from . import bench, train
+from . import bench, checkpoint, evaluate, shipped, train
 
 
 def main(argv=None):
@@ -13,6 +15,13 @@ def main(argv=None):
     p.add_argument("--out", help="output folder (overrides [train] out)")
     p.add_argument("--iterations", type=int, help="overrides [train] iterations")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p = sub.add_parser("evaluate", help="the evaluation suite against anisofem (paper Tables "
+                       "1, 2, Fig. 6), models side by side")
+    p.add_argument("models", nargs="+", metavar="MODEL",
+                   help=f"a model.pt / checkpoint.pt file or a shipped name {shipped.NAMES}")
+    p.add_argument("--steps", type=int, default=evaluate.STEPS,
+                   help="rollout steps per scene (default %(default)s)")
+    p.add_argument("--json", default="evaluation.json", help="where to write the JSON")
     p = sub.add_parser("bench", help="time the network, the loss and a training iteration")
     p.add_argument("--json", default="bench_anisognn.json", help="where to write the JSON")
     args = parser.parse_args(argv)
@@ -27,5 +36,26 @@ def main(argv=None):
         if summary["rank"] == 0:
             print(f"done: {summary['iterations']} iterations, final loss {summary['final_loss']:.6g}"
                   f" J, model in {config.train.out}/model.pt")
+    elif args.command == "evaluate":
+        try:
+            models = {_label(m): _model(m) for m in args.models}
+        except (ValueError, FileNotFoundError) as err:
+            sys.exit(f"error: {err}")
+        evaluate.run(models, steps=args.steps, out=args.json)
     else:
         bench.run(out=args.json)
+
+
+def _model(spec):
+    """A model from a shipped name or a checkpoint path."""
+    if spec in shipped.NAMES:
+        return shipped.pretrained(spec)
+    return checkpoint.load(spec)
+
+
+def _label(spec):
+    """Column name of a model: its shipped name, else its file's folder and name."""
+    if spec in shipped.NAMES:
+        return spec
+    return os.path.join(os.path.basename(os.path.dirname(os.path.abspath(spec))),
+                        os.path.basename(spec))

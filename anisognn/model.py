@@ -27,7 +27,7 @@ from torch import nn
 AGGREGATIONS = ("directional", "sum")
 VERTEX_FLAGS = 3   # Dirichlet flags per component
 VERTEX_REAL = 7    # velocity 3, mass 1, external force 3
-EDGE_FEATURES = 11  # rest unit 3 + length 1, current unit 3 + length 1, fiber 3
+EDGE_FEATURES = 15  # rest unit 3 + length 1, current unit 3 + length 1, fiber 3, strain 4
 
 
 @dataclass
@@ -125,11 +125,19 @@ class GraphNet(nn.Module):
         nn.init.zeros_(self.decoder[-1].bias)
 
     def edge_features(self, x, graph):
-        """(E, 11) raw edge inputs: rest unit + length, current unit + length, fiber."""
+        """(E, 15) raw edge inputs: rest unit + length (m), current unit + length (m), fiber,
+        and the edge's deformation: stretch - 1 and (x_ij - X_ij) / |X_ij|.
+
+        The deformation channels are not in the paper (which gives rest and current vectors
+        only): strains of 1e-3 are the signal of the stiff modes, and recovering them as the
+        difference of two normalized lengths costs the network most of its training."""
         vec = x[graph.senders] - x[graph.receivers]
         length = torch.linalg.vector_norm(vec, dim=1, keepdim=True)
         unit = vec / torch.clamp(length, min=1e-12)
-        return torch.cat([graph.rest, unit, length, graph.fiber], dim=1)
+        rest_length = graph.rest[:, 3:]
+        relative = (vec - graph.rest[:, :3] * rest_length) / rest_length
+        return torch.cat([graph.rest, unit, length, graph.fiber, length / rest_length - 1.0,
+                          relative], dim=1)
 
     def vertex_features(self, v, f_ext, graph):
         """(n, 7) raw vertex inputs: velocity, mass, external force."""

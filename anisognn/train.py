@@ -34,7 +34,7 @@ import anisofem
 from . import checkpoint
 from .graph import batch as batch_graphs
 from .graph import from_scene
-from .loss import BatchPotential, potential_loss
+from .loss import LOSSES, BatchPotential, potential_loss
 from .model import GraphNet, ModelConfig, integrate
 from .sampler import Sampler, SamplerConfig
 
@@ -49,8 +49,10 @@ class TrainingDiverged(RuntimeError):
 
 @dataclass
 class TrainConfig:
-    """Optimization and bookkeeping. learning_rate decays by lr_decay every decay_every
-    iterations (continuously); grad_clip bounds the global gradient norm (0: off)."""
+    """Optimization and bookkeeping. loss: "energy" (the paper's plain gradient) or "newton"
+    (Newton-preconditioned, see anisognn.loss). learning_rate decays by lr_decay every
+    decay_every iterations (continuously); grad_clip bounds the global gradient norm (0: off)."""
+    loss: str = "energy"
     iterations: int = 1000
     batch_size: int = 8
     learning_rate: float = 1e-3
@@ -65,6 +67,10 @@ class TrainConfig:
     checkpoint_every: int = 100
     normalization_samples: int = 64
     out: str = "runs/default"
+
+    def __post_init__(self):
+        if self.loss not in LOSSES:
+            raise ValueError(f"[train] loss: expected one of {LOSSES}, got {self.loss!r}")
 
 
 @dataclass
@@ -133,12 +139,13 @@ def make_batch(samples, dt, device, dtype=torch.float32, weights=None):
                  pot)
 
 
-def batch_loss(net, batch, dt):
+def batch_loss(net, batch, dt, kind="energy"):
     """(loss tensor, x_next) of the network net (a GraphNet, possibly wrapped by DDP) on a
-    Batch: sum_i w_i G_i(x_next) with x_next = x + dt v + dt^2 net(...)."""
+    Batch: sum_i w_i G_i(x_next) with x_next = x + dt v + dt^2 net(...); kind picks its
+    gradient (anisognn.loss.LOSSES)."""
     a = net(batch.x, batch.v, batch.f_ext, batch.graph)
     x_next, _ = integrate(batch.x, batch.v, a, dt, batch.graph)
-    return potential_loss(x_next, batch.potential), x_next
+    return potential_loss(x_next, batch.potential, kind), x_next
 
 
 def fit_normalization(model, samples):
@@ -154,19 +161,28 @@ def fit_normalization(model, samples):
 
 
 class Evaluation:
-    """Fixed evaluation samples with their optimal one-step energy decrease (anisofem's
-    Newton step): share = (G(start) - G(net)) / (G(start) - G(newton)), start = x + dt v
-    (zero acceleration). 1 is the optimum; 0 is no better than not accelerating."""
+    """Fixed evaluation samples scored against anisofem's backward-Euler step x* from the
+    same state, with start = x + dt v (zero acceleration):
+
+    - share_of_optimal_decrease = (G(start) - G(net)) / (G(start) - G(x*)): 1 is optimal, 0 no
+      better than not accelerating. G weighs errors by H, so the stiff volumetric modes rule it.
+    - force_error = |x_net - x*|_M / |start - x*|_M: the mass-weighted acceleration error
+      relative to the optimal acceleration's; 0 is optimal. At rest it is the imbalanced force
+      the network leaves relative to the load, which the soft bending modes rule.
+    Means and medians over the samples."""
 
     def __init__(self, samples, dt, device):
         self.dt = dt
         self.batch = make_batch(samples, dt, device)  # built once: the samples are fixed
-        self.start, self.best = [], []
+        self.start, self.best, self.energies, self.masses = [], [], [], []
         for s, pot in zip(samples, self.batch.potential.potentials):
             start = s.x + dt * s.v
             start[s.scene.fixed_mask] = s.scene.fixed_positions[s.scene.fixed_mask]
-            self.start.append(pot.energy_gradient(start)[0])
-            self.best.append(anisofem.step(s.scene, s.x, s.v, dt, warn=False).newton.energy)
+            best = anisofem.step(s.scene, s.x, s.v, dt, warn=False)
+            self.start.append(start)
+            self.best.append(best.x)
+            self.energies.append((pot.energy_gradient(start)[0], best.newton.energy))
+            self.masses.append(s.scene.masses[:, None])
 
     def __call__(self, model):
         model.eval()
@@ -174,14 +190,18 @@ class Evaluation:
             _, x_next = batch_loss(model, self.batch, self.dt)
         model.train()
         x64 = x_next.to("cpu", torch.float64).numpy()
-        shares = []
+        shares, errors = [], []
         bp = self.batch.potential
-        for pot, lo, hi, g0, gbest in zip(bp.potentials, bp.offsets, bp.offsets[1:], self.start,
-                                          self.best):
-            g = pot.energy_gradient(x64[lo:hi])[0]
+        for pot, lo, hi, start, best, (g0, gbest), m in zip(
+                bp.potentials, bp.offsets, bp.offsets[1:], self.start, self.best,
+                self.energies, self.masses):
+            x = x64[lo:hi]
+            g = pot.energy_gradient(x)[0]
             shares.append((g0 - g) / (g0 - gbest) if g0 > gbest else 1.0)
+            errors.append(np.sqrt((m * (x - best) ** 2).sum() / (m * (start - best) ** 2).sum()))
         return {"share_of_optimal_decrease": float(np.mean(shares)),
-                "share_median": float(np.median(shares))}
+                "share_median": float(np.median(shares)),
+                "force_error": float(np.mean(errors)), "force_error_median": float(np.median(errors))}
 
 
 def _device(name):
@@ -191,20 +211,27 @@ def _device(name):
 
 
 @contextlib.contextmanager
-def _distributed():
-    """Yields (rank, world size). Under torchrun (WORLD_SIZE > 1) it initializes the process
-    group unless the caller already did, and destroys the group it made on the way out (a
-    gloo group left to interpreter exit aborts the process: "terminate called without an
-    active exception")."""
+def _distributed(device):
+    """Yields (rank, world size, this process's device). Under torchrun (WORLD_SIZE > 1) it
+    initializes the process group (nccl on GPUs, one per process; gloo on the CPU) unless the
+    caller already did, and destroys the group it made on the way out (a gloo group left to
+    interpreter exit aborts the process: "terminate called without an active exception")."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
     if world == 1:
-        yield 0, 1
+        yield 0, 1, device
         return
+    if device.type == "cuda":
+        local = int(os.environ.get("LOCAL_RANK", "0"))
+        if local >= torch.cuda.device_count():
+            raise ValueError(f"[train] device: torchrun process {local} has no GPU of its own "
+                             f"({torch.cuda.device_count()} found); start one process per "
+                             "GPU, or set device = \"cpu\"")
+        device = torch.device("cuda", local)
     owned = not dist.is_initialized()
     if owned:
-        dist.init_process_group("nccl" if torch.cuda.is_available() else "gloo")
+        dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
     try:
-        yield dist.get_rank(), world
+        yield dist.get_rank(), world, device
     finally:
         if owned:
             dist.destroy_process_group()
@@ -245,15 +272,12 @@ class _Log:
 def train(config, progress=True):
     """Run (or resume) the training described by config (a RunConfig). Returns the model
     (unwrapped, on its device) and a summary dict (with "rank": only rank 0 writes files)."""
-    with _distributed() as (rank, world):
-        return _train(config, progress, rank, world)
+    with _distributed(_device(config.train.device)) as (rank, world, device):
+        return _train(config, progress, rank, world, device)
 
 
-def _train(config, progress, rank, world):
+def _train(config, progress, rank, world, device):
     tc = config.train
-    device = _device(tc.device)
-    if world > 1 and device.type == "cuda":
-        device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
     out = tc.out
     ckpt_path = os.path.join(out, "checkpoint.pt")
     log = _Log(os.path.join(out, "log.jsonl"), enabled=rank == 0)
@@ -302,7 +326,7 @@ def _train(config, progress, rank, world):
         samples = [sampler.sample(first + j) for j in range(tc.batch_size)]
         batch = make_batch(samples, config.model.dt, device,
                            weights=np.full(tc.batch_size, 1.0 / tc.batch_size))
-        loss, _ = batch_loss(net, batch, config.model.dt)
+        loss, _ = batch_loss(net, batch, config.model.dt, tc.loss)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(

@@ -107,7 +107,7 @@ def test_nan_guard_stops_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatc
 
 
 def test_two_process_torchrun_keeps_ranks_identical(tmp_path):
-    raw = {**TINY, "train": {**TINY["train"], "iterations": 4}}
+    raw = {**TINY, "train": {**TINY["train"], "iterations": 4, "device": "cpu"}}
     config = write_config(tmp_path / "ddp.toml", raw)
     out = str(tmp_path / "ddp")
     env = {**os.environ, "OMP_NUM_THREADS": "1"}

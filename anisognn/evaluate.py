@@ -1,0 +1,230 @@
+"""`python -m anisognn evaluate MODEL...`: the fixed evaluation suite, every model against
+anisofem on the same scenes, side by side (paper Table 1, Table 2, Fig. 6, plus the energy gap).
+
+Scenes (the paper's material, E = 100 kPa, nu = 0.48, 1000 kg/m^3; fibers with kappa = E; the
+end x = 0 held; meshes of the training family, about 1 cm elements):
+- cantilever: a 0.1 x 0.02 x 0.02 m box beam and a 0.1 m long, 1 cm radius cylinder under
+  gravity, fibers parallel to gravity (z) or orthogonal to it (along the beam, x): Table 1;
+- imbalance: the box beam under a downward body force of 1000 or 5000 N/m^3 with fibers at 45,
+  60 or 90 degrees from the beam axis towards gravity, d = (cos a, 0, sin a): Table 2;
+- tension: the box beam under a body force of 10 kN/m^3 along +x (it hangs from its held end),
+  fibers at 45 degrees in the x-y plane: Fig. 6.
+
+Each simulator rolls every scene forward from rest for `steps` steps of dt (default 1000 steps
+of 0.02 s: 20 s, long past the settling time); the final state is compared with anisofem's
+static equilibrium. Metrics per scene (units as named):
+- tip_error (m): |mean tip displacement - the FEM's|; tip_ratio: that over |FEM tip deflection|;
+- force_max, force_mean (N): imbalanced force |dG/dx| per free vertex at the final state;
+- volume_change_max: max over tets of |det F - 1|; volume_change_error: its relative
+  difference to the FEM's;
+- energy_gap (J): G(final) - G(FEM), and energy_gap_ratio: that over G(rest) - G(FEM);
+- max_displacement (m) over the whole rollout and finite: the stability check (bounded means
+  below the beam's length).
+"""
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+import anisofem
+from anisofem import Material, Scene, box_beam, cylinder_beam, metrics
+from anisofem.bench import write_json_atomic
+
+from .sampler import DENSITY, POISSON, YOUNG
+
+GRAVITY = 9.81         # m/s^2
+STEPS = 1000
+DT = 0.02              # s
+
+
+@dataclass
+class Case:
+    """One evaluation scene: group ("cantilever", "imbalance", "tension"), a label, the scene."""
+    group: str
+    label: str
+    scene: Scene
+
+
+def _beam(kind):
+    if kind == "box":
+        return box_beam(size=(0.1, 0.02, 0.02), cells=(5, 2, 2))
+    return cylinder_beam(0.1, 0.01, 5, 2, 0)
+
+
+def _scene(mesh, fiber, body_force):
+    """The beam held at x = 0 with fibers d (3,) (kappa = E) under a uniform body force
+    (3,) N/m^3."""
+    material = Material(YOUNG, POISSON, DENSITY, np.asarray(fiber, float) / np.linalg.norm(fiber),
+                        YOUNG)
+    fixed = mesh.vertices[:, 0] <= 1e-9
+    return Scene(mesh, material, fixed=fixed,
+                 body_force=np.tile(body_force, (mesh.n_tets, 1)).astype(float))
+
+
+def cases():
+    """The suite's scenes, in table order."""
+    out = []
+    weight = [0.0, 0.0, -DENSITY * GRAVITY]
+    for kind in ("box", "cylinder"):
+        for name, fiber in (("parallel", (0, 0, 1)), ("orthogonal", (1, 0, 0))):
+            out.append(Case("cantilever", f"{kind}, fibers {name} to gravity",
+                            _scene(_beam(kind), fiber, weight)))
+    for density in (1000.0, 5000.0):
+        for angle in (45, 60, 90):
+            a = math.radians(angle)
+            out.append(Case("imbalance", f"{density:g} N/m^3, fibers at {angle} deg",
+                            _scene(_beam("box"), (math.cos(a), 0, math.sin(a)),
+                                   [0, 0, -density])))
+    out.append(Case("tension", "box beam, 10 kN/m^3 along x, fibers at 45 deg in x-y",
+                    _scene(_beam("box"), (1, 1, 0), [10e3, 0, 0])))
+    return out
+
+
+def fem_rollout(scene, steps, dt=DT):
+    """anisofem's own backward-Euler rollout, (steps + 1, n, 3): the reference simulator."""
+    return anisofem.simulate(scene, steps, dt=dt, warn=False).positions
+
+
+def model_rollout(model):
+    """A simulator (scene, steps) -> (steps + 1, n, 3) positions for an anisognn model."""
+    from .rollout import rollout
+
+    def run(scene, steps):
+        return rollout(model, scene, steps)
+    return run
+
+
+def score(scene, positions, x_fem):
+    """The metrics (see module docstring) of a rollout's positions (k + 1, n, 3) against the
+    static equilibrium x_fem (n, 3)."""
+    mesh = scene.mesh
+    finite = bool(np.isfinite(positions).all())
+    max_disp = float(np.linalg.norm(positions - mesh.vertices, axis=2).max()) if finite else math.inf
+    out = {"finite": finite, "max_displacement": max_disp,
+           "bounded": finite and max_disp < mesh.size}
+    if not finite:
+        return out
+    x = positions[-1]
+    tip_fem = metrics.tip_displacement(mesh, x_fem)
+    tip_error = float(np.linalg.norm(metrics.tip_displacement(mesh, x) - tip_fem))
+    force = metrics.imbalanced_force(scene, x)
+    vol = float(np.abs(metrics.volume_change(mesh, x)).max())
+    vol_fem = float(np.abs(metrics.volume_change(mesh, x_fem)).max())
+    g_fem = anisofem.energy(scene, x_fem)
+    gap = anisofem.energy(scene, x) - g_fem
+    return {**out, "tip_error": tip_error, "tip_fem": float(np.linalg.norm(tip_fem)),
+            "tip_ratio": tip_error / float(np.linalg.norm(tip_fem)),
+            "force_max": force.max, "force_mean": force.mean,
+            "volume_change_max": vol, "volume_change_fem": vol_fem,
+            "volume_change_error": abs(vol - vol_fem) / vol_fem,
+            "energy_gap": gap,
+            "energy_gap_ratio": gap / (anisofem.energy(scene, scene.initial_positions()) - g_fem)}
+
+
+def evaluate(simulators, steps=STEPS, suite=None):
+    """{simulator name: [metrics dict per case]} for simulators {name: (scene, steps) ->
+    positions}; suite defaults to cases(). Also returns the cases."""
+    suite = cases() if suite is None else suite
+    fem = [anisofem.solve(c.scene).x for c in suite]
+    results = {name: [{"group": c.group, "case": c.label, **score(c.scene, run(c.scene, steps), x)}
+                      for c, x in zip(suite, fem)]
+               for name, run in simulators.items()}
+    return results, suite
+
+
+COLUMNS = {"cantilever": (("tip_error", "tip error m", "{:.2e}"), ("tip_ratio", "/FEM", "{:.3f}")),
+           "imbalance": (("force_mean", "mean force N", "{:.2e}"),
+                         ("force_max", "max force N", "{:.2e}")),
+           "tension": (("volume_change_max", "max |dV/V|", "{:.2e}"),
+                       ("volume_change_error", "vs FEM", "{:.3f}"))}
+TITLES = {"cantilever": "Table 1: cantilever tip displacement error at rest (FEM tip deflection "
+                        "in brackets)",
+          "imbalance": "Table 2: imbalanced force at the final state",
+          "tension": "Fig. 6: max per-element volume change, beam in tension"}
+
+
+def format_tables(results, suite, ratio=None):
+    """The results as text tables: one per group, the simulators side by side; with ratio =
+    (name a, name b), a's over b's for the group's first metric; then the energy gap and the
+    stability check of every scene."""
+    names = list(results)
+    lines = []
+    for group, columns in COLUMNS.items():
+        lines += ["", TITLES[group]]
+        header = ["case"] + [f"{n}: {c[1]}" for n in names for c in columns]
+        if ratio:
+            header.append(f"{ratio[0]}/{ratio[1]}")
+        rows = []
+        for i, case in enumerate(suite):
+            if case.group != group:
+                continue
+            label = case.label
+            if group == "cantilever":
+                label += f" [{results[names[0]][i].get('tip_fem', math.nan) * 1e3:.1f} mm]"
+            elif group == "tension":
+                label += f" [FEM {results[names[0]][i].get('volume_change_fem', math.nan):.2e}]"
+            row = [label] + [fmt.format(results[n][i].get(key, math.nan))
+                             for n in names for key, _, fmt in columns]
+            if ratio:
+                key = columns[0][0]
+                a, b = (results[n][i].get(key, math.nan) for n in ratio)
+                row.append(f"{a / b:.2f}" if b else "-")
+            rows.append(row)
+        lines += _table(header, rows)
+    lines += ["", "Energy gap to the FEM equilibrium (J; share of the rest-to-equilibrium drop) "
+                  "and stability over the whole rollout"]
+    header = ["case"] + [f"{n}: {h}" for n in names for h in ("gap J", "share", "bounded")]
+    rows = [[case.label] + [v for n in names for v in (
+        f"{results[n][i].get('energy_gap', math.nan):.2e}",
+        f"{results[n][i].get('energy_gap_ratio', math.nan):.3f}",
+        "yes" if results[n][i]["bounded"] else "NO")] for i, case in enumerate(suite)]
+    lines += _table(header, rows)
+    return "\n".join(lines)
+
+
+def _table(header, rows):
+    widths = [max(len(r[k]) for r in [header] + rows) for k in range(len(header))]
+    fmt = lambda r: "  ".join(c.ljust(w) if k == 0 else c.rjust(w)  # noqa: E731
+                              for k, (c, w) in enumerate(zip(r, widths)))
+    return [fmt(header), fmt(["-" * w for w in widths])] + [fmt(r) for r in rows]
+
+
+def summary(results, suite, ratio=None):
+    """Per simulator: mean tip ratio, mean imbalanced force, worst volume change error, all
+    finite and bounded; with ratio = (name a, name b) also a's over b's."""
+    out = {}
+    for name, rows in results.items():
+        pick = lambda group, key: [r.get(key, math.inf) for r, c in zip(rows, suite)  # noqa
+                                   if c.group == group]
+        out[name] = {"tip_ratio_mean": float(np.mean(pick("cantilever", "tip_ratio"))),
+                     "tip_ratio_max": float(np.max(pick("cantilever", "tip_ratio"))),
+                     "force_mean": float(np.mean(pick("imbalance", "force_mean"))),
+                     "volume_change_error_max": float(np.max(pick("tension",
+                                                                  "volume_change_error"))),
+                     "all_bounded": all(r["bounded"] for r in rows)}
+    if ratio:
+        first, second = (results[n] for n in ratio)
+        tips = [a["tip_error"] / b["tip_error"] for a, b, c in zip(first, second, suite)
+                if c.group == "cantilever" and "tip_error" in a and "tip_error" in b]
+        out["ratios"] = {"tip_error_mean": float(np.mean(tips)) if tips else math.nan,
+                         "tip_error_max": float(np.max(tips)) if tips else math.nan,
+                         "force_mean": out[ratio[0]]["force_mean"] / out[ratio[1]]["force_mean"]}
+    return out
+
+
+def run(models, steps=STEPS, out="evaluation.json", echo=print):
+    """Evaluate models {name: GraphNet} beside anisofem's own rollout ("fem"), print the
+    tables (the first model over the second in the ratio columns) and write the JSON
+    atomically. Returns the JSON dict."""
+    simulators = {name: model_rollout(m) for name, m in models.items()}
+    simulators["fem"] = fem_rollout
+    results, suite = evaluate(simulators, steps)
+    ratio = tuple(models)[:2] if len(models) >= 2 else None
+    echo(format_tables(results, suite, ratio))
+    report = {"steps": steps, "dt": DT, "results": results,
+              "summary": summary(results, suite, ratio)}
+    echo("\nsummary: " + str(report["summary"]))
+    if out:
+        write_json_atomic(os.fspath(out), report)
+    return report
