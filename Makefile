@@ -7,7 +7,7 @@ TORCH_SPEC ?= torch==2.13.0
 PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench pretrained clean
 
 $(VENV)/.installed: setup.cfg setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -24,6 +24,19 @@ test: $(VENV)/.installed
 
 bench: $(VENV)/.installed
 	$(PY) -m anisofem bench
+
+# Trains both shipped models side by side (one CPU thread each, about 40 minutes on 2 cores)
+# and installs them, with their configs and logs, as anisognn.pretrained(...).
+pretrained: $(VENV)/.installed
+	OMP_NUM_THREADS=1 $(PY) -m anisognn train --config configs/shipped-directional.toml --no-progress & d=$$!; \
+	OMP_NUM_THREADS=1 $(PY) -m anisognn train --config configs/shipped-meshgraphnets.toml --no-progress & m=$$!; \
+	wait $$d && wait $$m
+	for name in directional meshgraphnets; do \
+	  mkdir -p anisognn/pretrained/$$name && \
+	  cp runs/shipped-$$name/model.pt runs/shipped-$$name/log.jsonl anisognn/pretrained/$$name/ && \
+	  cp configs/shipped-$$name.toml anisognn/pretrained/$$name/config.toml || exit 1; \
+	done
+	$(PY) -m anisognn evaluate directional meshgraphnets --json anisognn/pretrained/evaluation.json
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -95,11 +95,19 @@ def model_rollout(model):
     return run
 
 
+def _rollout(run, scene, steps):
+    """run(scene, steps), or None if the simulator gave up on a non-finite state."""
+    try:
+        return run(scene, steps)
+    except FloatingPointError:
+        return None
+
+
 def score(scene, positions, x_fem):
-    """The metrics (see module docstring) of a rollout's positions (k + 1, n, 3) against the
-    static equilibrium x_fem (n, 3)."""
+    """The metrics (see module docstring) of a rollout's positions (k + 1, n, 3), or None for
+    one that blew up, against the static equilibrium x_fem (n, 3)."""
     mesh = scene.mesh
-    finite = bool(np.isfinite(positions).all())
+    finite = positions is not None and bool(np.isfinite(positions).all())
     max_disp = float(np.linalg.norm(positions - mesh.vertices, axis=2).max()) if finite else math.inf
     out = {"finite": finite, "max_displacement": max_disp,
            "bounded": finite and max_disp < mesh.size}
@@ -127,7 +135,8 @@ def evaluate(simulators, steps=STEPS, suite=None):
     positions}; suite defaults to cases(). Also returns the cases."""
     suite = cases() if suite is None else suite
     fem = [anisofem.solve(c.scene).x for c in suite]
-    results = {name: [{"group": c.group, "case": c.label, **score(c.scene, run(c.scene, steps), x)}
+    results = {name: [{"group": c.group, "case": c.label,
+                        **score(c.scene, _rollout(run, c.scene, steps), x)}
                       for c, x in zip(suite, fem)]
                for name, run in simulators.items()}
     return results, suite

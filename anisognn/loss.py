@@ -10,15 +10,16 @@ x_{n+1} = x_n + dt v_n + dt^2 a (held components at their prescribed positions),
 whose minimizer is the backward-Euler step. A batch is a disjoint union of scenes; the loss
 is sum_i weight_i G_i over its scenes.
 
-Two gradients of the same loss value (LOSSES):
-- "energy": dG/dx, the plain gradient (the paper's recipe);
-- "newton": (M/dt^2) H^-1 dG/dx, with H the PSD-projected Hessian of G at x_next: the
-  gradient of 1/2 |x_next - sg(x_next - H^-1 dG/dx)|^2_{M/dt^2}, a regression onto the
-  detached Newton target. It has the same minimizer (the backward-Euler step) but equal
-  curvature in every mode, where dG/dx is dominated by the stiff volumetric modes
-  (condition number ~3e4 at dt = 0.02 s, nu = 0.48, 1 cm elements) and learns the soft
-  bending modes, the ones that show, very slowly. On modes where inertia dominates
-  (H ~ M/dt^2) the two gradients agree, so learning rates carry over.
+Its gradient with respect to x_next is dG/dx + newton_weight (M/dt^2) H^-1 dG/dx, H the
+PSD-projected Hessian of G at x_next (plus M/dt^2: positive definite). newton_weight = 0 is the
+paper's plain energy gradient. The second term is the gradient of
+1/2 |x_next - sg(x_next - H^-1 dG/dx)|^2_{M/dt^2}, a regression onto the detached Newton target:
+same minimizer (the backward-Euler step), no data. Why: in mass-weighted coordinates dG/dx weighs
+each mode's error by its eigenvalue, about 1 for the soft bending modes (inertia-dominated at
+dt = 0.02 s) and up to ~4e4 for the volumetric ones (nu = 0.48, 1 cm elements), so plain
+gradients learn the modes that show, bending under load, very slowly; the Newton term weighs
+every mode alike. Alone it neglects the stiff modes, whose small errors then cost much energy;
+the sum with newton_weight = beta weighs mode k by lambda_k + beta.
 """
 import numpy as np
 import torch
@@ -26,7 +27,6 @@ import torch
 from anisofem import linsolve
 from anisofem.potential import Potential
 
-LOSSES = ("energy", "newton")
 
 
 class BatchPotential:
@@ -60,10 +60,9 @@ class BatchPotential:
             grad[lo:hi] = w * g
         return total, grad
 
-    def energy_newton_gradient(self, x):
-        """(sum_i w_i G_i in J, sum_i w_i (M_i/dt^2) H_i^-1 dG_i/dx (N, 3) in N) at stacked
-        positions x (N, 3) float64; zero on held components. H_i is the PSD-projected Hessian
-        (plus M/dt^2: positive definite)."""
+    def energy_newton_gradient(self, x, newton_weight):
+        """(sum_i w_i G_i in J, sum_i w_i (dG_i/dx + newton_weight (M_i/dt^2) H_i^-1 dG_i/dx)
+        (N, 3) in N) at stacked positions x (N, 3) float64; held components get dG/dx alone."""
         total, out = 0.0, np.zeros_like(x)
         for w, pot, lo, hi in zip(self.weights, self.potentials, self.offsets[:-1],
                                   self.offsets[1:]):
@@ -74,17 +73,20 @@ class BatchPotential:
                 e, g, data = pot.hessian_data(x[lo:hi], layout, project=True)
                 step = solver.factor(layout, data)(g.reshape(-1)[layout.dofs])
             total += w * e
-            out[lo:hi].reshape(-1)[layout.dofs] = w * pot.mass_over_dt2.repeat(3)[layout.dofs] * step
+            flat = g.reshape(-1)
+            flat[layout.dofs] += newton_weight * pot.mass_over_dt2.repeat(3)[layout.dofs] * step
+            out[lo:hi] = w * g
         return total, out
 
 
 class _PotentialFunction(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, x_next, batch_potential, kind):
+    def forward(ctx, x_next, batch_potential, newton_weight):
         x64 = x_next.detach().to("cpu", torch.float64).numpy()
-        evaluate = (batch_potential.energy_gradient if kind == "energy"
-                    else batch_potential.energy_newton_gradient)
-        energy, grad = evaluate(x64)
+        if newton_weight == 0:
+            energy, grad = batch_potential.energy_gradient(x64)
+        else:
+            energy, grad = batch_potential.energy_newton_gradient(x64, newton_weight)
         ctx.save_for_backward(torch.from_numpy(grad).to(x_next.device, x_next.dtype))
         return x_next.new_tensor(energy)
 
@@ -94,10 +96,10 @@ class _PotentialFunction(torch.autograd.Function):
         return grad_output * grad, None, None
 
 
-def potential_loss(x_next, batch_potential, kind="energy"):
+def potential_loss(x_next, batch_potential, newton_weight=0.0):
     """sum_i w_i G_i(x_next) as a scalar tensor (x_next's dtype and device), J; its gradient
-    with respect to x_next (N, 3) is anisofem's dG/dx (kind "energy") or the Newton-
-    preconditioned (M/dt^2) H^-1 dG/dx (kind "newton"), see the module docstring."""
-    if kind not in LOSSES:
-        raise ValueError(f"loss: expected one of {LOSSES}, got {kind!r}")
-    return _PotentialFunction.apply(x_next, batch_potential, kind)
+    with respect to x_next (N, 3) is anisofem's dG/dx plus newton_weight times the Newton-
+    preconditioned (M/dt^2) H^-1 dG/dx (see the module docstring)."""
+    if not newton_weight >= 0:
+        raise ValueError(f"newton_weight: must be >= 0, got {newton_weight}")
+    return _PotentialFunction.apply(x_next, batch_potential, float(newton_weight))

@@ -1,8 +1,8 @@
 """The shipped models: anisognn.pretrained("directional") and ("meshgraphnets").
 
 Each lives in anisognn/pretrained/NAME/ with model.pt, the config it was trained with
-(config.toml), its training log (log.jsonl) and COMMAND (how it was made), all produced by
-`python -m anisognn train`; see anisognn/pretrained/README.md.
+(config.toml) and its training log (log.jsonl), all produced by `make pretrained` (the repo's
+own `python -m anisognn train`); see anisognn/pretrained/README.md.
 """
 import os
 

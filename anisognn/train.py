@@ -34,7 +34,7 @@ import anisofem
 from . import checkpoint
 from .graph import batch as batch_graphs
 from .graph import from_scene
-from .loss import LOSSES, BatchPotential, potential_loss
+from .loss import BatchPotential, potential_loss
 from .model import GraphNet, ModelConfig, integrate
 from .sampler import Sampler, SamplerConfig
 
@@ -49,10 +49,11 @@ class TrainingDiverged(RuntimeError):
 
 @dataclass
 class TrainConfig:
-    """Optimization and bookkeeping. loss: "energy" (the paper's plain gradient) or "newton"
-    (Newton-preconditioned, see anisognn.loss). learning_rate decays by lr_decay every
-    decay_every iterations (continuously); grad_clip bounds the global gradient norm (0: off)."""
-    loss: str = "energy"
+    """Optimization and bookkeeping. newton_weight: weight of the Newton-preconditioned term of
+    the loss gradient (0: the paper's plain energy gradient; see anisognn.loss). learning_rate
+    decays by lr_decay every decay_every iterations (continuously); grad_clip bounds the global
+    gradient norm (0: off)."""
+    newton_weight: float = 0.0
     iterations: int = 1000
     batch_size: int = 8
     learning_rate: float = 1e-3
@@ -69,8 +70,8 @@ class TrainConfig:
     out: str = "runs/default"
 
     def __post_init__(self):
-        if self.loss not in LOSSES:
-            raise ValueError(f"[train] loss: expected one of {LOSSES}, got {self.loss!r}")
+        if not self.newton_weight >= 0:
+            raise ValueError(f"[train] newton_weight: must be >= 0, got {self.newton_weight}")
 
 
 @dataclass
@@ -139,13 +140,13 @@ def make_batch(samples, dt, device, dtype=torch.float32, weights=None):
                  pot)
 
 
-def batch_loss(net, batch, dt, kind="energy"):
+def batch_loss(net, batch, dt, newton_weight=0.0):
     """(loss tensor, x_next) of the network net (a GraphNet, possibly wrapped by DDP) on a
-    Batch: sum_i w_i G_i(x_next) with x_next = x + dt v + dt^2 net(...); kind picks its
-    gradient (anisognn.loss.LOSSES)."""
+    Batch: sum_i w_i G_i(x_next) with x_next = x + dt v + dt^2 net(...), its gradient with
+    the Newton term of weight newton_weight (anisognn.loss)."""
     a = net(batch.x, batch.v, batch.f_ext, batch.graph)
     x_next, _ = integrate(batch.x, batch.v, a, dt, batch.graph)
-    return potential_loss(x_next, batch.potential, kind), x_next
+    return potential_loss(x_next, batch.potential, newton_weight), x_next
 
 
 def fit_normalization(model, samples):
@@ -326,7 +327,7 @@ def _train(config, progress, rank, world, device):
         samples = [sampler.sample(first + j) for j in range(tc.batch_size)]
         batch = make_batch(samples, config.model.dt, device,
                            weights=np.full(tc.batch_size, 1.0 / tc.batch_size))
-        loss, _ = batch_loss(net, batch, config.model.dt, tc.loss)
+        loss, _ = batch_loss(net, batch, config.model.dt, tc.newton_weight)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(
