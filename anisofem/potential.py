@@ -34,7 +34,7 @@ class Potential:
                 raise ValueError(f"dt: the time step must be > 0 s, got {self.dt}")
             self.x_hat = check_positions(scene, x_hat, "x_hat")
             self.mass_over_dt2 = scene.masses / self.dt ** 2
-            self._mass_per_dof = np.repeat(self.mass_over_dt2, 3)
+            self.mass_per_dof = np.repeat(self.mass_over_dt2, 3)
 
     def _elastic(self, x, want_grad=False, layout=None, project=False):
         """Elastic part: (e_iso (m,), e_fib (m,), gradient (n, 3) or None, Hessian data or
@@ -79,7 +79,7 @@ class Potential:
         external, kinetic = self._loads(x, grad if want_grad else kernels.EMPTY_GRAD)
         value = float(e_iso.sum()) + float(e_fib.sum()) + external + kinetic
         if self.dynamic and layout is not None:
-            data[layout.diag] += self._mass_per_dof[layout.dofs]
+            data[layout.diag] += self.mass_per_dof[layout.dofs]
         return value, grad, data
 
     def _loads(self, x, grad):

@@ -28,7 +28,6 @@ from anisofem import linsolve
 from anisofem.potential import Potential
 
 
-
 class BatchPotential:
     """The incremental potentials of the scenes of a batch, on their slices of the stacked
     (N, 3) positions. potentials: anisofem Potentials (one per scene, same order as the batch);
@@ -50,43 +49,39 @@ class BatchPotential:
             start += n
         return cls(pots, weights)
 
-    def energy_gradient(self, x):
-        """(sum_i w_i G_i in J, gradient (N, 3) in N) at stacked positions x (N, 3) float64."""
+    def energy_gradient(self, x, newton_weight=0.0):
+        """(sum_i w_i G_i in J, its gradient (N, 3) in N, plus newton_weight times the Newton
+        term sum_i w_i (M_i/dt^2) H_i^-1 dG_i/dx on free components) at stacked positions
+        x (N, 3) float64."""
         total, grad = 0.0, np.empty_like(x)
         for w, pot, lo, hi in zip(self.weights, self.potentials, self.offsets[:-1],
                                   self.offsets[1:]):
-            e, g = pot.energy_gradient(x[lo:hi])
+            if newton_weight == 0:
+                e, g = pot.energy_gradient(x[lo:hi])
+            else:
+                e, g = _with_newton_term(pot, x[lo:hi], newton_weight)
             total += w * e
             grad[lo:hi] = w * g
         return total, grad
 
-    def energy_newton_gradient(self, x, newton_weight):
-        """(sum_i w_i G_i in J, sum_i w_i (dG_i/dx + newton_weight (M_i/dt^2) H_i^-1 dG_i/dx)
-        (N, 3) in N) at stacked positions x (N, 3) float64; held components get dG/dx alone."""
-        total, out = 0.0, np.zeros_like(x)
-        for w, pot, lo, hi in zip(self.weights, self.potentials, self.offsets[:-1],
-                                  self.offsets[1:]):
-            scene = pot.scene
-            solver = linsolve.make("auto", scene.n_free)
-            layout = scene.layout(solver.layout)
-            with solver.threads():
-                e, g, data = pot.hessian_data(x[lo:hi], layout, project=True)
-                step = solver.factor(layout, data)(g.reshape(-1)[layout.dofs])
-            total += w * e
-            flat = g.reshape(-1)
-            flat[layout.dofs] += newton_weight * pot.mass_over_dt2.repeat(3)[layout.dofs] * step
-            out[lo:hi] = w * g
-        return total, out
+
+def _with_newton_term(pot, x, newton_weight):
+    """(G in J, dG/dx + newton_weight (M/dt^2) H^-1 dG/dx (n, 3) in N) of one scene's
+    Potential at x (n, 3); H is the projected Hessian over the free components."""
+    solver = linsolve.make("auto", pot.scene.n_free)
+    layout = pot.scene.layout(solver.layout)
+    with solver.threads():
+        e, g, data = pot.hessian_data(x, layout, project=True)
+        step = solver.factor(layout, data)(g.reshape(-1)[layout.dofs])
+    g.reshape(-1)[layout.dofs] += newton_weight * pot.mass_per_dof[layout.dofs] * step
+    return e, g
 
 
 class _PotentialFunction(torch.autograd.Function):
     @staticmethod
     def forward(ctx, x_next, batch_potential, newton_weight):
         x64 = x_next.detach().to("cpu", torch.float64).numpy()
-        if newton_weight == 0:
-            energy, grad = batch_potential.energy_gradient(x64)
-        else:
-            energy, grad = batch_potential.energy_newton_gradient(x64, newton_weight)
+        energy, grad = batch_potential.energy_gradient(x64, newton_weight)
         ctx.save_for_backward(torch.from_numpy(grad).to(x_next.device, x_next.dtype))
         return x_next.new_tensor(energy)
 

@@ -130,7 +130,7 @@ def test_newton_term_is_the_mass_scaled_newton_step(kappa):
     v = 0.05 * rng.normal(size=(n, 3))
     pot = BatchPotential.backward_euler([scene], x, v, dt)
     e0, g = pot.energy_gradient(x)
-    e1, gb = pot.energy_newton_gradient(x, beta)
+    e1, gb = pot.energy_gradient(x, beta)
     assert e0 == e1
     free = ~scene.fixed_mask.reshape(-1)
     step = ((gb - g).reshape(-1) / beta / np.repeat(scene.masses / dt ** 2, 3))[free]

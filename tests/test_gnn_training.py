@@ -93,9 +93,9 @@ def test_nan_guard_stops_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatc
     real = BatchPotential.energy_gradient
     calls = {"n": 0}
 
-    def poisoned(self, x):
+    def poisoned(self, x, *args):
         calls["n"] += 1
-        energy, grad = real(self, x)
+        energy, grad = real(self, x, *args)
         return (float("nan"), grad) if calls["n"] == 5 else (energy, grad)
     monkeypatch.setattr(BatchPotential, "energy_gradient", poisoned)
     with pytest.raises(train.TrainingDiverged, match="iteration 5: loss nan.*last good"):
