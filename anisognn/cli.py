@@ -4,7 +4,7 @@ import argparse
 import os
 import sys
 
-from . import bench, checkpoint, evaluate, shipped, train
+from . import bench, evaluate, shipped, train
 
 
 def main(argv=None):
@@ -38,19 +38,12 @@ def main(argv=None):
                   f" J, model in {config.train.out}/model.pt")
     elif args.command == "evaluate":
         try:
-            models = {_label(m): _model(m) for m in args.models}
+            models = {_label(m): shipped.model(m) for m in args.models}
         except (ValueError, FileNotFoundError) as err:
             sys.exit(f"error: {err}")
         evaluate.run(models, steps=args.steps, out=args.json)
     else:
         bench.run(out=args.json)
-
-
-def _model(spec):
-    """A model from a shipped name or a checkpoint path."""
-    if spec in shipped.NAMES:
-        return shipped.pretrained(spec)
-    return checkpoint.load(spec)
 
 
 def _label(spec):

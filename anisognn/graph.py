@@ -54,19 +54,15 @@ def from_scene(scene, dtype=torch.float32):
     """The Graph of an anisofem.Scene: its mesh, fibers, masses and Dirichlet conditions."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
-    mesh = scene.mesh
-    edges = runtime.mesh_edges(mesh.tets)  # a TetMesh has at least one tet, so 6 edges
-    senders, receivers = runtime.directed_edges(edges)
-    rest = runtime.rest_features(mesh.vertices, senders, receivers)
-    el = scene.elements
-    fiber = runtime.edge_fibers(mesh.tets, edges, el.fiber, el.kappa)
-    incoming = runtime.incoming_table(receivers, mesh.n_vertices)
-    in_weights = runtime.incoming_weights(incoming, rest[:, :3])
-    return Graph(senders=torch.as_tensor(senders), receivers=torch.as_tensor(receivers),
-                 rest=_real(rest, dtype), fiber=_real(fiber, dtype),
-                 incoming=torch.as_tensor(incoming), in_weights=_real(in_weights, dtype),
-                 mass=_real(scene.masses[:, None], dtype), fixed=_real(scene.fixed_mask, dtype),
-                 fixed_positions=_real(scene.fixed_positions, dtype))
+    mesh, el = scene.mesh, scene.elements
+    t = runtime.mesh_tensors(mesh.vertices, mesh.tets, scene.masses, scene.fixed_mask,
+                             scene.fixed_positions, el.fiber, el.kappa)
+    return Graph(senders=torch.as_tensor(t["senders"]), receivers=torch.as_tensor(t["receivers"]),
+                 rest=_real(t["rest"], dtype), fiber=_real(t["fiber"], dtype),
+                 incoming=torch.as_tensor(t["incoming"]),
+                 in_weights=_real(t["incoming_weights"], dtype), mass=_real(t["mass"], dtype),
+                 fixed=_real(t["fixed"], dtype),
+                 fixed_positions=_real(t["fixed_positions"], dtype))
 
 
 def _real(array, dtype):

@@ -156,10 +156,12 @@ class GraphNet(nn.Module):
             [graph.fixed, self.vertex_norm(self.vertex_features(v, f_ext, graph))], dim=1))
         edge = self.edge_encoder(self.edge_norm(self.edge_features(x, graph)))
         weights = self.aggregation_weights(graph).transpose(1, 2)  # (n, C, K)
-        pad = edge.new_zeros((1, edge.shape[1]))
+        # padding slots (index E) read edge 0 instead: their weights are 0, so no pad row is
+        # concatenated to the edges at every step
+        incoming = torch.where(graph.incoming < graph.n_edges, graph.incoming, 0)
         for edge_update, vertex_update in zip(self.edge_updates, self.vertex_updates):
             edge = edge + edge_update(edge, vert, graph.senders, graph.receivers)
-            gathered = torch.cat([edge, pad])[graph.incoming]  # (n, K, L)
+            gathered = edge[incoming]  # (n, K, L)
             agg = torch.matmul(weights, gathered).flatten(1)  # (n, C L)
             vert = vert + vertex_update(torch.cat([vert, agg], dim=1))
         return self.decoder(vert) * self.accel_scale

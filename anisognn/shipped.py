@@ -25,3 +25,10 @@ def path(name):
 def pretrained(name, device="cpu"):
     """The shipped model `name` ("directional" or "meshgraphnets"), a GraphNet in eval mode."""
     return load(path(name), device)
+
+
+def model(spec, device="cpu"):
+    """A model from a shipped name (one of NAMES) or else a model.pt / checkpoint.pt path."""
+    if spec in NAMES:
+        return pretrained(spec, device)
+    return load(spec, device)

@@ -1,0 +1,36 @@
+"""`python -m export MODEL -o model.onnx` (MODEL: a model.pt / checkpoint.pt file or a shipped
+name) and `python -m export bench` (onnxruntime vs torch per step)."""
+import argparse
+import sys
+
+from anisognn import shipped
+
+from . import bench, to_onnx
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["bench"]:
+        parser = argparse.ArgumentParser(prog="python -m export bench",
+                                         description="onnxruntime vs torch per step")
+        parser.add_argument("--json", default="bench_export.json", help="where to write the JSON")
+        parser.add_argument("--sizes", nargs="+", default=list(bench.MESHES),
+                            choices=list(bench.MESHES), help="mesh sizes (default: all)")
+        args = parser.parse_args(argv[1:])
+        bench.run(sizes=args.sizes, out=args.json)
+        return
+    parser = argparse.ArgumentParser(
+        prog="python -m export", description="export a trained anisognn model to ONNX "
+        "(`python -m export bench` times it)")
+    parser.add_argument("model", metavar="MODEL",
+                        help=f"a model.pt / checkpoint.pt file or a shipped name {shipped.NAMES}")
+    parser.add_argument("-o", "--output", default="model.onnx", help="the .onnx file to write")
+    args = parser.parse_args(argv)
+    try:
+        net = shipped.model(args.model)
+    except (ValueError, FileNotFoundError) as err:
+        sys.exit(f"error: {err}")
+    to_onnx.export(net, args.output)
+    c = net.config
+    print(f"wrote {args.output}: {c.aggregation} aggregation, {c.latent} wide, {c.steps} steps, "
+          f"dt = {c.dt} s")

@@ -1,0 +1,125 @@
+"""Export a trained anisognn model to ONNX: one backward-Euler step of the network, with the
+input normalization inside the graph and dynamic numbers of vertices, edges and in-degree.
+
+The graph's inputs and outputs, their shapes and dtypes, are export/runtime.py's INPUTS and
+OUTPUTS (documented in export/README.md); the runtime builds the mesh tensors and steps the
+model with numpy and onnxruntime only.
+
+The exporter is torch's TorchScript-based one (torch.onnx.export(dynamo=False)): the
+torch.export-based exporter needs the onnxscript package, which is not among this project's
+dependencies, and the network is a static graph of Gather, MatMul, LayerNorm and elementwise
+ops that the TorchScript exporter handles completely.
+"""
+import json
+import os
+import tempfile
+import warnings
+
+import onnx
+import torch
+from torch import nn
+
+from anisognn.graph import Graph
+from anisognn.model import GraphNet
+from anisognn.sampler import DENSITY, POISSON, YOUNG
+
+from .runtime import FORMAT, INPUTS, OUTPUTS
+
+#: opset of the exported graph (LayerNormalization needs 17)
+OPSET = 17
+UNITS = ("SI: positions m, velocities m/s, external_force N per vertex, mass kg, rest lengths m, "
+         "fiber features Pa, acceleration m/s^2")
+
+
+class Step(nn.Module):
+    """One step of a GraphNet as a module of plain tensors (the exported graph).
+
+    The network runs in float32 on float32 casts of the state; the integration
+    x' = x + dt v + dt^2 a (held components at fixed_positions), v' = (x' - x) / dt runs in
+    float64, as anisognn.rollout does, so that long rollouts do not drift by rounding."""
+
+    def __init__(self, net):
+        super().__init__()
+        if not isinstance(net, GraphNet):
+            raise TypeError(f"net: expected an anisognn GraphNet, got {type(net).__name__}")
+        self.net = net
+        self.dt = float(net.config.dt)
+
+    def forward(self, positions, velocities, external_force, senders, receivers, rest, fiber,
+                incoming, incoming_weights, mass, fixed, fixed_positions):
+        graph = Graph(senders=senders, receivers=receivers, rest=rest, fiber=fiber,
+                      incoming=incoming, in_weights=incoming_weights, mass=mass, fixed=fixed,
+                      fixed_positions=fixed_positions)
+        a = self.net(positions.float(), velocities.float(), external_force.float(), graph)
+        dt = self.dt
+        free = positions + dt * velocities + (dt * dt) * a.double()
+        x_next = torch.where(fixed > 0, fixed_positions, free)
+        return a, x_next, (x_next - positions) / dt
+
+
+def example_inputs():
+    """Tracing inputs: a 5-vertex star graph (the sizes are dynamic in the export)."""
+    n, tdtype = 5, {"float64": torch.float64, "float32": torch.float32, "int64": torch.int64}
+    senders = torch.tensor([1, 2, 3, 4, 0, 0, 0, 0])
+    receivers = torch.tensor([0, 0, 0, 0, 1, 2, 3, 4])
+    incoming = torch.tensor([[0, 1, 2, 3], [4, 8, 8, 8], [5, 8, 8, 8], [6, 8, 8, 8],
+                             [7, 8, 8, 8]])
+    gen = torch.Generator().manual_seed(0)
+    values = {"senders": senders, "receivers": receivers, "incoming": incoming}
+    sizes = {"n": n, "E": senders.shape[0], "K": incoming.shape[1]}
+    for name, dtype, shape in INPUTS:
+        if name not in values:
+            dims = [sizes.get(d, d) for d in shape]
+            values[name] = torch.rand(dims, generator=gen, dtype=tdtype[dtype])
+    values["fixed"] = (values["fixed"] > 0.8).float()
+    return tuple(values[name] for name, _, _ in INPUTS)
+
+
+def metadata(net, version):
+    """The ONNX file's metadata_props: what a runtime needs to check and step the model."""
+    return {"format": FORMAT, "config": json.dumps(net.config.to_dict()),
+            "aggregation": net.config.aggregation, "dt": repr(float(net.config.dt)),
+            "units": UNITS, "version": version,
+            "trained_material": json.dumps({"young": YOUNG, "poisson": POISSON,
+                                            "density": DENSITY}),
+            "inputs": json.dumps([list(i) for i in INPUTS]),
+            "outputs": json.dumps([list(o) for o in OUTPUTS])}
+
+
+def export(net, path, version=None):
+    """Write the ONNX graph of one step of net (a GraphNet) to path atomically; returns path."""
+    version = version or _version()
+    step = Step(net.to("cpu", torch.float32).eval())
+    names = [name for name, _, _ in INPUTS]
+    dynamic = {name: {i: d for i, d in enumerate(shape) if isinstance(d, str)}
+               for name, _, shape in INPUTS + OUTPUTS}
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".onnx", dir=folder)
+    os.close(fd)
+    try:
+        with warnings.catch_warnings(), torch.no_grad():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            torch.onnx.export(step, example_inputs(), tmp, dynamo=False, opset_version=OPSET,
+                              input_names=names, output_names=[o for o, _, _ in OUTPUTS],
+                              dynamic_axes=dynamic)
+        model = onnx.load(tmp)
+        onnx.helper.set_model_props(model, metadata(net, version))
+        onnx.checker.check_model(model)
+        onnx.save(model, tmp)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def _version():
+    """The version of the installed distribution (setup.cfg: anisofem, which ships anisognn)."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("anisofem")
+    except PackageNotFoundError:
+        return "unknown"
