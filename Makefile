@@ -24,9 +24,12 @@ test: $(VENV)/.installed
 
 bench: $(VENV)/.installed
 	$(PY) -m anisofem bench
+	$(PY) -m anisognn bench
+	$(PY) -m export bench
 
 # Trains both shipped models side by side (one CPU thread each, about 40 minutes on 2 cores)
-# and installs them, with their configs and logs, as anisognn.pretrained(...).
+# and installs them, with their configs and logs, as anisognn.pretrained(...) and as
+# export/models/NAME.onnx.
 pretrained: $(VENV)/.installed
 	OMP_NUM_THREADS=1 $(PY) -m anisognn train --config configs/shipped-directional.toml --no-progress & d=$$!; \
 	OMP_NUM_THREADS=1 $(PY) -m anisognn train --config configs/shipped-meshgraphnets.toml --no-progress & m=$$!; \
@@ -37,6 +40,9 @@ pretrained: $(VENV)/.installed
 	  cp configs/shipped-$$name.toml anisognn/pretrained/$$name/config.toml || exit 1; \
 	done
 	$(PY) -m anisognn evaluate directional meshgraphnets --json anisognn/pretrained/evaluation.json
+	for name in directional meshgraphnets; do \
+	  $(PY) -m export $$name -o export/models/$$name.onnx || exit 1; \
+	done
 
 clean:
 	rm -rf $(VENV) build *.egg-info
