@@ -2,16 +2,15 @@
 numpy implementation (anisofem.reference_numpy), measured in the same run, and the linear
 solvers at the largest size. Prints tables and writes JSON (atomically)."""
 import json
-import os
 import subprocess
 import sys
-import tempfile
 import time
 
 import numba
 import numpy as np
 
 from . import linsolve, reference_numpy
+from ._files import atomic_path
 from .meshgen import box_beam
 from .newton import minimize
 from .potential import Potential
@@ -178,8 +177,6 @@ def print_report(r):
 
 
 def write_json_atomic(path, obj):
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".json", dir=folder)
-    with os.fdopen(fd, "w") as f:
+    """Write obj as indented JSON to path atomically (numpy scalars as floats)."""
+    with atomic_path(path, ".json") as tmp, open(tmp, "w") as f:
         json.dump(obj, f, indent=2, default=float)
-    os.replace(tmp, path)

@@ -3,11 +3,11 @@ meshio's formats). Results carry fields a person can open in ParaView: point dat
 "displacement" (m), cell data "fiber_direction", "fiber_stiffness" (Pa), "energy" (J per tet),
 "energy_density" (J/m^3) and "volume_change" (det F - 1)."""
 import os
-import tempfile
 
 import meshio
 import numpy as np
 
+from ._files import atomic_path
 from ._validate import as_float_array
 from .mesh import TetMesh
 from .metrics import volume_change
@@ -47,17 +47,10 @@ def write_mesh(path, mesh, x=None, scene=None):
         cells["fiber_stiffness"] = [scene.elements.kappa]
     out = meshio.Mesh(mesh.vertices, [("tetra", np.asarray(mesh.tets))], point_data=points,
                       cell_data=cells)
-    folder, name = os.path.split(os.path.abspath(path))
-    ext = os.path.splitext(name)[1]
+    ext = os.path.splitext(path)[1]
     # XDMF keeps its arrays inline (one file to move around); .msh is binary Gmsh 2.2 (meshio
     # cannot read back the fields of its ASCII .msh output with numpy 2)
     kwargs = {".xdmf": {"data_format": "XML"},
               ".msh": {"file_format": "gmsh22", "binary": True}}.get(ext, {})
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=ext, dir=folder)
-    os.close(fd)
-    try:
+    with atomic_path(path, ext) as tmp:
         meshio.write(tmp, out, **kwargs)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)

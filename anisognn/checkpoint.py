@@ -2,9 +2,10 @@
 torch.load(weights_only=True) and checked, so that a corrupted or foreign file gives a clear
 error instead of a crash deep in torch."""
 import os
-import tempfile
 
 import torch
+
+from anisofem._files import atomic_path
 
 from .model import GraphNet, ModelConfig
 
@@ -17,16 +18,9 @@ def save(path, model, **extra):
     lists and dicts of them) to path atomically."""
     payload = {"format": FORMAT, "version": VERSION, "config": model.config.to_dict(),
                "model": model.state_dict(), **extra}
-    folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".pt", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            torch.save(payload, f)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with atomic_path(path, ".pt") as tmp:
+        torch.save(payload, tmp)
 
 
 def read(path, map_location="cpu"):

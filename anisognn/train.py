@@ -20,7 +20,6 @@ import json
 import math
 import os
 import sys
-import tempfile
 import time
 import tomllib
 from dataclasses import dataclass
@@ -30,6 +29,7 @@ import torch
 import torch.distributed as dist
 
 import anisofem
+from anisofem._files import atomic_path
 
 from . import checkpoint
 from .graph import batch as batch_graphs
@@ -259,10 +259,8 @@ class _Log:
         with open(self.path) as f:
             keep = [line for line in f if line.strip()
                     and json.loads(line).get("iteration", 0) <= iteration]
-        fd, tmp = tempfile.mkstemp(prefix=".tmp-", dir=os.path.dirname(self.path))
-        with os.fdopen(fd, "w") as f:
+        with atomic_path(self.path) as tmp, open(tmp, "w") as f:
             f.writelines(keep)
-        os.replace(tmp, self.path)
 
     def write(self, record):
         if self.enabled:

@@ -12,11 +12,11 @@ import torch
 
 from anisofem import box_beam, default_scene
 from anisofem.bench import best_time, write_json_atomic
-from anisognn import from_scene, shipped
+from anisognn import shipped
 from anisognn.bench import MESHES
 from anisognn.model import GraphNet, ModelConfig
 
-from .runtime import OnnxSimulator
+from .runtime import INPUTS, OnnxSimulator
 from .to_onnx import Step, export
 
 #: the paper's reported step time for 100 elements (desktop GPU, LibTorch), s
@@ -41,16 +41,13 @@ def bench_case(net, onnx_path, cells):
     v = np.zeros_like(x)
     f = scene.external_force
     feed = dict(sim.constants, positions=x, velocities=v, external_force=f)
-    graph = from_scene(scene)
     step = Step(net)
-    state = [torch.tensor(a, dtype=torch.float64) for a in (x, v, f)]
-    args = [graph.senders, graph.receivers, graph.rest, graph.fiber, graph.incoming,
-            graph.in_weights, graph.mass, graph.fixed, graph.fixed_positions.double()]
+    inputs = [torch.as_tensor(feed[name]) for name, _, _ in INPUTS]  # what onnxruntime gets
 
     def torch_step():
         with torch.no_grad():
-            step(*state, *args)
-    return {"tets": mesh.n_tets, "edges": int(graph.n_edges),
+            step(*inputs)
+    return {"tets": mesh.n_tets, "edges": len(feed["senders"]),
             "torch_s": best_time(torch_step, 30),
             "onnxruntime_s": best_time(lambda: sim.session.run(None, feed), 30),
             "runtime_step_s": best_time(lambda: sim.step(x, v, f), 30)}

@@ -12,15 +12,16 @@ ops that the TorchScript exporter handles completely.
 """
 import json
 import os
-import tempfile
 import warnings
 
 import onnx
 import torch
 from torch import nn
 
+from anisofem._files import atomic_path
+
 from anisognn.graph import Graph
-from anisognn.model import GraphNet
+from anisognn.model import GraphNet, integrate
 from anisognn.sampler import DENSITY, POISSON, YOUNG
 
 from .runtime import FORMAT, INPUTS, OUTPUTS
@@ -51,10 +52,7 @@ class Step(nn.Module):
                       incoming=incoming, in_weights=incoming_weights, mass=mass, fixed=fixed,
                       fixed_positions=fixed_positions)
         a = self.net(positions.float(), velocities.float(), external_force.float(), graph)
-        dt = self.dt
-        free = positions + dt * velocities + (dt * dt) * a.double()
-        x_next = torch.where(fixed > 0, fixed_positions, free)
-        return a, x_next, (x_next - positions) / dt
+        return (a,) + integrate(positions, velocities, a.double(), self.dt, graph)
 
 
 def example_inputs():
@@ -93,11 +91,8 @@ def export(net, path, version=None):
     names = [name for name, _, _ in INPUTS]
     dynamic = {name: {i: d for i, d in enumerate(shape) if isinstance(d, str)}
                for name, _, shape in INPUTS + OUTPUTS}
-    folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".onnx", dir=folder)
-    os.close(fd)
-    try:
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with atomic_path(path, ".onnx") as tmp:
         with warnings.catch_warnings(), torch.no_grad():
             warnings.simplefilter("ignore", DeprecationWarning)
             torch.onnx.export(step, example_inputs(), tmp, dynamo=False, opset_version=OPSET,
@@ -107,12 +102,6 @@ def export(net, path, version=None):
         onnx.helper.set_model_props(model, metadata(net, version))
         onnx.checker.check_model(model)
         onnx.save(model, tmp)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
     return path
 
 
