@@ -19,7 +19,13 @@ each mode's error by its eigenvalue, about 1 for the soft bending modes (inertia
 dt = 0.02 s) and up to ~4e4 for the volumetric ones (nu = 0.48, 1 cm elements), so plain
 gradients learn the modes that show, bending under load, very slowly; the Newton term weighs
 every mode alike. Alone it neglects the stiff modes, whose small errors then cost much energy;
-the sum with newton_weight = beta weighs mode k by lambda_k + beta.
+the sum with newton_weight = beta weighs mode k by lambda_k + beta; energy_weight = 0 leaves the
+Newton term alone, a regression onto a target that anisofem recomputes from every prediction.
+
+normalize = True divides each scene's terms by its optimal decrease D = 1/2 g0^T H0^-1 g0 from
+the zero-acceleration start x_hat (held components at their prescribed positions), the
+decrease one Newton step promises there: every sample then weighs alike, whatever its load
+(without it a batch's gradient is the few heavily loaded samples').
 """
 import numpy as np
 import torch
@@ -31,7 +37,7 @@ from anisofem.potential import Potential
 class BatchPotential:
     """The incremental potentials of the scenes of a batch, on their slices of the stacked
     (N, 3) positions. potentials: anisofem Potentials (one per scene, same order as the batch);
-    weights: (scenes,) multipliers of each G_i (default 1)."""
+    weights: (scenes,) multipliers of each scene's loss (default 1)."""
 
     def __init__(self, potentials, weights=None):
         self.potentials = list(potentials)
@@ -40,61 +46,87 @@ class BatchPotential:
         self.weights = np.ones(len(sizes)) if weights is None else np.asarray(weights, float)
 
     @classmethod
-    def backward_euler(cls, scenes, x, v, dt, weights=None):
-        """Potentials of one backward-Euler step from stacked x, v (N, 3) numpy float64."""
+    def backward_euler(cls, scenes, x, v, dt, weights=None, normalize=False):
+        """Potentials of one backward-Euler step from stacked x, v (N, 3) numpy float64;
+        normalize: divide each weight by the scene's optimal decrease (module docstring)."""
         pots, start = [], 0
         for scene in scenes:
             n = scene.mesh.n_vertices
             pots.append(Potential(scene, x[start:start + n] + dt * v[start:start + n], dt))
             start += n
+        weights = np.ones(len(pots)) if weights is None else np.asarray(weights, float)
+        if normalize:
+            weights = weights / np.array([optimal_decrease(p) for p in pots])
         return cls(pots, weights)
 
-    def energy_gradient(self, x, newton_weight=0.0):
-        """(sum_i w_i G_i in J, its gradient (N, 3) in N, plus newton_weight times the Newton
-        term sum_i w_i (M_i/dt^2) H_i^-1 dG_i/dx on free components) at stacked positions
-        x (N, 3) float64."""
+    def energy_gradient(self, x, newton_weight=0.0, energy_weight=1.0):
+        """(loss in J, its gradient (N, 3) in N) at stacked positions x (N, 3) float64: the sum
+        over scenes of w_i (energy_weight G_i + newton_weight 1/2 |H_i^-1 dG_i/dx|^2_{M/dt^2}),
+        the gradient with the Newton term (M_i/dt^2) H_i^-1 dG_i/dx on free components."""
         total, grad = 0.0, np.empty_like(x)
         for w, pot, lo, hi in zip(self.weights, self.potentials, self.offsets[:-1],
                                   self.offsets[1:]):
             if newton_weight == 0:
                 e, g = pot.energy_gradient(x[lo:hi])
+                e, g = energy_weight * e, energy_weight * g
             else:
-                e, g = _with_newton_term(pot, x[lo:hi], newton_weight)
+                e, g = _with_newton_term(pot, x[lo:hi], newton_weight, energy_weight)
             total += w * e
             grad[lo:hi] = w * g
         return total, grad
 
 
-def _with_newton_term(pot, x, newton_weight):
-    """(G in J, dG/dx + newton_weight (M/dt^2) H^-1 dG/dx (n, 3) in N) of one scene's
-    Potential at x (n, 3); H is the projected Hessian over the free components."""
+def _newton_step(pot, x):
+    """(G in J, dG/dx (n, 3) in N, free DOF indices, Newton step H^-1 dG/dx on them in m) of
+    one scene's Potential at x (n, 3); H is the projected Hessian over the free components."""
     solver = linsolve.make("auto", pot.scene.n_free)
     layout = pot.scene.layout(solver.layout)
     with solver.threads():
         e, g, data = pot.hessian_data(x, layout, project=True)
         step = solver.factor(layout, data)(g.reshape(-1)[layout.dofs])
-    g.reshape(-1)[layout.dofs] += newton_weight * pot.mass_per_dof[layout.dofs] * step
-    return e, g
+    return e, g, layout.dofs, step
+
+
+def optimal_decrease(pot):
+    """1/2 g0^T H0^-1 g0 in J (floored at 1e-15 J) at the zero-acceleration start of a
+    backward-Euler Potential: x_hat with the held components at their prescribed positions."""
+    scene = pot.scene
+    start = np.where(scene.fixed_mask, scene.fixed_positions, pot.x_hat)
+    _, g, dofs, step = _newton_step(pot, start)
+    return max(0.5 * float(g.reshape(-1)[dofs] @ step), 1e-15)
+
+
+def _with_newton_term(pot, x, newton_weight, energy_weight):
+    """(energy_weight G + newton_weight 1/2 |s|^2_{M/dt^2} in J, energy_weight dG/dx +
+    newton_weight (M/dt^2) s (n, 3) in N) with s the Newton step at x (n, 3)."""
+    e, g, dofs, step = _newton_step(pot, x)
+    scaled = pot.mass_per_dof[dofs] * step
+    g *= energy_weight
+    g.reshape(-1)[dofs] += newton_weight * scaled
+    return energy_weight * e + 0.5 * newton_weight * float(step @ scaled), g
 
 
 class _PotentialFunction(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, x_next, batch_potential, newton_weight):
+    def forward(ctx, x_next, batch_potential, newton_weight, energy_weight):
         x64 = x_next.detach().to("cpu", torch.float64).numpy()
-        energy, grad = batch_potential.energy_gradient(x64, newton_weight)
+        energy, grad = batch_potential.energy_gradient(x64, newton_weight, energy_weight)
         ctx.save_for_backward(torch.from_numpy(grad).to(x_next.device, x_next.dtype))
         return x_next.new_tensor(energy)
 
     @staticmethod
     def backward(ctx, grad_output):
         (grad,) = ctx.saved_tensors
-        return grad_output * grad, None, None
+        return grad_output * grad, None, None, None
 
 
-def potential_loss(x_next, batch_potential, newton_weight=0.0):
-    """sum_i w_i G_i(x_next) as a scalar tensor (x_next's dtype and device), J; its gradient
-    with respect to x_next (N, 3) is anisofem's dG/dx plus newton_weight times the Newton-
-    preconditioned (M/dt^2) H^-1 dG/dx (see the module docstring)."""
-    if not newton_weight >= 0:
-        raise ValueError(f"newton_weight: must be >= 0, got {newton_weight}")
-    return _PotentialFunction.apply(x_next, batch_potential, float(newton_weight))
+def potential_loss(x_next, batch_potential, newton_weight=0.0, energy_weight=1.0):
+    """The loss of BatchPotential.energy_gradient at x_next (N, 3) as a scalar tensor (x_next's
+    dtype and device), J, with that gradient as its backward (see the module docstring)."""
+    for name, value in (("newton_weight", newton_weight), ("energy_weight", energy_weight)):
+        if not value >= 0:
+            raise ValueError(f"{name}: must be >= 0, got {value}")
+    if newton_weight == 0 and energy_weight == 0:
+        raise ValueError("newton_weight, energy_weight: at least one must be > 0")
+    return _PotentialFunction.apply(x_next, batch_potential, float(newton_weight),
+                                    float(energy_weight))

@@ -49,11 +49,14 @@ class TrainingDiverged(RuntimeError):
 
 @dataclass
 class TrainConfig:
-    """Optimization and bookkeeping. newton_weight: weight of the Newton-preconditioned term of
-    the loss gradient (0: the paper's plain energy gradient; see anisognn.loss). learning_rate
+    """Optimization and bookkeeping. energy_weight, newton_weight: weights of the energy and
+    of the Newton-preconditioned term of the loss (1, 0: the paper's plain energy loss);
+    normalize: divide each sample's loss by its optimal decrease (see anisognn.loss). learning_rate
     decays by lr_decay every decay_every iterations (continuously); grad_clip bounds the global
     gradient norm (0: off)."""
     newton_weight: float = 0.0
+    energy_weight: float = 1.0
+    normalize: bool = False
     iterations: int = 1000
     batch_size: int = 8
     learning_rate: float = 1e-3
@@ -70,8 +73,11 @@ class TrainConfig:
     out: str = "runs/default"
 
     def __post_init__(self):
-        if not self.newton_weight >= 0:
-            raise ValueError(f"[train] newton_weight: must be >= 0, got {self.newton_weight}")
+        for name in ("newton_weight", "energy_weight"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"[train] {name}: must be >= 0, got {getattr(self, name)}")
+        if self.newton_weight == 0 and self.energy_weight == 0:
+            raise ValueError("[train] newton_weight, energy_weight: at least one must be > 0")
 
 
 @dataclass
@@ -128,25 +134,27 @@ class Batch:
     potential: BatchPotential
 
 
-def make_batch(samples, dt, device, dtype=torch.float32, weights=None):
+def make_batch(samples, dt, device, dtype=torch.float32, weights=None, normalize=False):
     """Batch of anisognn.sampler.Samples: one disjoint graph, stacked states, and the
-    incremental potentials of one step of dt from each sample's state."""
+    incremental potentials of one step of dt from each sample's state (weights, normalize:
+    see BatchPotential.backward_euler)."""
     graph = batch_graphs([from_scene(s.scene, dtype) for s in samples]).to(device)
     x = np.concatenate([s.x for s in samples])
     v = np.concatenate([s.v for s in samples])
     f = np.concatenate([s.scene.external_force for s in samples])
-    pot = BatchPotential.backward_euler([s.scene for s in samples], x, v, dt, weights)
+    pot = BatchPotential.backward_euler([s.scene for s in samples], x, v, dt, weights,
+                                        normalize)
     return Batch(graph, *(torch.as_tensor(a, dtype=dtype, device=device) for a in (x, v, f)),
                  pot)
 
 
-def batch_loss(net, batch, dt, newton_weight=0.0):
+def batch_loss(net, batch, dt, newton_weight=0.0, energy_weight=1.0):
     """(loss tensor, x_next) of the network net (a GraphNet, possibly wrapped by DDP) on a
-    Batch: sum_i w_i G_i(x_next) with x_next = x + dt v + dt^2 net(...), its gradient with
-    the Newton term of weight newton_weight (anisognn.loss)."""
+    Batch at x_next = x + dt v + dt^2 net(...): anisognn.loss.potential_loss with these
+    weights (the defaults: sum_i w_i G_i(x_next))."""
     a = net(batch.x, batch.v, batch.f_ext, batch.graph)
     x_next, _ = integrate(batch.x, batch.v, a, dt, batch.graph)
-    return potential_loss(x_next, batch.potential, newton_weight), x_next
+    return potential_loss(x_next, batch.potential, newton_weight, energy_weight), x_next
 
 
 def fit_normalization(model, samples):
@@ -295,10 +303,10 @@ def _train(config, progress, rank, world, device):
         model.load_state_dict(payload["model"])
         optimizer.load_state_dict(payload["optimizer"])
         start = int(payload["iteration"])
-        log.truncate(start)
     else:
         norm = Sampler(tc.seed + NORMALIZATION_STREAM, config.sampler)
         fit_normalization(model, [norm.sample(i) for i in range(tc.normalization_samples)])
+    log.truncate(start)  # a fresh start drops a stale log left in out
     model.to(device)
     net = model
     if world > 1:
@@ -324,8 +332,9 @@ def _train(config, progress, rank, world, device):
         first = (it * world + rank) * tc.batch_size
         samples = [sampler.sample(first + j) for j in range(tc.batch_size)]
         batch = make_batch(samples, config.model.dt, device,
-                           weights=np.full(tc.batch_size, 1.0 / tc.batch_size))
-        loss, _ = batch_loss(net, batch, config.model.dt, tc.newton_weight)
+                           weights=np.full(tc.batch_size, 1.0 / tc.batch_size),
+                           normalize=tc.normalize)
+        loss, _ = batch_loss(net, batch, config.model.dt, tc.newton_weight, tc.energy_weight)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(

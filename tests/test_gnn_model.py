@@ -131,12 +131,36 @@ def test_newton_term_is_the_mass_scaled_newton_step(kappa):
     pot = BatchPotential.backward_euler([scene], x, v, dt)
     e0, g = pot.energy_gradient(x)
     e1, gb = pot.energy_gradient(x, beta)
-    assert e0 == e1
     free = ~scene.fixed_mask.reshape(-1)
-    step = ((gb - g).reshape(-1) / beta / np.repeat(scene.masses / dt ** 2, 3))[free]
+    mass = np.repeat(scene.masses / dt ** 2, 3)[free]
+    step = ((gb - g).reshape(-1)[free] / beta / mass)
     H = af.hessian(scene, x, x + dt * v, dt, project=True).toarray()[np.ix_(free, free)]
     assert np.allclose(H @ step, g.reshape(-1)[free], rtol=1e-9, atol=1e-9 * np.abs(g).max())
     assert (gb[scene.fixed_mask] == g[scene.fixed_mask]).all()  # integrate() drops these
+    assert e1 == pytest.approx(e0 + 0.5 * beta * step @ (mass * step), rel=1e-12)
+    # the Newton term alone: no energy gradient left
+    e2, gn = pot.energy_gradient(x, beta, energy_weight=0.0)
+    assert np.allclose(gn, gb - g, rtol=1e-12, atol=1e-12 * np.abs(gb).max())
+    assert e2 == pytest.approx(e1 - e0, rel=1e-9)
+
+
+@pytest.mark.parametrize("dt", [1e-4, 0.02])
+def test_normalization_divides_by_the_newton_decrease_at_the_start(dt):
+    """weights / D with D = 1/2 g0^T H0^-1 g0 at x_hat; for a tiny step from rest D is the
+    free fall's 1/2 dt^2 sum |f|^2 / m (inertia dominates the Hessian)."""
+    scene = fiber_scene(af.box_beam(cells=(3, 1, 1)))
+    x = scene.initial_positions()
+    v = np.zeros_like(x)
+    pot = BatchPotential.backward_euler([scene], x, v, dt, weights=[3.0], normalize=True)
+    free = ~scene.fixed_mask.reshape(-1)
+    g0 = af.gradient(scene, x, x, dt).reshape(-1)[free]
+    H0 = af.hessian(scene, x, x, dt, project=True).toarray()[np.ix_(free, free)]
+    decrease = 0.5 * g0 @ np.linalg.solve(H0, g0)
+    assert pot.weights[0] == pytest.approx(3.0 / decrease, rel=1e-9)
+    if dt == 1e-4:
+        f = scene.external_force.reshape(-1)[free]
+        m = np.repeat(scene.masses, 3)[free]
+        assert decrease == pytest.approx(0.5 * dt ** 2 * (f ** 2 / m).sum(), rel=1e-3)
 
 
 def test_model_runs_on_a_batch_equal_to_its_parts():

@@ -66,8 +66,11 @@ def test_training_on_a_fixed_scene_closes_most_of_the_energy_gap():
 
 def test_resume_after_kill_gives_the_parameters_of_an_uninterrupted_run(tmp_path):
     config = write_config(tmp_path / "tiny.toml", TINY)
+    os.makedirs(tmp_path / "whole")
+    (tmp_path / "whole" / "log.jsonl").write_text('{"iteration": 7, "loss": -1.0}\n')  # stale
     whole = train.train(train.load_config(config, out=str(tmp_path / "whole")),
                         progress=False)[1]
+    assert -1.0 not in [r.get("loss") for r in read_log(tmp_path / "whole")]
     out = str(tmp_path / "killed")
     proc = subprocess.Popen([sys.executable, "-m", "anisognn", "train", "--config", config,
                              "--out", out, "--no-progress"], cwd=ROOT)
@@ -130,6 +133,10 @@ def test_config_errors_name_the_problem(tmp_path):
         train.make_config({"modle": {}})
     with pytest.raises(ValueError, match="model.dt .* sampler.dt"):
         train.make_config({"model": {"dt": 0.01}})
+    with pytest.raises(ValueError, match=r"\[train\] energy_weight: must be >= 0"):
+        train.make_config({"train": {"energy_weight": -1.0}})
+    with pytest.raises(ValueError, match="at least one must be > 0"):
+        train.make_config({"train": {"energy_weight": 0.0}})
     bad = tmp_path / "bad.toml"
     bad.write_text("[train\niterations = 3")
     with pytest.raises(ValueError, match="not valid TOML"):
