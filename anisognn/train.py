@@ -36,11 +36,12 @@ from .graph import batch as batch_graphs
 from .graph import from_scene
 from .loss import BatchPotential, potential_loss
 from .model import GraphNet, ModelConfig, integrate
-from .sampler import Sampler, SamplerConfig
+from .sampler import Sample, Sampler, SamplerConfig
 
 #: sample streams of a seed: training uses the seed itself, these offsets the others
 NORMALIZATION_STREAM = 1_000_003
 EVALUATION_STREAM = 2_000_003
+ROLLOUT_STREAM = 3_000_017
 
 
 class TrainingDiverged(RuntimeError):
@@ -51,12 +52,18 @@ class TrainingDiverged(RuntimeError):
 class TrainConfig:
     """Optimization and bookkeeping. energy_weight, newton_weight: weights of the energy and
     of the Newton-preconditioned term of the loss (1, 0: the paper's plain energy loss);
-    normalize: divide each sample's loss by its optimal decrease (see anisognn.loss). learning_rate
+    normalize: divide each sample's loss by its optimal decrease (see anisognn.loss).
+    rollout_probability, rollout_steps: with that probability an iteration's batch is first
+    advanced 1..rollout_steps steps by the model itself (no gradient), so that it trains on the
+    states its own rollouts visit (a state that leaves the bounds of own_rollout keeps its
+    sampled start). learning_rate
     decays by lr_decay every decay_every iterations (continuously); grad_clip bounds the global
     gradient norm (0: off)."""
     newton_weight: float = 0.0
     energy_weight: float = 1.0
     normalize: bool = False
+    rollout_probability: float = 0.0
+    rollout_steps: int = 10
     iterations: int = 1000
     batch_size: int = 8
     learning_rate: float = 1e-3
@@ -76,6 +83,12 @@ class TrainConfig:
         for name in ("newton_weight", "energy_weight"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"[train] {name}: must be >= 0, got {getattr(self, name)}")
+        if not 0 <= self.rollout_probability <= 1:
+            raise ValueError("[train] rollout_probability: must be in [0, 1], got "
+                             f"{self.rollout_probability}")
+        if not (isinstance(self.rollout_steps, int) and self.rollout_steps >= 1):
+            raise ValueError(f"[train] rollout_steps: must be an integer >= 1, got "
+                             f"{self.rollout_steps!r}")
         if self.newton_weight == 0 and self.energy_weight == 0:
             raise ValueError("[train] newton_weight, energy_weight: at least one must be > 0")
 
@@ -146,6 +159,37 @@ def make_batch(samples, dt, device, dtype=torch.float32, weights=None, normalize
                                         normalize)
     return Batch(graph, *(torch.as_tensor(a, dtype=dtype, device=device) for a in (x, v, f)),
                  pot)
+
+
+def own_rollout(model, samples, steps, dt, device):
+    """The samples advanced `steps` backward-Euler steps of dt by the model (no gradient), as
+    new Samples with the same scenes: positions and velocities integrated in float64. A sample
+    whose rollout turns non-finite or moves a vertex farther than the mesh's bounding-box
+    diagonal keeps its start. Returns (samples, number advanced)."""
+    param = next(model.parameters())
+    graph64 = batch_graphs([from_scene(s.scene, torch.float64) for s in samples]).to(device)
+    graph = graph64.to(device, param.dtype)
+    x = torch.as_tensor(np.concatenate([s.x for s in samples]), device=device)
+    v = torch.as_tensor(np.concatenate([s.v for s in samples]), device=device)
+    f = torch.as_tensor(np.concatenate([s.scene.external_force for s in samples]),
+                        dtype=param.dtype, device=device)
+    with torch.no_grad():
+        for _ in range(steps):
+            a = model(x.to(param.dtype), v.to(param.dtype), f, graph)
+            x, v = integrate(x, v, a.double(), dt, graph64)
+    x, v = x.cpu().numpy(), v.cpu().numpy()
+    out, advanced, lo = [], 0, 0
+    for s in samples:
+        hi = lo + s.scene.mesh.n_vertices
+        rest = s.scene.mesh.vertices
+        bound = np.linalg.norm(rest.max(axis=0) - rest.min(axis=0))
+        xs, vs = x[lo:hi], v[lo:hi]
+        ok = np.isfinite(xs).all() and np.isfinite(vs).all() and \
+            np.linalg.norm(xs - rest, axis=1).max() < bound
+        out.append(Sample(s.scene, xs.copy(), vs.copy()) if ok else s)
+        advanced += int(ok)
+        lo = hi
+    return out, advanced
 
 
 def batch_loss(net, batch, dt, newton_weight=0.0, energy_weight=1.0):
@@ -331,6 +375,12 @@ def _train(config, progress, rank, world, device):
             group["lr"] = lr
         first = (it * world + rank) * tc.batch_size
         samples = [sampler.sample(first + j) for j in range(tc.batch_size)]
+        rng = np.random.default_rng([tc.seed, ROLLOUT_STREAM, it])
+        advanced = 0
+        if rng.random() < tc.rollout_probability:
+            samples, advanced = own_rollout(model, samples,
+                                            int(rng.integers(1, tc.rollout_steps + 1)),
+                                            config.model.dt, device)
         batch = make_batch(samples, config.model.dt, device,
                            weights=np.full(tc.batch_size, 1.0 / tc.batch_size),
                            normalize=tc.normalize)
@@ -351,7 +401,7 @@ def _train(config, progress, rank, world, device):
         done = it + 1
         if done % tc.log_every == 0 or done == tc.iterations:
             log.write({"iteration": done, "loss": loss_value, "lr": lr,
-                       "grad_norm": float(grad_norm),
+                       "grad_norm": float(grad_norm), "advanced": advanced,
                        "seconds": time.perf_counter() - t0})
         if evaluation is not None and (done % tc.eval_every == 0 or done == tc.iterations):
             log.write({"iteration": done, "event": "eval", **evaluation(model)})

@@ -25,6 +25,11 @@ TINY = {"model": {"latent": 16, "steps": 2},
                   "checkpoint_every": 3, "normalization_samples": 4, "learning_rate": 1e-3}}
 
 
+# the other loss and own-rollout training, for the exact-resume test
+RICH = {**TINY, "train": {**TINY["train"], "newton_weight": 10.0, "normalize": True,
+                          "rollout_probability": 0.5, "rollout_steps": 3}}
+
+
 def write_config(path, raw):
     lines = []
     for section, values in raw.items():
@@ -65,7 +70,7 @@ def test_training_on_a_fixed_scene_closes_most_of_the_energy_gap():
 
 
 def test_resume_after_kill_gives_the_parameters_of_an_uninterrupted_run(tmp_path):
-    config = write_config(tmp_path / "tiny.toml", TINY)
+    config = write_config(tmp_path / "rich.toml", RICH)
     os.makedirs(tmp_path / "whole")
     (tmp_path / "whole" / "log.jsonl").write_text('{"iteration": 7, "loss": -1.0}\n')  # stale
     whole = train.train(train.load_config(config, out=str(tmp_path / "whole")),
@@ -89,6 +94,29 @@ def test_resume_after_kill_gives_the_parameters_of_an_uninterrupted_run(tmp_path
     assert resumed["digest"] == whole["digest"]
     logged = [r["iteration"] for r in read_log(out) if "loss" in r and "event" not in r]
     assert logged == list(range(1, 13))  # no lost or repeated lines
+    assert any(r.get("advanced") for r in read_log(out))  # own rollouts were trained on
+
+
+def test_own_rollout_advances_by_the_model_and_keeps_runaway_starts():
+    """A model that predicts a = 0 flies free: x + k dt v, v unchanged (held components stay);
+    one that flings vertices away leaves the samples at their start."""
+    mesh = af.box_beam(cells=(3, 1, 1))
+    scene = af.Scene(mesh, fixed=mesh.vertices[:, 0] <= 1e-9, gravity=[0, 0, -9.81])
+    rng = np.random.default_rng(0)
+    x = scene.initial_positions()
+    v = np.where(scene.fixed_mask, 0.0, rng.normal(size=x.shape) * 0.01)
+    samples = [Sample(scene, x, v), Sample(scene, x + 1e-4 * scene.fixed_mask, v)]
+    model = GraphNet(ModelConfig(latent=8, steps=1))  # zero decoder: a = 0
+    out, advanced = train.own_rollout(model, samples, 3, 0.02, "cpu")
+    assert advanced == 2
+    free = ~scene.fixed_mask
+    for s, o in zip(samples, out):
+        assert np.allclose(o.x[free], s.x[free] + 0.06 * v[free], rtol=0, atol=1e-15)
+        assert np.array_equal(o.x[scene.fixed_mask], scene.fixed_positions[scene.fixed_mask])
+        assert np.allclose(o.v[free], v[free], rtol=0, atol=1e-12) and o.scene is scene
+    torch.nn.init.constant_(model.decoder[-1].bias, 1e3)  # 1e3 * accel_scale m/s^2
+    out, advanced = train.own_rollout(model, samples, 3, 0.02, "cpu")
+    assert advanced == 0 and all(o is s for o, s in zip(out, samples))
 
 
 def test_nan_guard_stops_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch):
@@ -135,6 +163,10 @@ def test_config_errors_name_the_problem(tmp_path):
         train.make_config({"model": {"dt": 0.01}})
     with pytest.raises(ValueError, match=r"\[train\] energy_weight: must be >= 0"):
         train.make_config({"train": {"energy_weight": -1.0}})
+    with pytest.raises(ValueError, match=r"rollout_probability: must be in \[0, 1\]"):
+        train.make_config({"train": {"rollout_probability": 1.5}})
+    with pytest.raises(ValueError, match="rollout_steps: must be an integer >= 1"):
+        train.make_config({"train": {"rollout_steps": 0}})
     with pytest.raises(ValueError, match="at least one must be > 0"):
         train.make_config({"train": {"energy_weight": 0.0}})
     bad = tmp_path / "bad.toml"
