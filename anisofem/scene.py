@@ -188,6 +188,13 @@ class Scene:
         """(n, 3) rest positions with fixed components at their prescribed positions."""
         return self.fixed_positions.copy()
 
+    def with_fixed(self, x):
+        """A float64 copy of positions x (n, 3) in m with the fixed components moved to their
+        prescribed positions."""
+        x = np.array(x, dtype=float)
+        x[self.fixed_mask] = self.fixed_positions[self.fixed_mask]
+        return x
+
 
 def _to_vertices(mesh, per_tet):
     """Sum a per-tet scalar (m,) onto its four vertices: (n,)."""

@@ -36,7 +36,7 @@ def solve(scene, x0=None, **newton):
         raise TypeError(f"scene: expected an anisofem.Scene or TetMesh, got "
                         f"{type(scene).__name__}")
     scene.check_static()
-    x0 = scene.initial_positions() if x0 is None else _with_fixed(scene, check_positions(
+    x0 = scene.initial_positions() if x0 is None else scene.with_fixed(check_positions(
         scene, x0, "x0"))
     return minimize(Potential(scene), x0, **newton)
 
@@ -71,7 +71,7 @@ def step(scene, x, v, dt, a_guess=None, **newton):
     x_hat = x + dt * v
     start = x_hat if a_guess is None else x_hat + dt ** 2 * check_positions(scene, a_guess,
                                                                            "a_guess")
-    result = minimize(Potential(scene, x_hat, dt), _with_fixed(scene, start), **newton)
+    result = minimize(Potential(scene, x_hat, dt), scene.with_fixed(start), **newton)
     return StepResult(result.x, (result.x - x) / dt, result)
 
 
@@ -94,7 +94,7 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, **newton):
     steps = int(steps)
     if steps < 0:
         raise ValueError(f"steps: must be >= 0, got {steps}")
-    x = _with_fixed(scene, scene.initial_positions() if x0 is None
+    x = scene.with_fixed(scene.initial_positions() if x0 is None
                     else check_positions(scene, x0, "x0"))
     v = np.zeros_like(x) if v0 is None else check_positions(scene, v0, "v0")
     xs, vs, results = [x], [v], []
@@ -111,10 +111,3 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, **newton):
         if callback is not None:
             callback(k, res)
     return Rollout(np.stack(xs), np.stack(vs), results, len(xs) == steps + 1)
-
-
-def _with_fixed(scene, x):
-    """x with the fixed components moved to their prescribed positions."""
-    x = np.array(x, dtype=float)
-    x[scene.fixed_mask] = scene.fixed_positions[scene.fixed_mask]
-    return x

@@ -90,9 +90,7 @@ def _newton_step(pot, x):
 def optimal_decrease(pot):
     """1/2 g0^T H0^-1 g0 in J (floored at 1e-15 J) at the zero-acceleration start of a
     backward-Euler Potential: x_hat with the held components at their prescribed positions."""
-    scene = pot.scene
-    start = np.where(scene.fixed_mask, scene.fixed_positions, pot.x_hat)
-    _, g, dofs, step = _newton_step(pot, start)
+    _, g, dofs, step = _newton_step(pot, pot.scene.with_fixed(pot.x_hat))
     return max(0.5 * float(g.reshape(-1)[dofs] @ step), 1e-15)
 
 

@@ -35,10 +35,10 @@ def rollout(model, scene, steps, dt=None, x0=None, v0=None):
     if steps < 0:
         raise ValueError(f"steps: must be >= 0, got {steps}")
     n = scene.mesh.n_vertices
-    x = scene.initial_positions() if x0 is None else as_float_array(x0, "x0", (n, 3))
+    x = scene.initial_positions() if x0 is None else scene.with_fixed(
+        as_float_array(x0, "x0", (n, 3)))
     v = np.zeros((n, 3)) if v0 is None else as_float_array(v0, "v0", (n, 3))
     held = scene.fixed_mask
-    x[held] = scene.fixed_positions[held]
     param = next(model.parameters())
     graph = from_scene(scene).to(param.device, param.dtype)
     f_ext = torch.tensor(scene.external_force, dtype=param.dtype, device=param.device)

@@ -147,11 +147,19 @@ class Batch:
     potential: BatchPotential
 
 
-def make_batch(samples, dt, device, dtype=torch.float32, weights=None, normalize=False):
-    """Batch of anisognn.sampler.Samples: one disjoint graph, stacked states, and the
-    incremental potentials of one step of dt from each sample's state (weights, normalize:
-    see BatchPotential.backward_euler)."""
-    graph = batch_graphs([from_scene(s.scene, dtype) for s in samples]).to(device)
+def batch_graph(samples, device, dtype=torch.float32):
+    """The disjoint union of the samples' graphs, on device, floating tensors in dtype."""
+    return batch_graphs([from_scene(s.scene, dtype) for s in samples]).to(device)
+
+
+def make_batch(samples, dt, device, dtype=torch.float32, weights=None, normalize=False,
+               graph=None):
+    """Batch of anisognn.sampler.Samples: one disjoint graph (graph, when the caller already
+    built batch_graph(samples, device, dtype)), stacked states, and the incremental potentials
+    of one step of dt from each sample's state (weights, normalize: see
+    BatchPotential.backward_euler)."""
+    if graph is None:
+        graph = batch_graph(samples, device, dtype)
     x = np.concatenate([s.x for s in samples])
     v = np.concatenate([s.v for s in samples])
     f = np.concatenate([s.scene.external_force for s in samples])
@@ -161,31 +169,30 @@ def make_batch(samples, dt, device, dtype=torch.float32, weights=None, normalize
                  pot)
 
 
-def own_rollout(model, samples, steps, dt, device):
+def own_rollout(model, samples, graph, steps, dt):
     """The samples advanced `steps` backward-Euler steps of dt by the model (no gradient), as
-    new Samples with the same scenes: positions and velocities integrated in float64. A sample
-    whose rollout turns non-finite or moves a vertex farther than the mesh's bounding-box
-    diagonal keeps its start. Returns (samples, number advanced)."""
-    param = next(model.parameters())
-    graph64 = batch_graphs([from_scene(s.scene, torch.float64) for s in samples]).to(device)
-    graph = graph64.to(device, param.dtype)
+    new Samples with the same scenes; graph: their batch_graph in the model's dtype and on its
+    device. Positions and velocities are integrated in float64. A sample whose rollout turns
+    non-finite or moves a vertex farther than the mesh's bounding-box diagonal keeps its start.
+    Returns (samples, number advanced)."""
+    dtype, device = graph.mass.dtype, graph.mass.device
     x = torch.as_tensor(np.concatenate([s.x for s in samples]), device=device)
     v = torch.as_tensor(np.concatenate([s.v for s in samples]), device=device)
     f = torch.as_tensor(np.concatenate([s.scene.external_force for s in samples]),
-                        dtype=param.dtype, device=device)
+                        dtype=dtype, device=device)
+    held = dataclasses.replace(graph, fixed_positions=torch.as_tensor(
+        np.concatenate([s.scene.fixed_positions for s in samples]), device=device))
     with torch.no_grad():
         for _ in range(steps):
-            a = model(x.to(param.dtype), v.to(param.dtype), f, graph)
-            x, v = integrate(x, v, a.double(), dt, graph64)
+            a = model(x.to(dtype), v.to(dtype), f, graph)
+            x, v = integrate(x, v, a.double(), dt, held)
     x, v = x.cpu().numpy(), v.cpu().numpy()
     out, advanced, lo = [], 0, 0
     for s in samples:
         hi = lo + s.scene.mesh.n_vertices
-        rest = s.scene.mesh.vertices
-        bound = np.linalg.norm(rest.max(axis=0) - rest.min(axis=0))
         xs, vs = x[lo:hi], v[lo:hi]
         ok = np.isfinite(xs).all() and np.isfinite(vs).all() and \
-            np.linalg.norm(xs - rest, axis=1).max() < bound
+            np.linalg.norm(xs - s.scene.mesh.vertices, axis=1).max() < s.scene.mesh.size
         out.append(Sample(s.scene, xs.copy(), vs.copy()) if ok else s)
         advanced += int(ok)
         lo = hi
@@ -203,7 +210,7 @@ def batch_loss(net, batch, dt, newton_weight=0.0, energy_weight=1.0):
 
 def fit_normalization(model, samples):
     """Set the model's input statistics and acceleration scale from samples (in place)."""
-    g = batch_graphs([from_scene(s.scene, torch.float64) for s in samples])
+    g = batch_graph(samples, "cpu", torch.float64)
     x = torch.as_tensor(np.concatenate([s.x for s in samples]))
     v = torch.as_tensor(np.concatenate([s.v for s in samples]))
     f = torch.as_tensor(np.concatenate([s.scene.external_force for s in samples]))
@@ -229,8 +236,7 @@ class Evaluation:
         self.batch = make_batch(samples, dt, device)  # built once: the samples are fixed
         self.start, self.best, self.energies, self.masses = [], [], [], []
         for s, pot in zip(samples, self.batch.potential.potentials):
-            start = s.x + dt * s.v
-            start[s.scene.fixed_mask] = s.scene.fixed_positions[s.scene.fixed_mask]
+            start = s.scene.with_fixed(s.x + dt * s.v)
             best = anisofem.step(s.scene, s.x, s.v, dt, warn=False)
             self.start.append(start)
             self.best.append(best.x)
@@ -375,15 +381,16 @@ def _train(config, progress, rank, world, device):
             group["lr"] = lr
         first = (it * world + rank) * tc.batch_size
         samples = [sampler.sample(first + j) for j in range(tc.batch_size)]
+        graph = batch_graph(samples, device)
         rng = np.random.default_rng([tc.seed, ROLLOUT_STREAM, it])
         advanced = 0
         if rng.random() < tc.rollout_probability:
-            samples, advanced = own_rollout(model, samples,
+            samples, advanced = own_rollout(model, samples, graph,
                                             int(rng.integers(1, tc.rollout_steps + 1)),
-                                            config.model.dt, device)
+                                            config.model.dt)
         batch = make_batch(samples, config.model.dt, device,
                            weights=np.full(tc.batch_size, 1.0 / tc.batch_size),
-                           normalize=tc.normalize)
+                           normalize=tc.normalize, graph=graph)
         loss, _ = batch_loss(net, batch, config.model.dt, tc.newton_weight, tc.energy_weight)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()

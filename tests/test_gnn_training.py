@@ -107,7 +107,8 @@ def test_own_rollout_advances_by_the_model_and_keeps_runaway_starts():
     v = np.where(scene.fixed_mask, 0.0, rng.normal(size=x.shape) * 0.01)
     samples = [Sample(scene, x, v), Sample(scene, x + 1e-4 * scene.fixed_mask, v)]
     model = GraphNet(ModelConfig(latent=8, steps=1))  # zero decoder: a = 0
-    out, advanced = train.own_rollout(model, samples, 3, 0.02, "cpu")
+    graph = train.batch_graph(samples, "cpu")
+    out, advanced = train.own_rollout(model, samples, graph, 3, 0.02)
     assert advanced == 2
     free = ~scene.fixed_mask
     for s, o in zip(samples, out):
@@ -115,7 +116,7 @@ def test_own_rollout_advances_by_the_model_and_keeps_runaway_starts():
         assert np.array_equal(o.x[scene.fixed_mask], scene.fixed_positions[scene.fixed_mask])
         assert np.allclose(o.v[free], v[free], rtol=0, atol=1e-12) and o.scene is scene
     torch.nn.init.constant_(model.decoder[-1].bias, 1e3)  # 1e3 * accel_scale m/s^2
-    out, advanced = train.own_rollout(model, samples, 3, 0.02, "cpu")
+    out, advanced = train.own_rollout(model, samples, graph, 3, 0.02)
     assert advanced == 0 and all(o is s for o, s in zip(out, samples))
 
 
