@@ -2,6 +2,7 @@
 and set of unknowns, so that assembly is a scatter-add into a preallocated array."""
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 
 def unknown_dofs(dof_map):
@@ -78,3 +79,51 @@ class DenseLayout:
     def matrix(self, data):
         """(k, k) ndarray view of data."""
         return data.reshape(self.shape)
+
+
+class BandedLayout:
+    """LAPACK lower band storage of the Hessian of the unknowns of dof_map, in the reverse
+    Cuthill-McKee order of the unknowns (which keeps the band narrow on beams).
+
+    Attributes: perm (k,) unknown at each banded position; kd the number of subdiagonals;
+    map (m, 144) position of element entry (r, c) in the (kd + 1, k) column-major band, -1
+    where r or c is not unknown or the entry lies above the diagonal (the band holds the lower
+    triangle: band[i - j, j] = H[i, j] for i >= j, in banded positions); diag (k,) position of
+    each unknown's diagonal entry; dofs (k,) flat DOF of each unknown; shape (k, k).
+    """
+
+    kind = "banded"
+
+    def __init__(self, tets, dof_map):
+        k, rows, cols = _entry_dofs(tets, dof_map)
+        valid = (rows >= 0) & (cols >= 0)
+        graph = sp.csr_matrix((np.ones(int(valid.sum())), (rows[valid], cols[valid])),
+                              shape=(k, k))
+        self.perm = reverse_cuthill_mckee(graph, symmetric_mode=True).astype(np.int64)
+        position = np.empty(k, np.int64)
+        position[self.perm] = np.arange(k)
+        pr = np.where(valid, position[np.maximum(rows, 0)], -1)
+        pc = np.where(valid, position[np.maximum(cols, 0)], -1)
+        self.kd = int((pr - pc)[valid].max()) if valid.any() else 0
+        self.map = np.where(valid & (pr >= pc), (pr - pc) + pc * (self.kd + 1), -1)
+        self.diag = position * (self.kd + 1)
+        self.dofs = unknown_dofs(dof_map)
+        self.shape = (k, k)
+
+    def zeros(self):
+        return np.zeros((self.kd + 1) * self.shape[0])
+
+    def band(self, data):
+        """(kd + 1, k) column-major view of data, as LAPACK's pbtrf reads it."""
+        return data.reshape((self.kd + 1, self.shape[0]), order="F")
+
+    def matrix(self, data):
+        """scipy.sparse.csr_matrix of the Hessian in unknown order (a copy; for inspection)."""
+        band = self.band(data)
+        offset, col = np.nonzero(band)
+        row, values = self.perm[col + offset], band[offset, col]
+        col = self.perm[col]
+        off = offset > 0  # mirror the strictly lower entries
+        return sp.csr_matrix((np.concatenate([values, values[off]]),
+                              (np.concatenate([row, col[off]]), np.concatenate([col, row[off]]))),
+                             shape=self.shape)

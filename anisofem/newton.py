@@ -92,14 +92,14 @@ def _iterate(potential, x0, solver, rtol, atol, max_iter, projection):
     """The Newton loop of minimize: (x, converged, iterations, residuals, energy, projected
     iterations, message)."""
     scene = potential.scene
-    free = ~scene.fixed_mask
+    free = scene.free_dofs
     layout = scene.layout(solver.layout)
     x = np.array(x0, dtype=float)
     energy, grad = potential.energy_gradient(x)
-    g = grad[free]
-    scale = max(_norm(g), _norm(scene.external_force[free]))
+    g = grad.ravel()[free]
+    scale = max(_norm(g), _norm(scene.external_force.ravel()[free]))
     if atol is None:
-        atol = ROUNDOFF * scene.force_unit * np.sqrt(scene.n_free)
+        atol = ROUNDOFF * scene.force_unit * math.sqrt(free.size)
     tol = max(rtol * scale, atol)
     res = [_norm(g) / scale if scale > 0 else 0.0]
     choices = {"adaptive": (False, True), "always": (True,), "never": (False,)}[projection]
@@ -124,7 +124,7 @@ def _iterate(potential, x0, solver, rtol, atol, max_iter, projection):
             break
         x, energy, grad, projected = step
         n_projected += projected
-        g = grad[free]
+        g = grad.ravel()[free]
         res.append(_norm(g) / scale)
     return x, converged, it, res, energy, n_projected, message
 
@@ -149,11 +149,11 @@ def _newton_step(potential, x, energy, g, free, layout, solver, projected):
     alpha = 1.0
     while alpha >= MIN_STEP:
         xt = x.copy()
-        xt[free] += alpha * p
+        xt.ravel()[free] += alpha * p
         et, gt = potential.energy_gradient(xt)
         if abs(et - energy) <= noise:
             # below round-off the energy cannot rank the points: accept if the gradient halves
-            if _norm(gt[free]) < 0.5 * gnorm:
+            if _norm(gt.ravel()[free]) < 0.5 * gnorm:
                 return xt, et, gt, projected
         elif et <= energy + ARMIJO * alpha * slope:
             return xt, et, gt, projected

@@ -6,7 +6,7 @@ from functools import cached_property
 import numpy as np
 
 from ._validate import as_float_array, as_index_array, check_shape, per_element
-from .assembly import CsrLayout, DenseLayout
+from .assembly import BandedLayout, CsrLayout, DenseLayout
 from .material import Material
 from .mesh import TetMesh
 
@@ -132,10 +132,16 @@ class Scene:
         dof[free] = np.arange(free.sum())
         return dof
 
+    @cached_property
+    def free_dofs(self):
+        """(k,) int64 flat DOF index (3 i + c) of each unknown, in unknown order: x.ravel()[
+        free_dofs] are the unknowns of positions x (n, 3)."""
+        return np.flatnonzero(~self.fixed_mask.ravel())
+
     @property
     def n_free(self):
         """Number of unknowns (free vertex components)."""
-        return int((~self.fixed_mask).sum())
+        return self.free_dofs.size
 
     @cached_property
     def force_unit(self):
@@ -160,9 +166,9 @@ class Scene:
             color_order=order, color_ptr=ptr)
 
     def layout(self, kind):
-        """The Hessian layout over the free DOFs: kind "csr" or "dense" (cached)."""
+        """The Hessian layout over the free DOFs: kind "csr", "dense" or "banded" (cached)."""
         if kind not in self._layouts:
-            cls = {"csr": CsrLayout, "dense": DenseLayout}[kind]
+            cls = {"csr": CsrLayout, "dense": DenseLayout, "banded": BandedLayout}[kind]
             self._layouts[kind] = cls(self.elements.tets, self.dof_map)
         return self._layouts[kind]
 

@@ -5,6 +5,7 @@ import pytest
 
 import anisofem as af
 from anisofem import linsolve
+from anisofem.potential import Potential
 
 
 def test_quadratic_convergence_near_the_solution(beam):
@@ -32,12 +33,36 @@ CHOLMOD = pytest.param("cholmod", marks=pytest.mark.skipif(
     not linsolve.cholmod_available(), reason="scikit-sparse (CHOLMOD) not installed"))
 
 
-@pytest.mark.parametrize("solver", ["dense", "superlu", "superlu-colamd", CHOLMOD])
+@pytest.mark.parametrize("solver", ["banded", "superlu", "superlu-colamd", CHOLMOD])
 def test_linear_solvers_agree(beam, solver):
     ref = af.solve(beam, linear_solver="dense", rtol=1e-10)
     res = af.solve(beam, linear_solver=solver, rtol=1e-10)
     assert res.converged
     assert np.abs(res.x - ref.x).max() < 1e-9
+
+
+@pytest.mark.parametrize("kind", ["dense", "banded"])
+def test_hessian_layouts_hold_the_same_matrix(beam, kind):
+    """The dense and banded layouts (over the free DOFs) hold the CSR layout's matrix, the
+    banded one with few subdiagonals (reverse Cuthill-McKee)."""
+    scene = af.default_scene(beam)
+    x = scene.initial_positions() + 1e-3 * np.random.default_rng(0).standard_normal(
+        (beam.n_vertices, 3))
+    pot = Potential(scene, x, 0.02)
+    ref = scene.layout("csr").matrix(pot.hessian_data(x, scene.layout("csr"))[2]).toarray()
+    layout = scene.layout(kind)
+    got = layout.matrix(pot.hessian_data(x, layout)[2])
+    got = got.toarray() if hasattr(got, "toarray") else got
+    assert np.abs(got - ref).max() <= 1e-14 * np.abs(ref).max()
+    if kind == "banded":
+        print("unknowns", scene.n_free, "subdiagonals", layout.kd)
+        assert layout.kd < scene.n_free / 2
+
+
+def test_auto_picks_the_banded_cholesky_for_small_systems():
+    assert isinstance(linsolve.make("auto", 135), linsolve.BandedCholesky)
+    assert not isinstance(linsolve.make("auto", linsolve.BANDED_MAX + 1),
+                          linsolve.BandedCholesky)
 
 
 def buckling_scene():
@@ -55,7 +80,7 @@ def buckling_scene():
     return scene, x0
 
 
-@pytest.mark.parametrize("solver", ["dense", "superlu", CHOLMOD])
+@pytest.mark.parametrize("solver", ["dense", "banded", "superlu", CHOLMOD])
 def test_buckling_needs_the_projected_fallback(solver):
     scene, x0 = buckling_scene()
     result = af.solve(scene, x0=x0, linear_solver=solver)
