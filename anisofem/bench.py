@@ -71,25 +71,28 @@ def bench_size(label, cells, with_numpy_solve):
     return row
 
 
-def bench_small_dynamics(cells=(5, 2, 2), steps=100):
-    """Backward Euler on the 100-tet cantilever, dt = 0.02 s: each step of a rollout from rest
-    timed on its own (median and least, seconds), and the first step from rest (least)."""
+def bench_small_dynamics(cells=(5, 2, 2), steps=100, repeats=5, solvers=("banded", "dense")):
+    """Backward Euler on the 100-tet cantilever, dt = 0.02 s: the states of a rollout from rest
+    are recorded, then each step is timed `repeats` times per linear solver (interleaved, so
+    both see the same machine load) and its least time kept. Seconds: the median and least
+    over steps per solver, and the first step from rest (least, default solver)."""
     scene = default_scene(box_beam(cells=cells))
-    simulate(scene, 3)
-    times = []
-    clock = [time.perf_counter()]
-
-    def lap(k, result):
-        now = time.perf_counter()
-        times.append(now - clock[0])
-        clock[0] = now
-    clock[0] = time.perf_counter()
-    roll = simulate(scene, steps, callback=lap)
+    roll = simulate(scene, steps)
+    xs, vs = roll.positions, roll.velocities
+    guesses = [None] + [(vs[k] - vs[k - 1]) / 0.02 for k in range(1, steps)]
+    best = {name: np.full(steps, np.inf) for name in solvers}
+    for _ in range(repeats):
+        for name, times in best.items():
+            for k in range(steps):
+                t0 = time.perf_counter()
+                step(scene, xs[k], vs[k], 0.02, guesses[k], linear_solver=name)
+                times[k] = min(times[k], time.perf_counter() - t0)
     x = scene.initial_positions()
     first_s = best_time(lambda: step(scene, x, np.zeros_like(x), 0.02), 20)
     iters = np.mean([s.newton.iterations for s in roll.steps])
-    return {"step_median_s": float(np.median(times)), "step_min_s": float(np.min(times)),
-            "step_from_rest_s": first_s, "newton_per_step": iters, "steps": steps}
+    return {"steps": steps, "newton_per_step": iters, "step_from_rest_s": first_s,
+            "step_median_s": {k: float(np.median(t)) for k, t in best.items()},
+            "step_min_s": {k: float(np.min(t)) for k, t in best.items()}}
 
 
 def bench_linear_solvers(cells, colamd=True):
@@ -107,18 +110,24 @@ def bench_linear_solvers(cells, colamd=True):
     return out
 
 
-def bench_dense_blas_threads(cells=(5, 2, 2)):
-    """One dense Cholesky of the 100-tet cantilever's Hessian with the default number of BLAS
-    threads and with the one thread dense Newton solves use, seconds."""
+def bench_small_factorizations(cells=(5, 2, 2)):
+    """One Cholesky factorization of the 100-tet cantilever's Hessian, seconds: dense with the
+    default number of BLAS threads, dense with one thread (what dense Newton solves use), and
+    banded (reverse Cuthill-McKee order)."""
     scene = default_scene(box_beam(cells=cells))
-    layout = scene.layout("dense")
-    _, _, data = Potential(scene).hessian_data(scene.initial_positions(), layout,
-                                               want_grad=False)
-    solver = linsolve.DenseCholesky()
-    default_s = best_time(lambda: solver.factor(layout, data.copy()), 200)
-    with solver.threads():
-        one_s = best_time(lambda: solver.factor(layout, data.copy()), 200)
-    return {"unknowns": scene.n_free, "default_threads_s": default_s, "one_thread_s": one_s}
+    pot, x = Potential(scene), scene.initial_positions()
+    dense, banded = linsolve.DenseCholesky(), linsolve.BandedCholesky()
+
+    def factor_time(solver):
+        layout = scene.layout(solver.layout)
+        _, _, data = pot.hessian_data(x, layout, want_grad=False)
+        return best_time(lambda: solver.factor(layout, data.copy()), 200)
+    default_s = factor_time(dense)
+    with dense.threads():
+        one_s = factor_time(dense)
+    return {"unknowns": scene.n_free, "subdiagonals": scene.layout("banded").kd,
+            "dense_default_threads_s": default_s, "dense_one_thread_s": one_s,
+            "banded_s": factor_time(banded)}
 
 
 def first_solve_in_new_process():
@@ -140,7 +149,7 @@ def run(sizes=tuple(SIZES), out="bench_anisofem.json"):
                      for label in sizes if label in ("1e4", "1e5")}
     report = {"assembly_and_static_solve": rows, "dynamics_100_tets": bench_small_dynamics(),
               "first_solve_new_process_s": first_solve_in_new_process(),
-              "dense_factorization": bench_dense_blas_threads(),
+              "small_factorization": bench_small_factorizations(),
               "factorization_s": factorization, "threads": numba.get_num_threads()}
     print_report(report)
     if out:
@@ -162,15 +171,18 @@ def print_report(r):
               f"{row['elements_per_s'] / 1e6:7.2f} | {1e3 * row['solve_s']:9.1f} "
               f"{row['newton_iterations']:3d} {npy}")
     d = r["dynamics_100_tets"]
-    print(f"\nBackward Euler, 100-tet cantilever, dt = 0.02 s, {d['steps']} steps from rest: "
-          f"{1e3 * d['step_median_s']:.2f} ms per step (median; least "
-          f"{1e3 * d['step_min_s']:.2f} ms; {d['newton_per_step']:.1f} Newton iterations), "
-          f"{1e3 * d['step_from_rest_s']:.2f} ms for the first step")
+    print(f"\nBackward Euler, 100-tet cantilever, dt = 0.02 s, {d['steps']} steps from rest "
+          f"({d['newton_per_step']:.1f} Newton iterations per step), each step's least time:")
+    for name, median in d["step_median_s"].items():
+        print(f"  {name:7} linear solver: {1e3 * median:.2f} ms per step (median; least "
+              f"{1e3 * d['step_min_s'][name]:.2f} ms)")
+    print(f"  first step from rest: {1e3 * d['step_from_rest_s']:.2f} ms")
     print(f"New process to first solve (numba cache warm): "
           f"{r['first_solve_new_process_s']:.2f} s")
-    b = r["dense_factorization"]
-    print(f"Dense Cholesky, {b['unknowns']} unknowns: {1e6 * b['default_threads_s']:.0f} us "
-          f"with the default BLAS threads, {1e6 * b['one_thread_s']:.0f} us with one")
+    b = r["small_factorization"]
+    print(f"Cholesky, {b['unknowns']} unknowns: dense {1e6 * b['dense_default_threads_s']:.0f} us "
+          f"with the default BLAS threads, {1e6 * b['dense_one_thread_s']:.0f} us with one; "
+          f"banded ({b['subdiagonals']} subdiagonals) {1e6 * b['banded_s']:.0f} us")
     for label, times in r["factorization_s"].items():
         print(f"One factorization at {label} tets: " + ", ".join(
             f"{k} {v:.2f} s" for k, v in times.items()))
