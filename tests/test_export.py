@@ -256,7 +256,8 @@ def test_cli_exports_a_checkpoint_and_a_shipped_name(tmp_path, capsys):
     source = anisognn.shipped.path("directional")
     cli.main([source, "-o", str(tmp_path / "a.onnx")])
     cli.main(["directional", "-o", str(tmp_path / "b.onnx")])
-    assert "directional aggregation, 64 wide" in capsys.readouterr().out
+    latent = anisognn.pretrained("directional").config.latent
+    assert f"directional aggregation, {latent} wide" in capsys.readouterr().out
     assert (tmp_path / "a.onnx").read_bytes() == (tmp_path / "b.onnx").read_bytes()
     with pytest.raises(SystemExit, match="error: checkpoint: no such file"):
         cli.main([str(tmp_path / "missing.pt"), "-o", str(tmp_path / "c.onnx")])
