@@ -102,10 +102,10 @@ class BandedLayout:
         self.perm = reverse_cuthill_mckee(graph, symmetric_mode=True).astype(np.int64)
         position = np.empty(k, np.int64)
         position[self.perm] = np.arange(k)
-        pr = np.where(valid, position[np.maximum(rows, 0)], -1)
-        pc = np.where(valid, position[np.maximum(cols, 0)], -1)
-        self.kd = int((pr - pc)[valid].max()) if valid.any() else 0
-        self.map = np.where(valid & (pr >= pc), (pr - pc) + pc * (self.kd + 1), -1)
+        pr, pc = position[rows[valid]], position[cols[valid]]
+        self.kd = int((pr - pc).max()) if pr.size else 0
+        self.map = np.full(rows.shape, -1, np.int64)
+        self.map[valid] = np.where(pr >= pc, (pr - pc) + pc * (self.kd + 1), -1)
         self.diag = position * (self.kd + 1)
         self.dofs = unknown_dofs(dof_map)
         self.shape = (k, k)

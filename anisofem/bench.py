@@ -71,26 +71,27 @@ def bench_size(label, cells, with_numpy_solve):
     return row
 
 
-def bench_small_dynamics(cells=(5, 2, 2), steps=100, repeats=5, solvers=("banded", "dense")):
-    """Backward Euler on the 100-tet cantilever, dt = 0.02 s: the states of a rollout from rest
+def bench_small_dynamics(cells=(5, 2, 2), steps=100, dt=0.02, repeats=5,
+                         solvers=("banded", "dense")):
+    """Backward Euler on the 100-tet cantilever, steps of dt s: the states of a rollout from rest
     are recorded, then each step is timed `repeats` times per linear solver (interleaved, so
     both see the same machine load) and its least time kept. Seconds: the median and least
     over steps per solver, and the first step from rest (least, default solver)."""
     scene = default_scene(box_beam(cells=cells))
-    roll = simulate(scene, steps)
+    roll = simulate(scene, steps, dt)
     xs, vs = roll.positions, roll.velocities
-    guesses = [None] + [(vs[k] - vs[k - 1]) / 0.02 for k in range(1, steps)]
+    guesses = [None] + [(vs[k] - vs[k - 1]) / dt for k in range(1, steps)]  # as simulate
     best = {name: np.full(steps, np.inf) for name in solvers}
     for _ in range(repeats):
         for name, times in best.items():
             for k in range(steps):
                 t0 = time.perf_counter()
-                step(scene, xs[k], vs[k], 0.02, guesses[k], linear_solver=name)
+                step(scene, xs[k], vs[k], dt, guesses[k], linear_solver=name)
                 times[k] = min(times[k], time.perf_counter() - t0)
     x = scene.initial_positions()
-    first_s = best_time(lambda: step(scene, x, np.zeros_like(x), 0.02), 20)
+    first_s = best_time(lambda: step(scene, x, np.zeros_like(x), dt), 20)
     iters = np.mean([s.newton.iterations for s in roll.steps])
-    return {"steps": steps, "newton_per_step": iters, "step_from_rest_s": first_s,
+    return {"steps": steps, "dt": dt, "newton_per_step": iters, "step_from_rest_s": first_s,
             "step_median_s": {k: float(np.median(t)) for k, t in best.items()},
             "step_min_s": {k: float(np.min(t)) for k, t in best.items()}}
 
@@ -171,7 +172,7 @@ def print_report(r):
               f"{row['elements_per_s'] / 1e6:7.2f} | {1e3 * row['solve_s']:9.1f} "
               f"{row['newton_iterations']:3d} {npy}")
     d = r["dynamics_100_tets"]
-    print(f"\nBackward Euler, 100-tet cantilever, dt = 0.02 s, {d['steps']} steps from rest "
+    print(f"\nBackward Euler, 100-tet cantilever, dt = {d['dt']:g} s, {d['steps']} steps from rest "
           f"({d['newton_per_step']:.1f} Newton iterations per step), each step's least time:")
     for name, median in d["step_median_s"].items():
         print(f"  {name:7} linear solver: {1e3 * median:.2f} ms per step (median; least "

@@ -11,9 +11,9 @@ a Newton solve runs its factorizations in.
              (`python -m anisofem bench` measures both).
 - "banded":  LAPACK banded Cholesky (pbtrf/pbtrs) in the reverse Cuthill-McKee order of the
              unknowns (anisofem.assembly.BandedLayout). On the 100-tet beam the band has 47
-             subdiagonals for 135 unknowns: the factorization takes 2/3 of the dense one's
-             time and needs no change of BLAS threads (OpenBLAS keeps these small band
-             kernels on one thread; `python -m anisofem bench` measures both solvers).
+             subdiagonals for 135 unknowns and the factorization takes 2/3 to 3/4 of the
+             one-thread dense one's time (`python -m anisofem bench` prints both); it runs
+             under the default BLAS threads.
 - "superlu": scipy's SuperLU with the minimum-degree ordering on A^T + A and diagonal
              pivoting. With a symmetric permutation and diagonal pivots, U's diagonal is D of
              A = L D L^T, so its signs give the inertia: like Cholesky, the factorization is

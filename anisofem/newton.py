@@ -92,8 +92,8 @@ def _iterate(potential, x0, solver, rtol, atol, max_iter, projection):
     """The Newton loop of minimize: (x, converged, iterations, residuals, energy, projected
     iterations, message)."""
     scene = potential.scene
-    free = scene.free_dofs
     layout = scene.layout(solver.layout)
+    free = layout.dofs  # flat DOF index (3 i + c) of each unknown
     x = np.array(x0, dtype=float)
     energy, grad = potential.energy_gradient(x)
     g = grad.ravel()[free]

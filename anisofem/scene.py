@@ -132,16 +132,10 @@ class Scene:
         dof[free] = np.arange(free.sum())
         return dof
 
-    @cached_property
-    def free_dofs(self):
-        """(k,) int64 flat DOF index (3 i + c) of each unknown, in unknown order: x.ravel()[
-        free_dofs] are the unknowns of positions x (n, 3)."""
-        return np.flatnonzero(~self.fixed_mask.ravel())
-
     @property
     def n_free(self):
         """Number of unknowns (free vertex components)."""
-        return self.free_dofs.size
+        return int((~self.fixed_mask).sum())
 
     @cached_property
     def force_unit(self):
