@@ -87,7 +87,10 @@ def mlp(inputs, width, outputs, hidden_layers, layer_norm):
 
 
 class EdgeUpdate(nn.Module):
-    """f_e([e, v_s, v_r]) with the first layer split: W_e e + (W_s v)[s] + (W_r v)[r] + b."""
+    """f_e([e, v_s, v_r]) with the first layer split: W_e e + (W_s v + b)[s] + (W_r v)[r].
+
+    The edge product is one addmm onto the gathered vertex terms (onnxruntime: a Gemm with
+    its C input), so no edge-sized Add is left for the bias or the edge term."""
 
     def __init__(self, latent, hidden_layers):
         super().__init__()
@@ -98,8 +101,8 @@ class EdgeUpdate(nn.Module):
                                                  layer_norm=True))
 
     def forward(self, e, v, senders, receivers):
-        h = self.edge(e) + self.sender(v)[senders] + self.receiver(v)[receivers]
-        return self.rest(h)
+        vertex_terms = (self.sender(v) + self.edge.bias)[senders] + self.receiver(v)[receivers]
+        return self.rest(torch.addmm(vertex_terms, e, self.edge.weight.t()))
 
 
 class GraphNet(nn.Module):
