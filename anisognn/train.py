@@ -4,7 +4,8 @@ A run is described by a TOML file with sections [model] (ModelConfig), [sampler]
 (SamplerConfig) and [train] (TrainConfig); see configs/. It writes into `out`:
 - checkpoint.pt: model, optimizer and iteration, written atomically every checkpoint_every
   iterations and at the end; a run started again with the same out resumes from it exactly
-  (samples depend only on (seed, index), the learning rate only on the iteration);
+  (samples depend only on (seed, index), the learning rate only on the iteration), also
+  with more iterations (a finished run extends to the longer run) or from a copied folder;
 - log.jsonl: one JSON object per logged iteration and per evaluation; on resume the lines
   after the checkpoint are dropped, so the log reads like an uninterrupted run's;
 - model.pt: the final model (anisognn.load reads it).
@@ -333,6 +334,27 @@ def train(config, progress=True):
         return _train(config, progress, rank, world, device)
 
 
+def _same_run(run):
+    """The parts of a run's configuration (a RunConfig dict) that a resume must match: all but
+    train.iterations and train.out."""
+    train = {k: v for k, v in run["train"].items() if k not in ("iterations", "out")}
+    return {**run, "train": train}
+
+
+def _check_resumable(payload, config, path):
+    """Raise ValueError unless the checkpoint payload continues config: the same run, at an
+    iteration not past config.train.iterations. A finished run extends exactly when its
+    iterations grow (samples and learning rate depend only on the iteration), and a copied
+    folder resumes under its new out."""
+    run = payload.get("run")
+    if not isinstance(run, dict) or _same_run(run) != _same_run(config.to_dict()):
+        raise ValueError(f"{path}: was written by a different configuration; use another out "
+                         "folder or delete it to start over")
+    if payload["iteration"] > config.train.iterations:
+        raise ValueError(f"{path}: is at iteration {payload['iteration']}, past [train] "
+                         f"iterations = {config.train.iterations}")
+
+
 def _train(config, progress, rank, world, device):
     tc = config.train
     out = tc.out
@@ -347,9 +369,7 @@ def _train(config, progress, rank, world, device):
     start = 0
     if os.path.exists(ckpt_path):
         payload = checkpoint.read(ckpt_path)
-        if payload.get("run") != config.to_dict():
-            raise ValueError(f"{ckpt_path}: was written by a different configuration; use "
-                             "another out folder or delete it to start over")
+        _check_resumable(payload, config, ckpt_path)
         model.load_state_dict(payload["model"])
         optimizer.load_state_dict(payload["optimizer"])
         start = int(payload["iteration"])

@@ -2,6 +2,7 @@
 guard, data-parallel training with torchrun, checkpoints, rollout and bad input."""
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -95,6 +96,27 @@ def test_resume_after_kill_gives_the_parameters_of_an_uninterrupted_run(tmp_path
     logged = [r["iteration"] for r in read_log(out) if "loss" in r and "event" not in r]
     assert logged == list(range(1, 13))  # no lost or repeated lines
     assert any(r.get("advanced") for r in read_log(out))  # own rollouts were trained on
+
+
+def test_a_finished_run_extends_to_the_longer_run_from_a_copied_folder(tmp_path):
+    """6 iterations, the folder copied, then extended to 12: the parameters of a 12-iteration
+    run; fewer iterations than the checkpoint's, or another setting, are refused."""
+    config = write_config(tmp_path / "tiny.toml", TINY)
+    whole = train.train(train.load_config(config, out=str(tmp_path / "whole")),
+                        progress=False)[1]
+    short = str(tmp_path / "short")
+    first = train.train(train.load_config(config, out=short, iterations=6), progress=False)[1]
+    assert first["digest"] != whole["digest"]
+    moved = str(tmp_path / "moved")
+    shutil.copytree(short, moved)
+    longer = train.train(train.load_config(config, out=moved), progress=False)[1]
+    assert longer["resumed_from"] == 6 and longer["digest"] == whole["digest"]
+    logged = [r["iteration"] for r in read_log(moved) if "loss" in r and "event" not in r]
+    assert logged == list(range(1, 13))
+    with pytest.raises(ValueError, match=r"at iteration 6, past \[train\] iterations = 4"):
+        train.train(train.load_config(config, out=short, iterations=4), progress=False)
+    with pytest.raises(ValueError, match="different configuration"):
+        train.train(train.load_config(config, out=short, learning_rate=2e-3), progress=False)
 
 
 def test_own_rollout_advances_by_the_model_and_keeps_runaway_starts():
