@@ -53,6 +53,8 @@ class TrainingDiverged(RuntimeError):
 class TrainConfig:
     """Optimization and bookkeeping. energy_weight, newton_weight: weights of the energy and
     of the Newton-preconditioned term of the loss (1, 0: the paper's plain energy loss);
+    rest_weight: of the term that weighs the step's error by how far it moves the rollout's
+    resting state (0: off; see anisognn.loss);
     normalize: divide each sample's loss by its optimal decrease (see anisognn.loss).
     rollout_probability, rollout_steps: with that probability an iteration's batch is first
     advanced 1..rollout_steps steps by the model itself (no gradient), so that it trains on the
@@ -62,6 +64,7 @@ class TrainConfig:
     gradient norm (0: off)."""
     newton_weight: float = 0.0
     energy_weight: float = 1.0
+    rest_weight: float = 0.0
     normalize: bool = False
     rollout_probability: float = 0.0
     rollout_steps: int = 10
@@ -81,7 +84,7 @@ class TrainConfig:
     out: str = "runs/default"
 
     def __post_init__(self):
-        for name in ("newton_weight", "energy_weight"):
+        for name in ("newton_weight", "energy_weight", "rest_weight"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"[train] {name}: must be >= 0, got {getattr(self, name)}")
         if not 0 <= self.rollout_probability <= 1:
@@ -90,8 +93,9 @@ class TrainConfig:
         if not (isinstance(self.rollout_steps, int) and self.rollout_steps >= 1):
             raise ValueError(f"[train] rollout_steps: must be an integer >= 1, got "
                              f"{self.rollout_steps!r}")
-        if self.newton_weight == 0 and self.energy_weight == 0:
-            raise ValueError("[train] newton_weight, energy_weight: at least one must be > 0")
+        if self.newton_weight == 0 and self.energy_weight == 0 and self.rest_weight == 0:
+            raise ValueError("[train] newton_weight, energy_weight, rest_weight: at least one "
+                             "must be > 0")
 
 
 @dataclass
@@ -200,13 +204,14 @@ def own_rollout(model, samples, graph, steps, dt):
     return out, advanced
 
 
-def batch_loss(net, batch, dt, newton_weight=0.0, energy_weight=1.0):
+def batch_loss(net, batch, dt, newton_weight=0.0, energy_weight=1.0, rest_weight=0.0):
     """(loss tensor, x_next) of the network net (a GraphNet, possibly wrapped by DDP) on a
     Batch at x_next = x + dt v + dt^2 net(...): anisognn.loss.potential_loss with these
     weights (the defaults: sum_i w_i G_i(x_next))."""
     a = net(batch.x, batch.v, batch.f_ext, batch.graph)
     x_next, _ = integrate(batch.x, batch.v, a, dt, batch.graph)
-    return potential_loss(x_next, batch.potential, newton_weight, energy_weight), x_next
+    loss = potential_loss(x_next, batch.potential, newton_weight, energy_weight, rest_weight)
+    return loss, x_next
 
 
 def fit_normalization(model, samples):
@@ -411,7 +416,8 @@ def _train(config, progress, rank, world, device):
         batch = make_batch(samples, config.model.dt, device,
                            weights=np.full(tc.batch_size, 1.0 / tc.batch_size),
                            normalize=tc.normalize, graph=graph)
-        loss, _ = batch_loss(net, batch, config.model.dt, tc.newton_weight, tc.energy_weight)
+        loss, _ = batch_loss(net, batch, config.model.dt, tc.newton_weight, tc.energy_weight,
+                             tc.rest_weight)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(

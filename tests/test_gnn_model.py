@@ -144,6 +144,31 @@ def test_newton_term_is_the_mass_scaled_newton_step(kappa):
     assert e2 == pytest.approx(e1 - e0, rel=1e-9)
 
 
+@pytest.mark.parametrize("kappa", [2e5, 1e7])
+def test_rest_term_is_the_newton_step_through_the_long_step_hessian(kappa):
+    """gradient(rest=beta) - gradient(0) = beta W K_r^-1 W H^-1 g on free components (W = M/dt^2,
+    K_r the projected Hessian at 10 dt, H at dt; against dense solves), nothing on held
+    ones, loss beta/2 (W s) . K_r^-1 W s; ordinary and stiff fibers."""
+    scene = fiber_scene(af.box_beam(cells=(3, 1, 1)), kappa=kappa)
+    rng = np.random.default_rng(2)
+    n, dt, beta = scene.mesh.n_vertices, 0.02, 30.0
+    x = scene.initial_positions() + 1e-3 * rng.normal(size=(n, 3))
+    x[scene.fixed_mask] = scene.fixed_positions[scene.fixed_mask]
+    v = 0.05 * rng.normal(size=(n, 3))
+    pot = BatchPotential.backward_euler([scene], x, v, dt)
+    e0, g = pot.energy_gradient(x)
+    e1, gr = pot.energy_gradient(x, rest_weight=beta)
+    free = ~scene.fixed_mask.reshape(-1)
+    W = np.repeat(scene.masses / dt ** 2, 3)[free]
+    H = af.hessian(scene, x, x + dt * v, dt, project=True).toarray()[np.ix_(free, free)]
+    K_r = af.hessian(scene, x, x + dt * v, 10 * dt, project=True).toarray()[np.ix_(free, free)]
+    Ws = W * np.linalg.solve(H, g.reshape(-1)[free])
+    rest, dense = (gr - g).reshape(-1)[free] / beta / W, np.linalg.solve(K_r, Ws)
+    assert np.allclose(rest, dense, rtol=1e-9, atol=1e-9 * np.abs(dense).max())
+    assert (gr[scene.fixed_mask] == g[scene.fixed_mask]).all()
+    assert e1 == pytest.approx(e0 + 0.5 * beta * Ws @ rest, rel=1e-12)
+
+
 @pytest.mark.parametrize("dt", [1e-4, 0.02])
 def test_normalization_divides_by_the_newton_decrease_at_the_start(dt):
     """weights / D with D = 1/2 g0^T H0^-1 g0 at x_hat; for a tiny step from rest D is the
