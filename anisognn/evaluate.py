@@ -19,7 +19,11 @@ static equilibrium. Metrics per scene (units as named):
   difference to the FEM's;
 - energy_gap (J): G(final) - G(FEM), and energy_gap_ratio: that over G(rest) - G(FEM);
 - max_displacement (m) over the whole rollout and finite: the stability check (bounded means
-  below the beam's length).
+  below the beam's length);
+- rest_acceleration_mean, _max (m/s^2): |x_1 - x_fem| / dt^2 over the vertices not fully held,
+  for one step from the FEM equilibrium at rest (0 for an exact simulator). The resting state
+  is sensitive to it: bending is soft, so a small force error at rest moves the resting tip
+  far (a simulator's rollout rests where its acceleration at rest vanishes).
 """
 import math
 import os
@@ -80,26 +84,40 @@ def cases():
     return out
 
 
-def fem_rollout(scene, steps, dt=DT):
-    """anisofem's own backward-Euler rollout, (steps + 1, n, 3): the reference simulator."""
-    return anisofem.simulate(scene, steps, dt=dt, warn=False).positions
+def fem_rollout(scene, steps, x0=None, dt=DT):
+    """anisofem's own backward-Euler rollout from x0 (n, 3) at rest (default: the rest shape),
+    (steps + 1, n, 3): the reference simulator."""
+    return anisofem.simulate(scene, steps, dt=dt, x0=x0, warn=False).positions
 
 
 def model_rollout(model):
-    """A simulator (scene, steps) -> (steps + 1, n, 3) positions for an anisognn model."""
+    """A simulator (scene, steps, x0=None) -> (steps + 1, n, 3) positions for an anisognn model,
+    from x0 (n, 3) at rest (default: the rest shape)."""
     from .rollout import rollout
 
-    def run(scene, steps):
-        return rollout(model, scene, steps)
+    def run(scene, steps, x0=None):
+        return rollout(model, scene, steps, x0=x0)
     return run
 
 
-def _rollout(run, scene, steps):
-    """run(scene, steps), or None if the simulator gave up on a non-finite state."""
+def _rollout(run, scene, steps, x0=None):
+    """run(scene, steps, x0), or None if the simulator gave up on a non-finite state."""
     try:
-        return run(scene, steps)
+        return run(scene, steps, x0)
     except FloatingPointError:
         return None
+
+
+def rest_acceleration(run, scene, x_fem):
+    """{"rest_acceleration_mean", "rest_acceleration_max"} in m/s^2: the simulator run's
+    acceleration over the vertices not fully held for one step from x_fem (n, 3) at rest (inf if
+    the step is not finite)."""
+    positions = _rollout(run, scene, 1, x_fem)
+    if positions is None or not np.isfinite(positions).all():
+        return {"rest_acceleration_mean": math.inf, "rest_acceleration_max": math.inf}
+    moving = ~scene.fixed_mask.all(axis=1)
+    a = np.linalg.norm(positions[1] - x_fem, axis=1)[moving] / DT ** 2
+    return {"rest_acceleration_mean": float(a.mean()), "rest_acceleration_max": float(a.max())}
 
 
 def score(scene, positions, x_fem):
@@ -131,12 +149,13 @@ def score(scene, positions, x_fem):
 
 
 def evaluate(simulators, steps=STEPS, suite=None):
-    """{simulator name: [metrics dict per case]} for simulators {name: (scene, steps) ->
+    """{simulator name: [metrics dict per case]} for simulators {name: (scene, steps, x0) ->
     positions}; suite defaults to cases(). Also returns the cases."""
     suite = cases() if suite is None else suite
     fem = [anisofem.solve(c.scene).x for c in suite]
     results = {name: [{"group": c.group, "case": c.label,
-                        **score(c.scene, _rollout(run, c.scene, steps), x)}
+                        **score(c.scene, _rollout(run, c.scene, steps), x),
+                        **rest_acceleration(run, c.scene, x)}
                       for c, x in zip(suite, fem)]
                for name, run in simulators.items()}
     return results, suite
@@ -181,12 +200,15 @@ def format_tables(results, suite, ratio=None):
                 row.append(f"{a / b:.2f}" if b else "-")
             rows.append(row)
         lines += _table(header, rows)
-    lines += ["", "Energy gap to the FEM equilibrium (J; share of the rest-to-equilibrium drop) "
-                  "and stability over the whole rollout"]
-    header = ["case"] + [f"{n}: {h}" for n in names for h in ("gap J", "share", "bounded")]
+    lines += ["", "Energy gap to the FEM equilibrium (J; share of the rest-to-equilibrium drop), "
+                  "mean acceleration of one step from it (m/s^2) and stability over the whole "
+                  "rollout"]
+    header = ["case"] + [f"{n}: {h}" for n in names
+                         for h in ("gap J", "share", "rest a", "bounded")]
     rows = [[case.label] + [v for n in names for v in (
         f"{results[n][i].get('energy_gap', math.nan):.2e}",
         f"{results[n][i].get('energy_gap_ratio', math.nan):.3f}",
+        f"{results[n][i]['rest_acceleration_mean']:.2e}",
         "yes" if results[n][i]["bounded"] else "NO")] for i, case in enumerate(suite)]
     lines += _table(header, rows)
     return "\n".join(lines)
@@ -203,8 +225,9 @@ def _table(header, rows):
 
 
 def summary(results, suite, ratio=None):
-    """Per simulator: mean tip ratio, mean imbalanced force, worst volume change error, all
-    finite and bounded; with ratio = (name a, name b) also a's over b's."""
+    """Per simulator: mean tip ratio, mean imbalanced force, worst volume change error, mean
+    acceleration at the FEM's rest, all finite and bounded; with ratio = (name a, name b) also
+    a's over b's."""
     out = {}
     for name, rows in results.items():
         tips = _pick(rows, suite, "cantilever", "tip_ratio")
@@ -212,6 +235,8 @@ def summary(results, suite, ratio=None):
                      "force_mean": float(np.mean(_pick(rows, suite, "imbalance", "force_mean"))),
                      "volume_change_error_max": float(np.max(
                          _pick(rows, suite, "tension", "volume_change_error"))),
+                     "rest_acceleration_mean": float(np.mean(
+                         [r["rest_acceleration_mean"] for r in rows])),
                      "all_bounded": all(r["bounded"] for r in rows)}
     if ratio:
         first, second = (results[n] for n in ratio)

@@ -21,17 +21,18 @@ def suite():
     return evaluate.cases()
 
 
-def stay_put(scene, steps):
-    return np.broadcast_to(scene.mesh.vertices, (steps + 1,) + scene.mesh.vertices.shape)
+def stay_put(scene, steps, x0=None):
+    x = scene.mesh.vertices if x0 is None else x0
+    return np.broadcast_to(x, (steps + 1,) + x.shape)
 
 
-def blow_up(scene, steps):
-    out = np.array(stay_put(scene, steps))
+def blow_up(scene, steps, x0=None):
+    out = np.array(stay_put(scene, steps, x0))
     out[-1] = np.nan
     return out
 
 
-def give_up(scene, steps):
+def give_up(scene, steps, x0=None):
     raise FloatingPointError("rollout: the predicted state is not finite")
 
 
@@ -55,6 +56,7 @@ def test_fem_rollout_scores_as_the_equilibrium(results, suite):
         assert abs(row["energy_gap_ratio"]) < 1e-6, case.label
         load = np.abs(case.scene.external_force).sum(axis=1).mean()
         assert row["force_mean"] < 1e-6 * load, case.label
+        assert row["rest_acceleration_max"] < 1e-6 * evaluate.GRAVITY, case.label
 
 
 def test_a_body_that_stays_put_misses_by_the_whole_response(results, suite):
@@ -64,6 +66,7 @@ def test_a_body_that_stays_put_misses_by_the_whole_response(results, suite):
         assert row["volume_change_max"] < 1e-12
         assert row["volume_change_error"] == pytest.approx(1.0, abs=1e-9)
         assert row["force_mean"] > 0
+        assert row["rest_acceleration_max"] == 0.0  # it stays at the FEM's rest too
 
 
 def test_fibers_along_the_beam_stiffen_bending(results, suite):
@@ -76,6 +79,7 @@ def test_fibers_along_the_beam_stiffen_bending(results, suite):
 def test_a_blown_up_rollout_is_flagged(results, suite):
     for name in ("nan", "raise"):
         assert all(not r["finite"] and not r["bounded"] for r in results[name])
+        assert all(r["rest_acceleration_mean"] == np.inf for r in results[name])
     text = evaluate.format_tables(results, suite, ratio=("still", "fem"))
     assert "NO" in text and "still/fem" in text
     s = evaluate.summary(results, suite, ratio=("still", "fem"))
