@@ -350,9 +350,14 @@ def _check_resumable(payload, config, path):
     """Raise ValueError unless the checkpoint payload continues config: the same run, at an
     iteration not past config.train.iterations. A finished run extends exactly when its
     iterations grow (samples and learning rate depend only on the iteration), and a copied
-    folder resumes under its new out."""
+    folder resumes under its new out. Fields added since the checkpoint was written take
+    their defaults, which keep earlier runs' behavior."""
     run = payload.get("run")
-    if not isinstance(run, dict) or _same_run(run) != _same_run(config.to_dict()):
+    try:
+        run = make_config(run, source=path).to_dict()
+    except (TypeError, ValueError, AttributeError):
+        run = None
+    if run is None or _same_run(run) != _same_run(config.to_dict()):
         raise ValueError(f"{path}: was written by a different configuration; use another out "
                          "folder or delete it to start over")
     if payload["iteration"] > config.train.iterations:

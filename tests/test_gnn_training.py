@@ -100,7 +100,8 @@ def test_resume_after_kill_gives_the_parameters_of_an_uninterrupted_run(tmp_path
 
 def test_a_finished_run_extends_to_the_longer_run_from_a_copied_folder(tmp_path):
     """6 iterations, the folder copied, then extended to 12: the parameters of a 12-iteration
-    run; fewer iterations than the checkpoint's, or another setting, are refused."""
+    run, also when the checkpoint predates a setting at its default (rest_weight); fewer
+    iterations than the checkpoint's, or another setting, are refused."""
     config = write_config(tmp_path / "tiny.toml", TINY)
     whole = train.train(train.load_config(config, out=str(tmp_path / "whole")),
                         progress=False)[1]
@@ -109,6 +110,9 @@ def test_a_finished_run_extends_to_the_longer_run_from_a_copied_folder(tmp_path)
     assert first["digest"] != whole["digest"]
     moved = str(tmp_path / "moved")
     shutil.copytree(short, moved)
+    payload = torch.load(os.path.join(moved, "checkpoint.pt"), weights_only=False)
+    del payload["run"]["train"]["rest_weight"]
+    torch.save(payload, os.path.join(moved, "checkpoint.pt"))
     longer = train.train(train.load_config(config, out=moved), progress=False)[1]
     assert longer["resumed_from"] == 6 and longer["digest"] == whole["digest"]
     logged = [r["iteration"] for r in read_log(moved) if "loss" in r and "event" not in r]
