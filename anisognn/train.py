@@ -55,7 +55,8 @@ class TrainConfig:
     of the Newton-preconditioned term of the loss (1, 0: the paper's plain energy loss);
     rest_weight: of the term that weighs the step's error by how far it moves the rollout's
     resting state (0: off; see anisognn.loss);
-    normalize: divide each sample's loss by its optimal decrease (see anisognn.loss).
+    normalize: divide each sample's loss by its optimal decrease, floored at normalize_floor
+    times its load decrease (see anisognn.loss; 0: no floor).
     rollout_probability, rollout_steps: with that probability an iteration's batch is first
     advanced 1..rollout_steps steps by the model itself (no gradient), so that it trains on the
     states its own rollouts visit (a state that leaves the bounds of own_rollout keeps its
@@ -66,6 +67,7 @@ class TrainConfig:
     energy_weight: float = 1.0
     rest_weight: float = 0.0
     normalize: bool = False
+    normalize_floor: float = 0.0
     rollout_probability: float = 0.0
     rollout_steps: int = 10
     iterations: int = 1000
@@ -84,9 +86,12 @@ class TrainConfig:
     out: str = "runs/default"
 
     def __post_init__(self):
-        for name in ("newton_weight", "energy_weight", "rest_weight"):
+        for name in ("newton_weight", "energy_weight", "rest_weight", "normalize_floor"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"[train] {name}: must be >= 0, got {getattr(self, name)}")
+        if self.normalize_floor > 0 and not self.normalize:
+            raise ValueError(f"[train] normalize_floor: {self.normalize_floor} floors the "
+                             "normalizer of normalize = true, which is off")
         if not 0 <= self.rollout_probability <= 1:
             raise ValueError("[train] rollout_probability: must be in [0, 1], got "
                              f"{self.rollout_probability}")
@@ -158,10 +163,10 @@ def batch_graph(samples, device, dtype=torch.float32):
 
 
 def make_batch(samples, dt, device, dtype=torch.float32, weights=None, normalize=False,
-               graph=None):
+               graph=None, normalize_floor=0.0):
     """Batch of anisognn.sampler.Samples: one disjoint graph (graph, when the caller already
     built batch_graph(samples, device, dtype)), stacked states, and the incremental potentials
-    of one step of dt from each sample's state (weights, normalize: see
+    of one step of dt from each sample's state (weights, normalize, normalize_floor: see
     BatchPotential.backward_euler)."""
     if graph is None:
         graph = batch_graph(samples, device, dtype)
@@ -169,7 +174,7 @@ def make_batch(samples, dt, device, dtype=torch.float32, weights=None, normalize
     v = np.concatenate([s.v for s in samples])
     f = np.concatenate([s.scene.external_force for s in samples])
     pot = BatchPotential.backward_euler([s.scene for s in samples], x, v, dt, weights,
-                                        normalize)
+                                        normalize, normalize_floor)
     return Batch(graph, *(torch.as_tensor(a, dtype=dtype, device=device) for a in (x, v, f)),
                  pot)
 
@@ -420,7 +425,8 @@ def _train(config, progress, rank, world, device):
                                             config.model.dt)
         batch = make_batch(samples, config.model.dt, device,
                            weights=np.full(tc.batch_size, 1.0 / tc.batch_size),
-                           normalize=tc.normalize, graph=graph)
+                           normalize=tc.normalize, graph=graph,
+                           normalize_floor=tc.normalize_floor)
         loss, _ = batch_loss(net, batch, config.model.dt, tc.newton_weight, tc.energy_weight,
                              tc.rest_weight)
         optimizer.zero_grad(set_to_none=True)

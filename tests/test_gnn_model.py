@@ -188,6 +188,29 @@ def test_normalization_divides_by_the_newton_decrease_at_the_start(dt):
         assert decrease == pytest.approx(0.5 * dt ** 2 * (f ** 2 / m).sum(), rel=1e-3)
 
 
+@pytest.mark.parametrize("floor", [0.01, 0.2])
+def test_normalization_floor_is_a_share_of_the_load_decrease_at_equilibrium(floor):
+    """At the static equilibrium at rest the Newton decrease is ~0 and the normalizer is the
+    floor: floor * 1/2 f^T H0^-1 f; away from it (from the rest shape) the floor does not act."""
+    scene = fiber_scene(af.box_beam(cells=(3, 1, 1)))
+    rest = scene.initial_positions()
+    x_eq = af.solve(scene).x
+    v = np.zeros_like(rest)
+    dt = 0.02
+    free = ~scene.fixed_mask.reshape(-1)
+    f = scene.external_force.reshape(-1)[free]
+    H0 = af.hessian(scene, x_eq, x_eq, dt, project=True).toarray()[np.ix_(free, free)]
+    load = 0.5 * f @ np.linalg.solve(H0, f)
+    at_rest = BatchPotential.backward_euler([scene], x_eq, v, dt, normalize=True,
+                                            normalize_floor=floor)
+    unfloored = BatchPotential.backward_euler([scene], x_eq, v, dt, normalize=True)
+    assert at_rest.weights[0] == pytest.approx(1.0 / (floor * load), rel=1e-9)
+    assert unfloored.weights[0] > 1e4 * at_rest.weights[0]
+    start = [BatchPotential.backward_euler([scene], rest, v, dt, normalize=True,
+                                           normalize_floor=c).weights[0] for c in (0.0, floor)]
+    assert start[1] == start[0]
+
+
 def test_model_runs_on_a_batch_equal_to_its_parts():
     torch.manual_seed(0)
     model = GraphNet(ModelConfig(latent=16, steps=2)).double()

@@ -196,6 +196,8 @@ def test_config_errors_name_the_problem(tmp_path):
         train.make_config({"train": {"rollout_steps": 0}})
     with pytest.raises(ValueError, match="at least one must be > 0"):
         train.make_config({"train": {"energy_weight": 0.0}})
+    with pytest.raises(ValueError, match=r"normalize_floor: 0.1 floors .* normalize = true"):
+        train.make_config({"train": {"normalize_floor": 0.1}})
     bad = tmp_path / "bad.toml"
     bad.write_text("[train\niterations = 3")
     with pytest.raises(ValueError, match="not valid TOML"):
