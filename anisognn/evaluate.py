@@ -24,6 +24,10 @@ static equilibrium. Metrics per scene (units as named):
   for one step from the FEM equilibrium at rest (0 for an exact simulator). The resting state
   is sensitive to it: bending is soft, so a small force error at rest moves the resting tip
   far (a simulator's rollout rests where its acceleration at rest vanishes).
+- rest_stiffness: how the simulator's acceleration at rest changes with the deflection, as a
+  share of the FEM's: with u = x_fem - X and p(s) the mass-weighted projection on u of one
+  step from X + s u at rest, (p(0.5) - p(1.5)) over the FEM's (1 for an exact simulator, 0 for
+  one that holds every still, deformed state in place, whatever its load).
 """
 import math
 import os
@@ -108,16 +112,45 @@ def _rollout(run, scene, steps, x0=None):
         return None
 
 
+def _step_at_rest(run, scene, x):
+    """(n, 3) m: the simulator run's displacement over one step from x (n, 3) at rest, or None
+    if it is not finite."""
+    positions = _rollout(run, scene, 1, x)
+    if positions is None or not np.isfinite(positions).all():
+        return None
+    return positions[1] - x
+
+
 def rest_acceleration(run, scene, x_fem):
     """{"rest_acceleration_mean", "rest_acceleration_max"} in m/s^2: the simulator run's
     acceleration over the vertices not fully held for one step from x_fem (n, 3) at rest (inf if
     the step is not finite)."""
-    positions = _rollout(run, scene, 1, x_fem)
-    if positions is None or not np.isfinite(positions).all():
+    step = _step_at_rest(run, scene, x_fem)
+    if step is None:
         return {"rest_acceleration_mean": math.inf, "rest_acceleration_max": math.inf}
     moving = ~scene.fixed_mask.all(axis=1)
-    a = np.linalg.norm(positions[1] - x_fem, axis=1)[moving] / DT ** 2
+    a = np.linalg.norm(step, axis=1)[moving] / DT ** 2
     return {"rest_acceleration_mean": float(a.mean()), "rest_acceleration_max": float(a.max())}
+
+
+#: the deflections, as shares of the FEM's, between which rest_stiffness compares
+STIFFNESS_SHARES = (0.5, 1.5)
+
+
+def rest_stiffness(run, scene, x_fem):
+    """{"rest_stiffness"}: the change of the simulator run's one-step displacement at rest
+    between STIFFNESS_SHARES of the FEM deflection u = x_fem - X (n, 3), projected on u in the
+    mass norm, over anisofem's (module docstring; nan if a step is not finite)."""
+    u = x_fem - scene.mesh.vertices
+    weighted = scene.masses[:, None] * u
+
+    def change(simulator):
+        steps = [_step_at_rest(simulator, scene, scene.mesh.vertices + s * u)
+                 for s in STIFFNESS_SHARES]
+        if any(step is None for step in steps):
+            return math.nan
+        return float(((steps[0] - steps[1]) * weighted).sum() / (u * weighted).sum())
+    return {"rest_stiffness": change(run) / change(fem_rollout)}
 
 
 def score(scene, positions, x_fem):
@@ -155,7 +188,8 @@ def evaluate(simulators, steps=STEPS, suite=None):
     fem = [anisofem.solve(c.scene).x for c in suite]
     results = {name: [{"group": c.group, "case": c.label,
                         **score(c.scene, _rollout(run, c.scene, steps), x),
-                        **rest_acceleration(run, c.scene, x)}
+                        **rest_acceleration(run, c.scene, x),
+                        **rest_stiffness(run, c.scene, x)}
                       for c, x in zip(suite, fem)]
                for name, run in simulators.items()}
     return results, suite
@@ -201,14 +235,15 @@ def format_tables(results, suite, ratio=None):
             rows.append(row)
         lines += _table(header, rows)
     lines += ["", "Energy gap to the FEM equilibrium (J; share of the rest-to-equilibrium drop), "
-                  "mean acceleration of one step from it (m/s^2) and stability over the whole "
-                  "rollout"]
+                  "mean acceleration of one step from it (m/s^2), stiffness at rest (share of "
+                  "the FEM's) and stability over the whole rollout"]
     header = ["case"] + [f"{n}: {h}" for n in names
-                         for h in ("gap J", "share", "rest a", "bounded")]
+                         for h in ("gap J", "share", "rest a", "rest k", "bounded")]
     rows = [[case.label] + [v for n in names for v in (
         f"{results[n][i].get('energy_gap', math.nan):.2e}",
         f"{results[n][i].get('energy_gap_ratio', math.nan):.3f}",
         f"{results[n][i]['rest_acceleration_mean']:.2e}",
+        f"{results[n][i]['rest_stiffness']:.2f}",
         "yes" if results[n][i]["bounded"] else "NO")] for i, case in enumerate(suite)]
     lines += _table(header, rows)
     return "\n".join(lines)
@@ -226,7 +261,7 @@ def _table(header, rows):
 
 def summary(results, suite, ratio=None):
     """Per simulator: mean tip ratio, mean imbalanced force, worst volume change error, mean
-    acceleration at the FEM's rest, all finite and bounded; with ratio = (name a, name b) also
+    acceleration at the FEM's rest, mean stiffness at rest, all finite and bounded; with ratio = (name a, name b) also
     a's over b's."""
     out = {}
     for name, rows in results.items():
@@ -237,6 +272,7 @@ def summary(results, suite, ratio=None):
                          _pick(rows, suite, "tension", "volume_change_error"))),
                      "rest_acceleration_mean": float(np.mean(
                          [r["rest_acceleration_mean"] for r in rows])),
+                     "rest_stiffness_mean": float(np.mean([r["rest_stiffness"] for r in rows])),
                      "all_bounded": all(r["bounded"] for r in rows)}
     if ratio:
         first, second = (results[n] for n in ratio)

@@ -57,6 +57,7 @@ def test_fem_rollout_scores_as_the_equilibrium(results, suite):
         load = np.abs(case.scene.external_force).sum(axis=1).mean()
         assert row["force_mean"] < 1e-6 * load, case.label
         assert row["rest_acceleration_max"] < 1e-6 * evaluate.GRAVITY, case.label
+        assert row["rest_stiffness"] == pytest.approx(1.0, abs=1e-12), case.label
 
 
 def test_a_body_that_stays_put_misses_by_the_whole_response(results, suite):
@@ -67,6 +68,19 @@ def test_a_body_that_stays_put_misses_by_the_whole_response(results, suite):
         assert row["volume_change_error"] == pytest.approx(1.0, abs=1e-9)
         assert row["force_mean"] > 0
         assert row["rest_acceleration_max"] == 0.0  # it stays at the FEM's rest too
+        assert row["rest_stiffness"] == 0.0  # and at every other still state
+
+
+def test_rest_stiffness_is_the_share_of_the_fems_response(suite):
+    """A simulator that takes a fixed share of anisofem's step from every state at rest has
+    that share of its stiffness at rest."""
+    def damped(scene, steps, x0=None):
+        positions = evaluate.fem_rollout(scene, steps, x0)
+        return positions[0] + 0.3 * (positions - positions[0])
+    case = suite[0]
+    x_fem = evaluate.anisofem.solve(case.scene).x
+    assert evaluate.rest_stiffness(damped, case.scene, x_fem)["rest_stiffness"] == pytest.approx(
+        0.3, rel=1e-9)
 
 
 def test_fibers_along_the_beam_stiffen_bending(results, suite):
@@ -80,6 +94,7 @@ def test_a_blown_up_rollout_is_flagged(results, suite):
     for name in ("nan", "raise"):
         assert all(not r["finite"] and not r["bounded"] for r in results[name])
         assert all(r["rest_acceleration_mean"] == np.inf for r in results[name])
+        assert all(np.isnan(r["rest_stiffness"]) for r in results[name])
     text = evaluate.format_tables(results, suite, ratio=("still", "fem"))
     assert "NO" in text and "still/fem" in text
     s = evaluate.summary(results, suite, ratio=("still", "fem"))
