@@ -50,6 +50,23 @@ class SamplerConfig:
     noise_velocity: float = 5e-2       # in units of h per second
     dt: float = 0.02
 
+    def __post_init__(self):
+        for name in ("extra_force_probability", "traction_probability",
+                     "varying_fiber_probability", "deformed_probability",
+                     "equilibrium_probability"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise ValueError(f"[sampler] {name}: must be in [0, 1], got "
+                                 f"{getattr(self, name)}")
+        for name in ("body_force", "extra_force", "traction_density", "fiber_stiffness",
+                     "equilibrium_spread", "noise_position", "noise_velocity"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"[sampler] {name}: must be >= 0, got {getattr(self, name)}")
+        if not (isinstance(self.deform_steps, int) and self.deform_steps >= 1):
+            raise ValueError(f"[sampler] deform_steps: must be an integer >= 1, got "
+                             f"{self.deform_steps!r}")
+        if not self.dt > 0:
+            raise ValueError(f"[sampler] dt: must be > 0 s, got {self.dt}")
+
 
 @dataclass
 class Sample:

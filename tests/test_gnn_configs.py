@@ -9,8 +9,9 @@ from anisognn import train
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-@pytest.mark.parametrize("path", sorted(glob.glob(os.path.join(ROOT, "configs", "*.toml"))
-                                         + glob.glob(os.path.join(ROOT, "configs", "ab", "*.toml"))))
+@pytest.mark.parametrize("path", sorted(
+    glob.glob(os.path.join(ROOT, "configs", "*.toml"))
+    + glob.glob(os.path.join(ROOT, "configs", "*", "*.toml"))))
 def test_shipped_configs_parse(path):
     config = train.load_config(path)
     assert config.model.dt == config.sampler.dt == 0.02

@@ -198,6 +198,11 @@ def test_config_errors_name_the_problem(tmp_path):
         train.make_config({"train": {"energy_weight": 0.0}})
     with pytest.raises(ValueError, match=r"normalize_floor: 0.1 floors .* normalize = true"):
         train.make_config({"train": {"normalize_floor": 0.1}})
+    with pytest.raises(ValueError,
+                       match=r"\[sampler\] equilibrium_probability: must be in \[0, 1\]"):
+        train.make_config({"sampler": {"equilibrium_probability": 1.5}})
+    with pytest.raises(ValueError, match=r"\[sampler\] noise_position: must be >= 0"):
+        train.make_config({"sampler": {"noise_position": -1e-3}})
     bad = tmp_path / "bad.toml"
     bad.write_text("[train\niterations = 3")
     with pytest.raises(ValueError, match="not valid TOML"):
