@@ -261,8 +261,8 @@ def _table(header, rows):
 
 def summary(results, suite, ratio=None):
     """Per simulator: mean tip ratio, mean imbalanced force, worst volume change error, mean
-    acceleration at the FEM's rest, mean stiffness at rest, all finite and bounded; with ratio = (name a, name b) also
-    a's over b's."""
+    acceleration at the FEM's rest, mean stiffness at rest, all finite and bounded; with
+    ratio = (name a, name b) also a's over b's."""
     out = {}
     for name, rows in results.items():
         tips = _pick(rows, suite, "cantilever", "tip_ratio")

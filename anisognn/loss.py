@@ -115,11 +115,13 @@ def optimal_decrease(pot, floor=0.0):
     (x_hat with the held components at their prescribed positions), floored at floor times
     1/2 f^T H0^-1 f (f the external force on the free components) and at 1e-15 J."""
     f = pot.scene.external_force.reshape(-1)
-    _, g, dofs, steps = _newton_step(pot, pot.scene.with_fixed(pot.x_hat),
-                                     rhs=lambda dofs, g: np.stack([g, f[dofs]], axis=1))
-    rhs = np.stack([g.reshape(-1)[dofs], f[dofs]], axis=1)
-    decrease, load = 0.5 * (rhs * steps).sum(axis=0)
-    return max(float(decrease), floor * float(load), 1e-15)
+    with_load = (lambda dofs, g: np.stack([g, f[dofs]], axis=1)) if floor > 0 else None
+    _, g, dofs, steps = _newton_step(pot, pot.scene.with_fixed(pot.x_hat), rhs=with_load)
+    steps = steps.reshape(len(dofs), -1)
+    decrease = 0.5 * float(g.reshape(-1)[dofs] @ steps[:, 0])
+    if floor > 0:
+        decrease = max(decrease, floor * 0.5 * float(f[dofs] @ steps[:, 1]))
+    return max(decrease, 1e-15)
 
 
 def _with_newton_term(pot, x, newton_weight, energy_weight, rest_weight=0.0):
