@@ -1,0 +1,145 @@
+"""Diagnostics of how a model treats still, deformed states (README "What we learned").
+
+    python scripts/at_rest.py taken MODEL...   share of anisofem's step a model takes from 40
+                                               noise-free at-rest training samples
+    python scripts/at_rest.py probe MODEL...   tip z acceleration (m/s^2) of one step from rest at
+                                               0-1.5 times the FEM deflection, four cantilevers
+    python scripts/at_rest.py learn [--iterations N] [--floor C] [--energy-weight W]
+                                    [--no-normalize] [--fixed]
+                                               train a fresh 32 x 6 directional model on at-rest
+                                               samples only (fresh each iteration, or one fixed
+                                               batch of 8) and print its held-out taken share
+    python scripts/at_rest.py noise            the normalizer's noisy over noise-free value
+
+MODEL: a shipped name or a model.pt / checkpoint.pt path. Run with OMP_NUM_THREADS=1.
+"""
+import argparse
+
+import numpy as np
+import torch
+
+import anisofem
+from anisofem.potential import Potential
+from anisognn import evaluate, shipped
+from anisognn import train as T
+from anisognn.loss import optimal_decrease
+from anisognn.model import GraphNet, ModelConfig
+from anisognn.sampler import Sampler, SamplerConfig
+
+DT = 0.02
+AT_REST = SamplerConfig(equilibrium_probability=1.0, noise_position=0.0, noise_velocity=0.0)
+SHARES = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5)
+
+
+def taken_shares(run, samples, fem_steps):
+    """(k,) the model's one-step displacement projected on anisofem's, in the mass norm."""
+    out = []
+    with torch.no_grad():
+        for s, d in zip(samples, fem_steps):
+            m = s.scene.masses[:, None]
+            step = run(s.scene, 1, s.x)[1] - s.x
+            out.append((m * step * d).sum() / (m * d * d).sum())
+    return np.array(out)
+
+
+def fem_steps(samples):
+    return [anisofem.simulate(s.scene, 1, dt=DT, x0=s.x, warn=False).positions[1] - s.x
+            for s in samples]
+
+
+def taken(models):
+    samples = [Sampler(123, AT_REST).sample(i) for i in range(40)]
+    steps = fem_steps(samples)
+    for name in models:
+        shares = taken_shares(evaluate.model_rollout(shipped.model(name)), samples, steps)
+        print(f"{name}: median share of anisofem's step taken {np.median(shares):.2f}")
+
+
+def probe(models):
+    sims = [("fem", evaluate.fem_rollout)] + [(n, evaluate.model_rollout(shipped.model(n)))
+                                              for n in models]
+    for case in evaluate.cases()[:4]:
+        scene, X = case.scene, case.scene.mesh.vertices
+        x_fem = anisofem.solve(scene).x
+        tip = X[:, 0] >= X[:, 0].max() - 1e-9
+        print(f"{case.label}; deflection shares {SHARES}")
+        for name, run in sims:
+            acc = [(run(scene, 1, X + s * (x_fem - X))[1] - (X + s * (x_fem - X)))[tip, 2].mean()
+                   / DT ** 2 for s in SHARES]
+            print(f"  {name[-40:]:40}" + "".join(f"{a:8.3f}" for a in acc))
+
+
+def learn(iterations, floor, energy_weight, normalize, fixed):
+    torch.manual_seed(0)
+    sampler = Sampler(7, AT_REST)
+    held = [Sampler(99, AT_REST).sample(i) for i in range(24)]
+    steps = fem_steps(held)
+    model = GraphNet(ModelConfig(latent=32, hidden_layers=2, steps=6, aggregation="directional"))
+    T.fit_normalization(model, [Sampler(0, SamplerConfig(equilibrium_probability=0.6)).sample(i)
+                                for i in range(64)])
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
+    run = evaluate.model_rollout(model)
+    batch = None
+    for it in range(1, iterations + 1):
+        if batch is None or not fixed:
+            samples = [sampler.sample(it * 8 + j) for j in range(8)]
+            batch = T.make_batch(samples, DT, "cpu", weights=np.full(8, 1 / 8),
+                                 normalize=normalize, normalize_floor=floor)
+        loss, _ = T.batch_loss(model, batch, DT, 1000.0, energy_weight)
+        optimizer.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        optimizer.step()
+        if it % 200 == 0:
+            model.eval()
+            q = np.quantile(taken_shares(run, held, steps), [0.25, 0.5, 0.75])
+            line = f"{it}: held-out taken share quartiles {np.round(q, 2)}"
+            if fixed:
+                own = taken_shares(run, samples, fem_steps(samples))
+                line += f"; on the fixed batch {np.round(np.quantile(own, [0.25, 0.5, 0.75]), 2)}"
+            print(line, flush=True)
+            model.train()
+
+
+def noise():
+    noisy = Sampler(0, SamplerConfig(equilibrium_probability=0.6))
+    clean = Sampler(0, SamplerConfig(equilibrium_probability=0.6, noise_position=0.0,
+                                     noise_velocity=0.0))
+    rows = []
+    for i in range(120):
+        a, b = noisy.sample(i), clean.sample(i)  # same scene and state, noise aside
+        rows.append((bool(np.allclose(b.v, 0)),
+                     optimal_decrease(Potential(a.scene, a.x + DT * a.v, DT))
+                     / optimal_decrease(Potential(b.scene, b.x + DT * b.v, DT))))
+    rows = np.array(rows)
+    for flag, label in ((1, "at rest"), (0, "moving")):
+        print(f"{label}: median noisy / noise-free optimal decrease "
+              f"{np.median(rows[rows[:, 0] == flag, 1]):.1f}")
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    for name in ("taken", "probe"):
+        sub.add_parser(name).add_argument("models", nargs="+")
+    q = sub.add_parser("learn")
+    q.add_argument("--iterations", type=int, default=1200)
+    q.add_argument("--floor", type=float, default=0.0)
+    q.add_argument("--energy-weight", type=float, default=1.0)
+    q.add_argument("--no-normalize", action="store_true")
+    q.add_argument("--fixed", action="store_true")
+    sub.add_parser("noise")
+    args = p.parse_args()
+    torch.set_num_threads(1)
+    if args.command == "taken":
+        taken(args.models)
+    elif args.command == "probe":
+        probe(args.models)
+    elif args.command == "learn":
+        learn(args.iterations, args.floor, args.energy_weight, not args.no_normalize, args.fixed)
+    else:
+        noise()
+
+
+if __name__ == "__main__":
+    main()
