@@ -4,7 +4,8 @@ aggregation), decode to end-of-step accelerations (paper section 3.1).
 Inputs per vertex: Dirichlet flags (3, one per component, not normalized), velocity (3, m/s),
 mass (1, kg), external force (3, N). Inputs per directed edge (sender s -> receiver r): unit
 rest vector and rest length (4), unit current vector x_s - x_r and current length (4), fiber
-feature (3, Pa). All but the flags are normalized with statistics stored as buffers.
+feature (3, Pa), the edge's deformation (4), and with ModelConfig.fiber_stress the fiber stress
+along the edge (1, Pa). All but the flags are normalized with statistics stored as buffers.
 
 Processor step l (paper eq. 3):
     e <- e + f_e^l([e, v_s, v_r])
@@ -33,12 +34,15 @@ EDGE_FEATURES = 15  # rest unit 3 + length 1, current unit 3 + length 1, fiber 3
 @dataclass
 class ModelConfig:
     """Network shape. Paper defaults: latent 128, 2 hidden layers, 15 steps, SiLU, LayerNorm
-    on every MLP but the decoder. dt (s) is the time step the model is trained for."""
+    on every MLP but the decoder. dt (s) is the time step the model is trained for.
+    fiber_stress (not in the paper) adds the edge channel kappa (d . n)^2 (l^2 / L^2 - 1) / 2:
+    the fiber stress along the edge (Pa), a product of three inputs an MLP forms only slowly."""
     latent: int = 128
     hidden_layers: int = 2
     steps: int = 15
     aggregation: str = "directional"
     dt: float = 0.02
+    fiber_stress: bool = False
 
     def __post_init__(self):
         if self.aggregation not in AGGREGATIONS:
@@ -50,6 +54,13 @@ class ModelConfig:
                 raise ValueError(f"{name}: expected a positive integer, got {value!r}")
         if not self.dt > 0:
             raise ValueError(f"dt: expected a time step > 0 s, got {self.dt!r}")
+        if not isinstance(self.fiber_stress, bool):
+            raise ValueError(f"fiber_stress: expected true or false, got {self.fiber_stress!r}")
+
+    @property
+    def edge_channels(self):
+        """Number of raw edge features: 15, 16 with fiber_stress."""
+        return EDGE_FEATURES + int(self.fiber_stress)
 
     def to_dict(self):
         return asdict(self)
@@ -114,10 +125,10 @@ class GraphNet(nn.Module):
         c = self.config
         L, H = c.latent, c.hidden_layers
         self.vertex_norm = Normalizer(VERTEX_REAL)
-        self.edge_norm = Normalizer(EDGE_FEATURES)
+        self.edge_norm = Normalizer(c.edge_channels)
         self.register_buffer("accel_scale", torch.ones(()))
         self.vertex_encoder = mlp(VERTEX_FLAGS + VERTEX_REAL, L, L, H, layer_norm=True)
-        self.edge_encoder = mlp(EDGE_FEATURES, L, L, H, layer_norm=True)
+        self.edge_encoder = mlp(c.edge_channels, L, L, H, layer_norm=True)
         channels = 3 if c.aggregation == "directional" else 1
         self.edge_updates = nn.ModuleList(EdgeUpdate(L, H) for _ in range(c.steps))
         self.vertex_updates = nn.ModuleList(
@@ -129,7 +140,8 @@ class GraphNet(nn.Module):
 
     def edge_features(self, x, graph):
         """(E, 15) raw edge inputs: rest unit + length (m), current unit + length (m), fiber,
-        and the edge's deformation: stretch - 1 and (x_ij - X_ij) / |X_ij|.
+        and the edge's deformation: stretch - 1 and (x_ij - X_ij) / |X_ij|; (E, 16) with the
+        fiber stress along the edge (ModelConfig.fiber_stress).
 
         The deformation channels are not in the paper (which gives rest and current vectors
         only): strains of 1e-3 are the signal of the stiff modes, and recovering them as the
@@ -138,9 +150,12 @@ class GraphNet(nn.Module):
         length = torch.linalg.vector_norm(vec, dim=1, keepdim=True)
         unit = vec / torch.clamp(length, min=1e-12)
         rest_length = graph.rest[:, 3:]
+        stretch = length / rest_length
         relative = (vec - graph.rest[:, :3] * rest_length) / rest_length
-        return torch.cat([graph.rest, unit, length, graph.fiber, length / rest_length - 1.0,
-                          relative], dim=1)
+        features = [graph.rest, unit, length, graph.fiber, stretch - 1.0, relative]
+        if self.config.fiber_stress:
+            features.append(fiber_stress(graph.fiber, graph.rest[:, :3], stretch))
+        return torch.cat(features, dim=1)
 
     def vertex_features(self, v, f_ext, graph):
         """(n, 7) raw vertex inputs: velocity, mass, external force."""
@@ -168,6 +183,15 @@ class GraphNet(nn.Module):
             agg = torch.matmul(weights, gathered).flatten(1)  # (n, C L)
             vert = vert + vertex_update(torch.cat([vert, agg], dim=1))
         return self.decoder(vert) * self.accel_scale
+
+
+def fiber_stress(fiber, rest_unit, stretch):
+    """(E, 1) Pa: kappa (d . n)^2 (stretch^2 - 1) / 2 for fiber features kappa d (E, 3), unit
+    rest vectors n (E, 3) and stretches l / L (E, 1): the fiber term's stress along an edge
+    aligned with the fiber, weighted by how well the edge is aligned (0 without a fiber)."""
+    kappa = torch.linalg.vector_norm(fiber, dim=1, keepdim=True)
+    along = (fiber * rest_unit).sum(dim=1, keepdim=True)
+    return along * along / torch.clamp(kappa, min=1e-30) * 0.5 * (stretch * stretch - 1.0)
 
 
 def integrate(x, v, a, dt, graph):

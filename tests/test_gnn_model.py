@@ -242,4 +242,26 @@ def test_config_validation():
         ModelConfig(latent=0)
     with pytest.raises(ValueError, match="dt"):
         ModelConfig(dt=0.0)
+    with pytest.raises(ValueError, match="fiber_stress"):
+        ModelConfig(fiber_stress=1)
     assert anisognn.ModelConfig().latent == 128 and ModelConfig().steps == 15
+
+
+def test_fiber_stress_channel_is_the_fiber_stress_along_each_edge():
+    mesh = af.box_beam(cells=(4, 2, 2))
+    d, kappa = np.array([0.6, 0.0, 0.8]), 3e5
+    g = G.from_scene(fiber_scene(mesh, d, kappa))
+    F = np.array([[1.01, 0.002, 0.0], [0.0, 0.995, 0.003], [0.004, 0.0, 1.02]])
+    x = torch.tensor(mesh.vertices @ F.T, dtype=torch.float32)
+    plain = GraphNet(ModelConfig(latent=8, steps=1)).edge_features(x, g)
+    with_stress = GraphNet(ModelConfig(latent=8, steps=1, fiber_stress=True)).edge_features(x, g)
+    assert plain.shape[1] == 15 and with_stress.shape[1] == 16
+    assert torch.equal(with_stress[:, :15], plain)
+    n = g.rest[:, :3].double().numpy()
+    green = 0.5 * (np.einsum("ei,ij,ej->e", n, F.T @ F, n) - 1.0)  # Green strain along n
+    expected = kappa * (n @ d) ** 2 * green
+    assert np.allclose(with_stress[:, 15].numpy(), expected, rtol=1e-3, atol=1e-4 * kappa * 0.02)
+    assert np.abs(expected).max() > 1e-3 * kappa
+    free = GraphNet(ModelConfig(latent=8, steps=1, fiber_stress=True)).edge_features(
+        x, G.from_scene(fiber_scene(mesh, d, 0.0)))
+    assert torch.equal(free[:, 15], torch.zeros(g.n_edges))  # no fiber, no stress
