@@ -1,0 +1,74 @@
+"""How far anisofem's one-step response reaches, in mesh hops (README "What we learned").
+
+    python scripts/reach.py [--steps 6 12]
+
+For each training geometry (anisognn.sampler.geometries) and each evaluation cantilever, at
+rest under the shipped time step (0.02 s) and the paper's material with kappa = E along x:
+the hops from the clamp to the farthest vertex, and the share (mass norm) of the response
+H^-1 e to a unit point force e at a free vertex that lies farther than k hops from it, averaged
+over every free vertex and axis. A network with k message-passing steps sees k hops, so this
+share is what it cannot represent of a point load's step. Run with OMP_NUM_THREADS=1.
+"""
+import argparse
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as sla
+from scipy.sparse.csgraph import shortest_path
+
+import anisofem
+from anisofem import Material, Scene
+from anisognn import evaluate
+from anisognn.sampler import DENSITY, POISSON, YOUNG, geometries
+
+DT = 0.02
+
+
+def hop_table(mesh):
+    """(n, n) hops between vertices along mesh edges."""
+    e, n = mesh.edges, mesh.n_vertices
+    adjacency = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return shortest_path(adjacency + adjacency.T, unweighted=True)
+
+
+def reach(mesh, steps):
+    """(hops from the clamp to the farthest vertex, {k: share of the response beyond k hops})."""
+    fixed = mesh.vertices[:, 0] <= 1e-9
+    scene = Scene(mesh, Material(YOUNG, POISSON, DENSITY, np.array([1.0, 0, 0]), YOUNG),
+                  fixed=fixed)
+    X = mesh.vertices
+    free = np.repeat(~fixed, 3)
+    H = anisofem.hessian(scene, X, x_hat=X, dt=DT).tocsc()
+    lu = sla.splu(H[free][:, free].tocsc())
+    hops = hop_table(mesh)
+    n = mesh.n_vertices
+    shares = {k: [] for k in steps}
+    for i in np.flatnonzero(~fixed):
+        for axis in range(3):
+            rhs = np.zeros(3 * n)
+            rhs[3 * i + axis] = 1.0
+            u = np.zeros(3 * n)
+            u[free] = lu.solve(rhs[free])
+            weight = scene.masses * (u.reshape(n, 3) ** 2).sum(axis=1)
+            for k in steps:
+                shares[k].append(weight[hops[i] > k].sum() / weight.sum())
+    return int(hops[fixed].min(axis=0).max()), {k: float(np.mean(v)) for k, v in shares.items()}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, nargs="+", default=[6, 12])
+    steps = parser.parse_args().steps
+    meshes = [(f"training {k}: {m.n_tets} tets", m) for k, m in enumerate(geometries())]
+    meshes += [(f"evaluation {kind}: {m.n_tets} tets", m)
+               for kind, m in (("box", evaluate._beam("box")), ("cylinder",
+                                                                evaluate._beam("cylinder")))]
+    print(f"{'mesh':<28} {'hops from clamp':>15} " + " ".join(f"{'> %d hops' % k:>10}"
+                                                                for k in steps))
+    for label, mesh in meshes:
+        diameter, shares = reach(mesh, steps)
+        print(f"{label:<28} {diameter:>15d} " + " ".join(f"{shares[k]:>10.3f}" for k in steps))
+
+
+if __name__ == "__main__":
+    main()
