@@ -22,6 +22,9 @@ class Graph:
     in_weights: (n, K, 3) directional weights of the incoming edges (0 at padding).
     mass: (n, 1) kg. fixed: (n, 3) 1.0 where a component is held (Dirichlet), else 0.0.
     fixed_positions: (n, 3) m, where held components are held.
+    tets (m, 4) int64, tet_gradients (m, 4, 3) 1/m, tet_material (m, 4) volume m^3 and mu, lam,
+    kappa Pa, tet_fiber (m, 3) unit, corners (n, C) int64 corner slots padded with 4 m: the
+    per-tet constants of the elastic force (export/runtime.py).
     """
     senders: torch.Tensor
     receivers: torch.Tensor
@@ -32,6 +35,11 @@ class Graph:
     mass: torch.Tensor
     fixed: torch.Tensor
     fixed_positions: torch.Tensor
+    tets: torch.Tensor
+    tet_gradients: torch.Tensor
+    tet_material: torch.Tensor
+    tet_fiber: torch.Tensor
+    corners: torch.Tensor
 
     @property
     def n_vertices(self):
@@ -51,18 +59,17 @@ class Graph:
 
 
 def from_scene(scene, dtype=torch.float32):
-    """The Graph of an anisofem.Scene: its mesh, fibers, masses and Dirichlet conditions."""
+    """The Graph of an anisofem.Scene: its mesh, fibers, material, masses and Dirichlet
+    conditions."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
     mesh, el = scene.mesh, scene.elements
     t = runtime.mesh_tensors(mesh.vertices, mesh.tets, scene.masses, scene.fixed_mask,
-                             scene.fixed_positions, el.fiber, el.kappa)
-    return Graph(senders=torch.as_tensor(t["senders"]), receivers=torch.as_tensor(t["receivers"]),
-                 rest=_real(t["rest"], dtype), fiber=_real(t["fiber"], dtype),
-                 incoming=torch.as_tensor(t["incoming"]),
-                 in_weights=_real(t["incoming_weights"], dtype), mass=_real(t["mass"], dtype),
-                 fixed=_real(t["fixed"], dtype),
-                 fixed_positions=_real(t["fixed_positions"], dtype))
+                             scene.fixed_positions, el.fiber, el.kappa, el.mu, el.lam)
+    t["in_weights"] = t.pop("incoming_weights")
+    return Graph(**{name: torch.tensor(value, dtype=torch.int64)
+                    if np.issubdtype(value.dtype, np.integer) else _real(value, dtype)
+                    for name, value in t.items()})
 
 
 def _real(array, dtype):
@@ -75,18 +82,33 @@ def batch(graphs):
     graphs = list(graphs)
     n_edges = sum(g.n_edges for g in graphs)
     width = max(g.incoming.shape[1] for g in graphs)
-    v_off = e_off = 0
-    senders, receivers, incoming, in_weights = [], [], [], []
+    n_slots = 4 * sum(g.tets.shape[0] for g in graphs)
+    corner_width = max(g.corners.shape[1] for g in graphs)
+    v_off = e_off = s_off = 0
+    senders, receivers, incoming, in_weights, tets, corners = [], [], [], [], [], []
     for g in graphs:
         senders.append(g.senders + v_off)
         receivers.append(g.receivers + v_off)
-        table = torch.where(g.incoming == g.n_edges, n_edges, g.incoming + e_off)
-        pad = width - table.shape[1]
-        incoming.append(torch.nn.functional.pad(table, (0, pad), value=n_edges))
+        tets.append(g.tets + v_off)
+        incoming.append(_offset_table(g.incoming, g.n_edges, e_off, n_edges, width))
+        corners.append(_offset_table(g.corners, 4 * g.tets.shape[0], s_off, n_slots,
+                                     corner_width))
+        pad = width - g.incoming.shape[1]
         in_weights.append(torch.nn.functional.pad(g.in_weights, (0, 0, 0, pad)))
         v_off += g.n_vertices
         e_off += g.n_edges
+        s_off += 4 * g.tets.shape[0]
     joined = {name: torch.cat([getattr(g, name) for g in graphs])
-              for name in ("rest", "fiber", "mass", "fixed", "fixed_positions")}
+              for name in ("rest", "fiber", "mass", "fixed", "fixed_positions", "tet_gradients",
+                           "tet_material", "tet_fiber")}
     return Graph(senders=torch.cat(senders), receivers=torch.cat(receivers),
-                 incoming=torch.cat(incoming), in_weights=torch.cat(in_weights), **joined)
+                 incoming=torch.cat(incoming), in_weights=torch.cat(in_weights),
+                 tets=torch.cat(tets), corners=torch.cat(corners), **joined)
+
+
+def _offset_table(table, own_pad, offset, pad_index, width):
+    """A padded index table (rows, k) of one graph in a batch: entries shifted by offset, its
+    padding own_pad (the graph's own count of the indexed items) replaced by pad_index, and
+    padded with pad_index to width columns."""
+    shifted = torch.where(table == own_pad, pad_index, table + offset)
+    return torch.nn.functional.pad(shifted, (0, width - table.shape[1]), value=pad_index)

@@ -2,7 +2,8 @@
 aggregation), decode to end-of-step accelerations (paper section 3.1).
 
 Inputs per vertex: Dirichlet flags (3, one per component, not normalized), velocity (3, m/s),
-mass (1, kg), external force (3, N). Inputs per directed edge (sender s -> receiver r): unit
+mass (1, kg), external force (3, N), and with ModelConfig.elastic_force the acceleration the
+forces give at the inertial predictor, (f_elastic(x + dt v) + f_ext) / m (3, m/s^2). Inputs per directed edge (sender s -> receiver r): unit
 rest vector and rest length (4), unit current vector x_s - x_r and current length (4), fiber
 feature (3, Pa), the edge's deformation (4), and with ModelConfig.fiber_stress the fiber stress
 along the edge (1, Pa). All but the flags are normalized with statistics stored as buffers.
@@ -25,9 +26,11 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
+from .elastic import elastic_force
+
 AGGREGATIONS = ("directional", "sum")
 VERTEX_FLAGS = 3   # Dirichlet flags per component
-VERTEX_REAL = 7    # velocity 3, mass 1, external force 3
+VERTEX_REAL = 7    # velocity 3, mass 1, external force 3 (+ 3 force accelerations)
 EDGE_FEATURES = 15  # rest unit 3 + length 1, current unit 3 + length 1, fiber 3, strain 4
 
 
@@ -36,13 +39,17 @@ class ModelConfig:
     """Network shape. Paper defaults: latent 128, 2 hidden layers, 15 steps, SiLU, LayerNorm
     on every MLP but the decoder. dt (s) is the time step the model is trained for.
     fiber_stress (not in the paper) adds the edge channel kappa (d . n)^2 (l^2 / L^2 - 1) / 2:
-    the fiber stress along the edge (Pa), a product of three inputs an MLP forms only slowly."""
+    the fiber stress along the edge (Pa), a product of three inputs an MLP forms only slowly.
+    elastic_force (not in the paper) adds the vertex input (f_elastic(x + dt v) + f_ext) / m
+    (m/s^2, 0 on held components; anisognn.elastic): the explicit acceleration at the point
+    where a backward-Euler step's Newton iteration starts, which the network then corrects."""
     latent: int = 128
     hidden_layers: int = 2
     steps: int = 15
     aggregation: str = "directional"
     dt: float = 0.02
     fiber_stress: bool = False
+    elastic_force: bool = False
 
     def __post_init__(self):
         if self.aggregation not in AGGREGATIONS:
@@ -54,13 +61,19 @@ class ModelConfig:
                 raise ValueError(f"{name}: expected a positive integer, got {value!r}")
         if not self.dt > 0:
             raise ValueError(f"dt: expected a time step > 0 s, got {self.dt!r}")
-        if not isinstance(self.fiber_stress, bool):
-            raise ValueError(f"fiber_stress: expected true or false, got {self.fiber_stress!r}")
+        for name in ("fiber_stress", "elastic_force"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name}: expected true or false, got {getattr(self, name)!r}")
 
     @property
     def edge_channels(self):
         """Number of raw edge features: 15, 16 with fiber_stress."""
         return EDGE_FEATURES + int(self.fiber_stress)
+
+    @property
+    def vertex_channels(self):
+        """Number of normalized vertex features: 7, 10 with elastic_force."""
+        return VERTEX_REAL + 3 * int(self.elastic_force)
 
     def to_dict(self):
         return asdict(self)
@@ -124,10 +137,10 @@ class GraphNet(nn.Module):
         self.config = config or ModelConfig()
         c = self.config
         L, H = c.latent, c.hidden_layers
-        self.vertex_norm = Normalizer(VERTEX_REAL)
+        self.vertex_norm = Normalizer(c.vertex_channels)
         self.edge_norm = Normalizer(c.edge_channels)
         self.register_buffer("accel_scale", torch.ones(()))
-        self.vertex_encoder = mlp(VERTEX_FLAGS + VERTEX_REAL, L, L, H, layer_norm=True)
+        self.vertex_encoder = mlp(VERTEX_FLAGS + c.vertex_channels, L, L, H, layer_norm=True)
         self.edge_encoder = mlp(c.edge_channels, L, L, H, layer_norm=True)
         channels = 3 if c.aggregation == "directional" else 1
         self.edge_updates = nn.ModuleList(EdgeUpdate(L, H) for _ in range(c.steps))
@@ -157,9 +170,15 @@ class GraphNet(nn.Module):
             features.append(fiber_stress(graph.fiber, graph.rest[:, :3], stretch))
         return torch.cat(features, dim=1)
 
-    def vertex_features(self, v, f_ext, graph):
-        """(n, 7) raw vertex inputs: velocity, mass, external force."""
-        return torch.cat([v, graph.mass, f_ext], dim=1)
+    def vertex_features(self, x, v, f_ext, graph):
+        """(n, 7) raw vertex inputs: velocity, mass, external force; (n, 10) with the force
+        acceleration (f_elastic(x + dt v) + f_ext) / m, 0 on held components
+        (ModelConfig.elastic_force)."""
+        features = [v, graph.mass, f_ext]
+        if self.config.elastic_force:
+            force = elastic_force(x + self.config.dt * v, graph) + f_ext
+            features.append(force / graph.mass * (1.0 - graph.fixed))
+        return torch.cat(features, dim=1)
 
     def aggregation_weights(self, graph):
         """(n, K, C) weights of each vertex's incoming edges: C = 3 directional, 1 sum."""
@@ -171,7 +190,7 @@ class GraphNet(nn.Module):
         """Accelerations (n, 3) in m/s^2 for positions x (n, 3) m, velocities v (n, 3) m/s and
         external forces f_ext (n, 3) N on graph (anisognn.graph.Graph)."""
         vert = self.vertex_encoder(torch.cat(
-            [graph.fixed, self.vertex_norm(self.vertex_features(v, f_ext, graph))], dim=1))
+            [graph.fixed, self.vertex_norm(self.vertex_features(x, v, f_ext, graph))], dim=1))
         edge = self.edge_encoder(self.edge_norm(self.edge_features(x, graph)))
         weights = self.aggregation_weights(graph).transpose(1, 2)  # (n, C, K)
         # padding slots (index E) read edge 0 instead: their weights are 0, so no pad row is

@@ -225,7 +225,7 @@ def fit_normalization(model, samples):
     x = torch.as_tensor(np.concatenate([s.x for s in samples]))
     v = torch.as_tensor(np.concatenate([s.v for s in samples]))
     f = torch.as_tensor(np.concatenate([s.scene.external_force for s in samples]))
-    model.vertex_norm.fit(model.vertex_features(v, f, g))
+    model.vertex_norm.fit(model.vertex_features(x, v, f, g))
     model.edge_norm.fit(model.edge_features(x, g))
     accel = f / g.mass
     model.accel_scale.fill_(float(torch.sqrt((accel ** 2).sum(dim=1).mean())))

@@ -44,6 +44,7 @@ def bench_case(net, onnx_path, cells):
     feed = dict(sim.constants, positions=x, velocities=v, external_force=f)
     step = Step(net)
     inputs = [torch.as_tensor(feed[name]) for name, _, _ in INPUTS]  # what onnxruntime gets
+    feed = {i.name: feed[i.name] for i in sim.session.get_inputs()}
 
     def torch_step():
         with torch.no_grad():

@@ -32,7 +32,13 @@ Graph of a tet mesh with n vertices (all arrays are numpy; float32 unless said):
 - mass (n, 1) kg: lumped, density * volume / 4 of every tet to each of its vertices.
 - fixed (n, 3): 1.0 where a component is held (Dirichlet), else 0.0; fixed_positions (n, 3)
   float64 m: where held components are held (here: their rest positions).
+- per-tet constants of the elastic force (read only by models with elastic_force): tets (m, 4)
+  int64; tet_gradients (m, 4, 3) 1/m, the gradients of the four linear shape functions (row a
+  is grad N_a, so F = sum_a x_a grad N_a^T); tet_material (m, 4): rest volume (m^3), mu, lam,
+  kappa (Pa); tet_fiber (m, 3) unit fiber directions; corners (n, C) int64, the slots 4 t + a
+  of the tet corners at each vertex, padded with 4 m.
 """
+import json
 import os
 
 import numpy as np
@@ -126,6 +132,11 @@ INPUTS = (
     ("mass", "float32", ("n", 1)),
     ("fixed", "float32", ("n", 3)),
     ("fixed_positions", "float64", ("n", 3)),
+    ("tets", "int64", ("m", 4)),
+    ("tet_gradients", "float32", ("m", 4, 3)),
+    ("tet_material", "float32", ("m", 4)),
+    ("tet_fiber", "float32", ("m", 3)),
+    ("corners", "int64", ("n", "C")),
 )
 #: (name, dtype, shape) of the model's outputs
 OUTPUTS = (
@@ -150,13 +161,32 @@ def lumped_masses(vertices, tets, density):
     return np.bincount(tets.ravel(), weights=np.repeat(quarter, 4), minlength=vertices.shape[0])
 
 
+def shape_gradients(vertices, tets):
+    """(m, 4, 3) float64 gradients of the linear shape functions of each tet, 1/m (row a is
+    grad N_a): rows 1-3 are the rows of Dm^-1, Dm = [X_1 - X_0, X_2 - X_0, X_3 - X_0]; row 0 is
+    minus their sum (the rows of an affine partition of unity sum to zero)."""
+    corner = vertices[tets]
+    inverse = np.linalg.inv(np.transpose(corner[:, 1:] - corner[:, :1], (0, 2, 1)))
+    return np.concatenate([-inverse.sum(axis=1, keepdims=True), inverse], axis=1)
+
+
+def tet_tensors(vertices, tets, mu, lam, fiber_direction, fiber_stiffness):
+    """The per-tet constants of the elastic force (module docstring), a dict of float64 and
+    int64 arrays. vertices (n, 3) m; tets (m, 4); mu, lam, fiber_stiffness (m,) Pa;
+    fiber_direction (m, 3) unit."""
+    material = np.stack([tet_volumes(vertices, tets), mu, lam, fiber_stiffness], axis=1)
+    return {"tets": tets, "tet_gradients": shape_gradients(vertices, tets),
+            "tet_material": material, "tet_fiber": np.asarray(fiber_direction, np.float64),
+            "corners": incoming_table(tets.ravel(), vertices.shape[0])}
+
+
 def mesh_tensors(vertices, tets, masses, fixed, fixed_positions, fiber_direction,
-                 fiber_stiffness):
+                 fiber_stiffness, mu, lam):
     """The constant inputs of the model, a dict keyed by INPUTS names: index arrays int64, real
     ones float64 (cast them to INPUTS' dtypes to feed the model).
 
     vertices (n, 3) m; tets (m, 4); masses (n,) kg; fixed (n, 3) bool; fixed_positions (n, 3) m;
-    fiber_direction (m, 3) unit; fiber_stiffness (m,) Pa."""
+    fiber_direction (m, 3) unit; fiber_stiffness, mu, lam (m,) Pa (Lame parameters)."""
     edges = mesh_edges(tets)
     senders, receivers = directed_edges(edges)
     rest = rest_features(vertices, senders, receivers)
@@ -167,7 +197,8 @@ def mesh_tensors(vertices, tets, masses, fixed, fixed_positions, fiber_direction
             "incoming": incoming, "incoming_weights": incoming_weights(incoming, rest[:, :3]),
             "mass": np.asarray(masses, dtype=real).reshape(-1, 1),
             "fixed": np.asarray(fixed, dtype=real),
-            "fixed_positions": np.asarray(fixed_positions, dtype=real)}
+            "fixed_positions": np.asarray(fixed_positions, dtype=real),
+            **tet_tensors(vertices, tets, mu, lam, fiber_direction, fiber_stiffness)}
 
 
 class OnnxSimulator:
@@ -211,11 +242,15 @@ class OnnxSimulator:
         self.metadata = dict(self.session.get_modelmeta().custom_metadata_map)
         _check_model(self.session, self.metadata, model_path)
         self.dt = float(self.metadata["dt"])
+        mu, lam = _lame(json.loads(self.metadata["trained_material"]))
         tensors = mesh_tensors(vertices, tets, self.masses, self.fixed, vertices, direction,
-                               stiffness)
-        wanted = {i.name for i in self.session.get_inputs()}
+                               stiffness, np.full(m, mu), np.full(m, lam))
+        #: every constant mesh tensor, cast to its INPUTS dtype
         self.constants = {name: tensors[name].astype(dtype) for name, dtype, _ in INPUTS
-                          if name in tensors and name in wanted}
+                          if name in tensors}
+        # the ones this model reads (the exporter drops the others)
+        wanted = {i.name for i in self.session.get_inputs()}
+        self._feed = {name: value for name, value in self.constants.items() if name in wanted}
 
     @property
     def n_vertices(self):
@@ -225,7 +260,7 @@ class OnnxSimulator:
         """(acceleration float32, next positions, next velocities), each (n, 3), from positions
         x (n, 3) m, velocities v (n, 3) m/s and external_force (n, 3) N per vertex."""
         n = self.n_vertices
-        feed = dict(self.constants)
+        feed = dict(self._feed)
         for name, value in zip(STATE, (x, v, external_force)):
             feed[name] = _real(value, name, (n, 3))
         return tuple(self.session.run(None, feed))
@@ -311,6 +346,12 @@ def _fibers(direction, stiffness, m):
     if (norm == 0).any():
         raise ValueError("fiber_direction: a direction has zero length")
     return d / norm, stiffness
+
+
+def _lame(material):
+    """(mu, lam) in Pa of a dict with "young" (Pa) and "poisson" (the trained material)."""
+    young, nu = float(material["young"]), float(material["poisson"])
+    return young / (2.0 * (1.0 + nu)), young * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
 
 
 def _fixed(fixed, n):

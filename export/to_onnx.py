@@ -14,6 +14,7 @@ import json
 import os
 import warnings
 
+import numpy as np
 import onnx
 import torch
 from torch import nn
@@ -24,7 +25,10 @@ from anisognn.graph import Graph
 from anisognn.model import GraphNet, integrate
 from anisognn.sampler import DENSITY, POISSON, YOUNG
 
-from .runtime import FORMAT, INPUTS, OUTPUTS
+from .runtime import FORMAT, INPUTS, OUTPUTS, STATE, mesh_tensors
+
+#: names of the constant mesh inputs, in INPUTS order
+CONSTANTS = tuple(name for name, _, _ in INPUTS if name not in STATE)
 
 #: opset of the exported graph (LayerNormalization needs 17)
 OPSET = 17
@@ -46,31 +50,31 @@ class Step(nn.Module):
         self.net = net
         self.dt = float(net.config.dt)
 
-    def forward(self, positions, velocities, external_force, senders, receivers, rest, fiber,
-                incoming, incoming_weights, mass, fixed, fixed_positions):
-        graph = Graph(senders=senders, receivers=receivers, rest=rest, fiber=fiber,
-                      incoming=incoming, in_weights=incoming_weights, mass=mass, fixed=fixed,
-                      fixed_positions=fixed_positions)
+    def forward(self, positions, velocities, external_force, *constants):
+        """The OUTPUTS from the state and the constant mesh tensors, in INPUTS order."""
+        tensors = dict(zip(CONSTANTS, constants))
+        tensors["in_weights"] = tensors.pop("incoming_weights")
+        graph = Graph(**tensors)
         a = self.net(positions.float(), velocities.float(), external_force.float(), graph)
         return (a,) + integrate(positions, velocities, a.double(), self.dt, graph)
 
 
 def example_inputs():
-    """Tracing inputs: a 5-vertex star graph (the sizes are dynamic in the export)."""
-    n, tdtype = 5, {"float64": torch.float64, "float32": torch.float32, "int64": torch.int64}
-    senders = torch.tensor([1, 2, 3, 4, 0, 0, 0, 0])
-    receivers = torch.tensor([0, 0, 0, 0, 1, 2, 3, 4])
-    incoming = torch.tensor([[0, 1, 2, 3], [4, 8, 8, 8], [5, 8, 8, 8], [6, 8, 8, 8],
-                             [7, 8, 8, 8]])
-    gen = torch.Generator().manual_seed(0)
-    values = {"senders": senders, "receivers": receivers, "incoming": incoming}
-    sizes = {"n": n, "E": senders.shape[0], "K": incoming.shape[1]}
-    for name, dtype, shape in INPUTS:
-        if name not in values:
-            dims = [sizes.get(d, d) for d in shape]
-            values[name] = torch.rand(dims, generator=gen, dtype=tdtype[dtype])
-    values["fixed"] = (values["fixed"] > 0.8).float()
-    return tuple(values[name] for name, _, _ in INPUTS)
+    """Tracing inputs: two tets sharing a face, deformed and moving (the sizes are dynamic in
+    the export)."""
+    gen = np.random.default_rng(0)
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], float) * 0.01
+    tets = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+    fixed = np.zeros((5, 3), bool)
+    fixed[0] = True
+    fiber = np.tile([1.0, 0.0, 0.0], (2, 1))
+    values = mesh_tensors(vertices, tets, np.full(5, 1e-3), fixed, vertices, fiber,
+                          np.full(2, 1e5), np.full(2, 3e4), np.full(2, 8e5))
+    values["positions"] = vertices + gen.normal(scale=1e-4, size=vertices.shape)
+    values["velocities"] = gen.normal(scale=1e-2, size=vertices.shape)
+    values["external_force"] = gen.normal(scale=1e-2, size=vertices.shape)
+    dtypes = {"float64": torch.float64, "float32": torch.float32, "int64": torch.int64}
+    return tuple(torch.tensor(values[name], dtype=dtypes[dtype]) for name, dtype, _ in INPUTS)
 
 
 def metadata(net, version):

@@ -53,13 +53,22 @@ def simulator(path, scene, **kwargs):
 
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory):
-    """{name: (torch model, onnx path)} for both shipped models, exported fresh."""
+    """{name: (torch model, onnx path)} for both shipped models and an untrained one with the
+    optional inputs (fiber stress, elastic force; random decoder), exported fresh."""
     folder = tmp_path_factory.mktemp("onnx")
     out = {}
     for name in anisognn.shipped.NAMES:
         net = anisognn.pretrained(name)
         out[name] = net, to_onnx.export(net, str(folder / f"{name}.onnx"))
+    torch.manual_seed(0)
+    net = anisognn.GraphNet(anisognn.ModelConfig(latent=16, steps=2, fiber_stress=True,
+                                                 elastic_force=True))
+    torch.nn.init.normal_(net.decoder[-1].weight)
+    out[OPTIONAL] = net, to_onnx.export(net, str(folder / "optional.onnx"))
     return out
+
+
+OPTIONAL = "fiber stress + elastic force"
 
 
 MESHES = {"box 3x2x1 (30 tets)": lambda: (box((3, 2, 1)), "x0"),
@@ -81,7 +90,7 @@ def states(mesh, count, seed=0):
         yield x, rng.normal(0, 0.05, x.shape)
 
 
-@pytest.mark.parametrize("name", anisognn.shipped.NAMES)
+@pytest.mark.parametrize("name", anisognn.shipped.NAMES + (OPTIONAL,))
 @pytest.mark.parametrize("mesh_name", list(MESHES))
 def test_parity_with_torch(exported, name, mesh_name):
     net, path = exported[name]

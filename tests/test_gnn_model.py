@@ -6,6 +6,7 @@ import torch
 import anisofem as af
 import anisognn
 from anisognn import graph as G
+from anisognn.elastic import elastic_force
 from anisognn.loss import BatchPotential, potential_loss
 from anisognn.model import GraphNet, ModelConfig, integrate
 from export import runtime
@@ -208,7 +209,7 @@ def test_normalization_floor_is_a_share_of_the_load_decrease_at_equilibrium(floo
     assert unfloored.weights[0] > 1e4 * at_rest.weights[0]
     start = [BatchPotential.backward_euler([scene], rest, v, dt, normalize=True,
                                            normalize_floor=c).weights[0] for c in (0.0, floor)]
-    assert start[1] == start[0]
+    assert start[1] == pytest.approx(start[0], rel=1e-12)  # the same sample, solved twice
 
 
 def test_model_runs_on_a_batch_equal_to_its_parts():
@@ -244,6 +245,8 @@ def test_config_validation():
         ModelConfig(dt=0.0)
     with pytest.raises(ValueError, match="fiber_stress"):
         ModelConfig(fiber_stress=1)
+    with pytest.raises(ValueError, match="elastic_force"):
+        ModelConfig(elastic_force="yes")
     assert anisognn.ModelConfig().latent == 128 and ModelConfig().steps == 15
 
 
@@ -265,3 +268,60 @@ def test_fiber_stress_channel_is_the_fiber_stress_along_each_edge():
     free = GraphNet(ModelConfig(latent=8, steps=1, fiber_stress=True)).edge_features(
         x, G.from_scene(fiber_scene(mesh, d, 0.0)))
     assert torch.equal(free[:, 15], torch.zeros(g.n_edges))  # no fiber, no stress
+
+
+def per_element_fiber_scene(mesh, seed):
+    """mesh with a random unit fiber and stiffness (up to 10 E) per tet, nothing held, no load."""
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(mesh.n_tets, 3))
+    material = af.Material(1e5, 0.48, 1000.0, d / np.linalg.norm(d, axis=1, keepdims=True),
+                           rng.uniform(0.0, 1e6, mesh.n_tets))
+    return af.Scene(mesh, material, gravity=(0.0, 0.0, 0.0))
+
+
+@pytest.mark.parametrize("strain", [1e-3, 0.3])
+def test_elastic_force_is_minus_anisofems_gradient_on_a_batch(strain):
+    scenes = [per_element_fiber_scene(af.box_beam(cells=(4, 2, 2)), 0),
+              per_element_fiber_scene(af.cylinder_beam(), 1)]
+    rng = np.random.default_rng(2)
+    xs = [s.mesh.vertices + rng.normal(0, strain * 0.01, s.mesh.vertices.shape) for s in scenes]
+    expected = np.concatenate([-af.gradient(s, x) for s, x in zip(scenes, xs)])
+    graph = G.batch([G.from_scene(s, torch.float64) for s in scenes])
+    got = elastic_force(torch.tensor(np.concatenate(xs)), graph).numpy()
+    assert np.abs(expected).max() > 1e-3
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-10 * np.abs(expected).max())
+    single = G.from_scene(scenes[0])  # float32, as the network reads it
+    got32 = elastic_force(torch.tensor(xs[0], dtype=torch.float32), single).numpy()
+    n0 = scenes[0].mesh.n_vertices
+    assert np.abs(got32 - expected[:n0]).max() <= 1e-3 * np.abs(expected[:n0]).max()
+
+
+def test_runtime_shape_gradients_are_anisofems():
+    mesh = af.cylinder_beam()
+    np.testing.assert_allclose(runtime.shape_gradients(mesh.vertices, mesh.tets),
+                               mesh.shape_gradients, rtol=1e-12, atol=1e-9)
+
+
+def test_elastic_force_input_vanishes_at_equilibrium_and_points_back_beyond_it():
+    """(f_elastic(x + dt v) + f_ext) / m: ~0 at anisofem's static equilibrium under gravity;
+    at half and 1.5 times its displacement the free vertices' mass-weighted mean is about
+    -g/2 and +g/2 along z (the stiffness the channel carries; nonlinear, so not exactly)."""
+    scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
+    x_eq = af.solve(scene).x
+    rest = scene.initial_positions()
+    net = GraphNet(ModelConfig(latent=8, steps=1, elastic_force=True))
+    g = G.from_scene(scene, torch.float64)
+    f = torch.tensor(scene.external_force)
+    free = ~scene.fixed_mask[:, 0]
+    weights = scene.masses[free] / scene.masses[free].sum()
+
+    def channel(x):
+        features = net.vertex_features(torch.tensor(x), torch.zeros(x.shape, dtype=torch.float64),
+                                       f, g)
+        return features[:, 7:].numpy()
+    assert channel(x_eq).shape == (scene.mesh.n_vertices, 3)
+    assert np.abs(channel(x_eq)).max() < 1e-6 * 9.81
+    for scale, expected in ((0.5, -9.81 / 2), (1.5, 9.81 / 2)):
+        mean = weights @ channel(rest + scale * (x_eq - rest))[free, 2]
+        assert mean == pytest.approx(expected, rel=0.25), scale
+    assert np.all(channel(rest)[scene.fixed_mask] == 0.0)  # held components read 0
