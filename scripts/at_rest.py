@@ -9,7 +9,8 @@
                                                train a fresh 32 x 6 directional model on at-rest
                                                samples only (fresh each iteration, or one fixed
                                                batch of 8) and print its held-out taken share
-    python scripts/at_rest.py noise            the normalizer's noisy over noise-free value
+    python scripts/at_rest.py noise            the normalizer's noisy over noise-free value, and
+                                               how much of the elastic-force input is noise
 
 MODEL: a shipped name or a model.pt / checkpoint.pt path. Run with OMP_NUM_THREADS=1.
 """
@@ -22,6 +23,7 @@ import anisofem
 from anisofem.potential import Potential
 from anisognn import evaluate, shipped
 from anisognn import train as T
+from anisognn.graph import from_scene
 from anisognn.loss import optimal_decrease
 from anisognn.model import GraphNet, ModelConfig
 from anisognn.sampler import Sampler, SamplerConfig
@@ -115,6 +117,31 @@ def noise():
     for flag, label in ((1, "at rest"), (0, "moving")):
         print(f"{label}: median noisy / noise-free optimal decrease "
               f"{np.median(rows[rows[:, 0] == flag, 1]):.1f}")
+    for scale in (1.0, 0.1, 0.01, 0.0):
+        force, external = force_channel(scale)
+        print(f"noise x {scale:g}: rms of the elastic-force input (f_elastic(x + dt v) + f_ext)/m "
+              f"{force:.3g} m/s^2 (external force alone {external:.3g})")
+
+
+def force_channel(scale, count=64):
+    """(rms force input, rms external force / m) in m/s^2 over the free components of count
+    training samples whose state noise is scale times the default."""
+    net = GraphNet(ModelConfig(latent=8, steps=1, elastic_force=True))
+    defaults = SamplerConfig()
+    sampler = Sampler(0, SamplerConfig(equilibrium_probability=0.6,
+                                       noise_position=scale * defaults.noise_position,
+                                       noise_velocity=scale * defaults.noise_velocity))
+    force, external = [], []
+    for i in range(count):
+        s = sampler.sample(i)
+        graph = from_scene(s.scene, torch.float64)
+        f = torch.tensor(s.scene.external_force)
+        channel = net.vertex_features(torch.tensor(s.x), torch.tensor(s.v), f, graph)[:, 7:]
+        free = ~s.scene.fixed_mask
+        force.append(channel.numpy()[free])
+        external.append((s.scene.external_force / s.scene.masses[:, None])[free])
+    rms = [float(np.sqrt(np.mean(np.concatenate(v) ** 2))) for v in (force, external)]
+    return tuple(rms)
 
 
 def main():
