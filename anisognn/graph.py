@@ -41,6 +41,14 @@ class Graph:
     tet_fiber: torch.Tensor
     corners: torch.Tensor
 
+    @classmethod
+    def from_inputs(cls, tensors):
+        """The Graph of the constant model inputs, a dict of tensors keyed by
+        export/runtime.py's INPUTS names (its incoming_weights is this class's in_weights)."""
+        named = dict(tensors)
+        named["in_weights"] = named.pop("incoming_weights")
+        return cls(**named)
+
     @property
     def n_vertices(self):
         return self.mass.shape[0]
@@ -66,10 +74,9 @@ def from_scene(scene, dtype=torch.float32):
     mesh, el = scene.mesh, scene.elements
     t = runtime.mesh_tensors(mesh.vertices, mesh.tets, scene.masses, scene.fixed_mask,
                              scene.fixed_positions, el.fiber, el.kappa, el.mu, el.lam)
-    t["in_weights"] = t.pop("incoming_weights")
-    return Graph(**{name: torch.tensor(value, dtype=torch.int64)
-                    if np.issubdtype(value.dtype, np.integer) else _real(value, dtype)
-                    for name, value in t.items()})
+    return Graph.from_inputs({name: torch.tensor(value, dtype=torch.int64)
+                              if np.issubdtype(value.dtype, np.integer) else _real(value, dtype)
+                              for name, value in t.items()})
 
 
 def _real(array, dtype):

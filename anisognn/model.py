@@ -3,10 +3,11 @@ aggregation), decode to end-of-step accelerations (paper section 3.1).
 
 Inputs per vertex: Dirichlet flags (3, one per component, not normalized), velocity (3, m/s),
 mass (1, kg), external force (3, N), and with ModelConfig.elastic_force the acceleration the
-forces give at the inertial predictor, (f_elastic(x + dt v) + f_ext) / m (3, m/s^2). Inputs per directed edge (sender s -> receiver r): unit
-rest vector and rest length (4), unit current vector x_s - x_r and current length (4), fiber
-feature (3, Pa), the edge's deformation (4), and with ModelConfig.fiber_stress the fiber stress
-along the edge (1, Pa). All but the flags are normalized with statistics stored as buffers.
+forces give at the inertial predictor, (f_elastic(x + dt v) + f_ext) / m (3, m/s^2). Inputs
+per directed edge (sender s -> receiver r): unit rest vector and rest length (4), unit current
+vector x_s - x_r and current length (4), fiber feature (3, Pa), the edge's deformation (4), and
+with ModelConfig.fiber_stress the fiber stress along the edge (1, Pa). All but the flags are
+normalized with statistics stored as buffers.
 
 Processor step l (paper eq. 3):
     e <- e + f_e^l([e, v_s, v_r])

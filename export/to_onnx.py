@@ -52,9 +52,7 @@ class Step(nn.Module):
 
     def forward(self, positions, velocities, external_force, *constants):
         """The OUTPUTS from the state and the constant mesh tensors, in INPUTS order."""
-        tensors = dict(zip(CONSTANTS, constants))
-        tensors["in_weights"] = tensors.pop("incoming_weights")
-        graph = Graph(**tensors)
+        graph = Graph.from_inputs(dict(zip(CONSTANTS, constants)))
         a = self.net(positions.float(), velocities.float(), external_force.float(), graph)
         return (a,) + integrate(positions, velocities, a.double(), self.dt, graph)
 
