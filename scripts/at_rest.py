@@ -121,16 +121,22 @@ def noise():
         force, external = force_channel(scale)
         print(f"noise x {scale:g}: rms of the elastic-force input (f_elastic(x + dt v) + f_ext)/m "
               f"{force:.3g} m/s^2 (external force alone {external:.3g})")
+    for modes in (4, 8, 16):
+        force, external = force_channel(1.0, modes)
+        print(f"noise x 1 in the {modes} softest modes (noise_modes = {modes}): rms of the "
+              f"elastic-force input {force:.3g} m/s^2 (external force alone {external:.3g})")
 
 
-def force_channel(scale, count=64):
+def force_channel(scale, modes=0, count=64):
     """(rms force input, rms external force / m) in m/s^2 over the free components of count
-    training samples whose state noise is scale times the default."""
+    training samples whose state noise is scale times the default, in the modes softest modes
+    (white noise when modes is 0)."""
     net = GraphNet(ModelConfig(latent=8, steps=1, elastic_force=True))
     defaults = SamplerConfig()
     sampler = Sampler(0, SamplerConfig(equilibrium_probability=0.6,
                                        noise_position=scale * defaults.noise_position,
-                                       noise_velocity=scale * defaults.noise_velocity))
+                                       noise_velocity=scale * defaults.noise_velocity,
+                                       noise_modes=modes))
     force, external = [], []
     for i in range(count):
         s = sampler.sample(i)

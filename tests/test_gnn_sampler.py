@@ -1,6 +1,7 @@
 """The training sampler: reproducible samples, and the optional at-rest (static equilibrium)
 starting states."""
 import numpy as np
+import pytest
 
 import anisofem as af
 from anisognn.sampler import Sampler, SamplerConfig
@@ -38,3 +39,36 @@ def test_equilibrium_spread_scales_the_load_of_the_equilibrium():
     # the same draws but a load factor in [0.5, 1.5]: out of balance with the scene's own load
     assert residual(0.0) < 1e-6 * residual(0.5)
 
+
+
+def _stiffness_per_mass(scene, x, dx):
+    """dx^T K dx / dx^T M dx in 1/s^2, K the static Hessian at x: how stiff a perturbation is."""
+    k = af.hessian(scene, x) @ dx.ravel()
+    return float(dx.ravel() @ k / np.sum(scene.masses[:, None] * dx ** 2))
+
+
+def test_noise_modes_perturb_the_soft_modes_only_at_the_configured_size():
+    rest = dict(equilibrium_probability=1.0, equilibrium_spread=0.0)
+    clean = Sampler(2, SamplerConfig(**rest, **QUIET))
+    white = Sampler(2, SamplerConfig(**rest))
+    soft = Sampler(2, SamplerConfig(**rest, noise_modes=8))
+    h = 0.01  # training meshes: about 1 cm edges, so the noise is at most about 1e-5 m
+    for i in range(3):
+        c, w, s = clean.sample(i), white.sample(i), soft.sample(i)
+        for sample in (w, s):
+            np.testing.assert_array_equal(sample.x[c.scene.fixed_mask], c.x[c.scene.fixed_mask])
+        dx, dv = s.x - c.x, s.v - c.v
+        assert 0 < np.sqrt(np.mean(dx[~c.scene.fixed_mask] ** 2)) < 2e-3 * h
+        assert 0 < np.sqrt(np.mean(dv[~c.scene.fixed_mask] ** 2)) < 1e-1 * h
+        # white noise lies mostly in the stiff volumetric modes; the soft-mode noise, in both
+        # position and velocity, is at least 100 times less stiff per unit mass
+        stiff = _stiffness_per_mass(c.scene, c.x, w.x - c.x)
+        assert _stiffness_per_mass(c.scene, c.x, dx) < stiff / 100, i
+        assert _stiffness_per_mass(c.scene, c.x, dv) < stiff / 100, i
+
+
+def test_noise_modes_must_be_a_nonnegative_integer():
+    with pytest.raises(ValueError, match="noise_modes"):
+        SamplerConfig(noise_modes=-1)
+    with pytest.raises(ValueError, match="noise_modes"):
+        SamplerConfig(noise_modes=2.5)
