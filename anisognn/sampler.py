@@ -23,7 +23,9 @@ would drown 1 cm elements, so the noise is relative to the element size. With no
 (not in the paper) the noise keeps those standard deviations but lies in the k softest modes of
 the scene at the sampled state (lowest eigenvectors of M^-1/2 K M^-1/2, K the PSD-projected
 static Hessian over the free DOFs): white noise mostly excites the stiff volumetric modes, whose
-forces then dwarf every other force in the state.
+forces then dwarf every other force in the state. With noise_decades = d > 0 (not in the paper)
+the two standard deviations are drawn log-uniformly from [10^-d, 1] times those maxima instead,
+so that more samples are nearly noise-free.
 """
 from dataclasses import dataclass
 
@@ -54,6 +56,7 @@ class SamplerConfig:
     noise_position: float = 1e-3       # in units of h
     noise_velocity: float = 5e-2       # in units of h per second
     noise_modes: int = 0               # 0: white noise; k > 0: in the k softest modes
+    noise_decades: float = 0.0         # 0: noise sizes uniform in [0, max]; d: log-uniform
     dt: float = 0.02
 
     def __post_init__(self):
@@ -64,7 +67,7 @@ class SamplerConfig:
                 raise ValueError(f"[sampler] {name}: must be in [0, 1], got "
                                  f"{getattr(self, name)}")
         for name in ("body_force", "extra_force", "traction_density", "fiber_stiffness",
-                     "equilibrium_spread", "noise_position", "noise_velocity"):
+                     "equilibrium_spread", "noise_position", "noise_velocity", "noise_decades"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"[sampler] {name}: must be >= 0, got {getattr(self, name)}")
         if not (isinstance(self.deform_steps, int) and self.deform_steps >= 1):
@@ -135,13 +138,19 @@ class Sampler:
         if c.noise_modes:
             shapes = _soft_modes(scene, x, c.noise_modes)
             x[free] += _scaled(shapes @ rng.normal(size=shapes.shape[1]),
-                               rng.uniform(0, c.noise_position * h))
+                               self._noise_size(rng, c.noise_position * h))
             v[free] += _scaled(shapes @ rng.normal(size=shapes.shape[1]),
-                               rng.uniform(0, c.noise_velocity * h))
+                               self._noise_size(rng, c.noise_velocity * h))
         else:
-            x[free] += rng.normal(size=free.sum()) * rng.uniform(0, c.noise_position * h)
-            v[free] += rng.normal(size=free.sum()) * rng.uniform(0, c.noise_velocity * h)
+            x[free] += rng.normal(size=free.sum()) * self._noise_size(rng, c.noise_position * h)
+            v[free] += rng.normal(size=free.sum()) * self._noise_size(rng, c.noise_velocity * h)
         return Sample(scene, x, v)
+
+    def _noise_size(self, rng, largest):
+        """A noise standard deviation up to largest (its units): uniform in [0, largest], or
+        log-uniform in [10^-noise_decades, 1] times largest."""
+        d = self.config.noise_decades
+        return rng.uniform(0, largest) if d == 0 else largest * 10.0 ** rng.uniform(-d, 0)
 
     def _material(self, rng, mesh):
         c = self.config

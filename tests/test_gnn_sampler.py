@@ -67,8 +67,30 @@ def test_noise_modes_perturb_the_soft_modes_only_at_the_configured_size():
         assert _stiffness_per_mass(c.scene, c.x, dv) < stiff / 100, i
 
 
-def test_noise_modes_must_be_a_nonnegative_integer():
+def test_noise_options_are_validated():
     with pytest.raises(ValueError, match="noise_modes"):
         SamplerConfig(noise_modes=-1)
     with pytest.raises(ValueError, match="noise_modes"):
         SamplerConfig(noise_modes=2.5)
+    with pytest.raises(ValueError, match="noise_decades"):
+        SamplerConfig(noise_decades=-1.0)
+
+
+def test_noise_decades_draw_the_noise_size_log_uniformly():
+    def relative_sizes(**options):
+        """Position noise rms over its largest allowed value, noise_position h, per sample."""
+        config = SamplerConfig(equilibrium_probability=1.0, noise_velocity=0.0, **options)
+        noisy, clean = Sampler(5, config), Sampler(5, SamplerConfig(
+            equilibrium_probability=1.0, **QUIET))
+        sizes = []
+        for i in range(30):
+            s, c = noisy.sample(i), clean.sample(i)
+            mesh = c.scene.mesh
+            h = np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1), axis=2))
+            dx = (s.x - c.x)[~c.scene.fixed_mask]
+            sizes.append(np.sqrt(np.mean(dx ** 2)) / (config.noise_position * h))
+        return np.array(sizes)
+    uniform, logs = relative_sizes(), relative_sizes(noise_decades=3.0)
+    assert logs.max() < 1.3 and logs.min() > 1e-3 / 1.3
+    assert np.median(uniform) > 0.3 and np.median(logs) < 0.1
+    assert (logs < 1e-2).sum() >= 5   # a third of them expected below a hundredth
