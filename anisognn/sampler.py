@@ -32,7 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import eigh
 
-from anisofem import Material, Scene, box_beam, cylinder_beam, hessian, simulate, solve
+from anisofem import Material, Scene, box_beam, cylinder_beam, simulate, solve
+from anisofem.potential import Potential
 
 YOUNG = 1e5
 POISSON = 0.48
@@ -135,22 +136,23 @@ class Sampler:
             x = self._equilibrium(mesh, material, fixed, loads,
                                   rng.uniform(1 - c.equilibrium_spread, 1 + c.equilibrium_spread))
         free = ~scene.fixed_mask
-        if c.noise_modes:
-            shapes = _soft_modes(scene, x, c.noise_modes)
-            x[free] += _scaled(shapes @ rng.normal(size=shapes.shape[1]),
-                               self._noise_size(rng, c.noise_position * h))
-            v[free] += _scaled(shapes @ rng.normal(size=shapes.shape[1]),
-                               self._noise_size(rng, c.noise_velocity * h))
-        else:
-            x[free] += rng.normal(size=free.sum()) * self._noise_size(rng, c.noise_position * h)
-            v[free] += rng.normal(size=free.sum()) * self._noise_size(rng, c.noise_velocity * h)
+        shapes = _soft_modes(scene, x, c.noise_modes) if c.noise_modes else None
+        x[free] += self._noise(rng, free.sum(), shapes, c.noise_position * h)
+        v[free] += self._noise(rng, free.sum(), shapes, c.noise_velocity * h)
         return Sample(scene, x, v)
 
-    def _noise_size(self, rng, largest):
-        """A noise standard deviation up to largest (its units): uniform in [0, largest], or
-        log-uniform in [10^-noise_decades, 1] times largest."""
-        d = self.config.noise_decades
-        return rng.uniform(0, largest) if d == 0 else largest * 10.0 ** rng.uniform(-d, 0)
+    def _noise(self, rng, d, shapes, largest):
+        """(d,) zero-mean noise over the free DOFs, in largest's units: white, or in the span
+        of shapes (d, k) when given, with its standard deviation (rms) drawn up to largest:
+        uniform in [0, largest], or log-uniform in [10^-noise_decades, 1] times largest."""
+        direction = rng.normal(size=d) if shapes is None else shapes @ rng.normal(
+            size=shapes.shape[1])
+        decades = self.config.noise_decades
+        size = rng.uniform(0, largest) if decades == 0 else largest * 10.0 ** rng.uniform(
+            -decades, 0)
+        if shapes is None:
+            return direction * size
+        return direction * (size / np.sqrt(np.mean(direction ** 2)))
 
     def _material(self, rng, mesh):
         c = self.config
@@ -195,18 +197,15 @@ class Sampler:
 def _soft_modes(scene, x, k):
     """(d, min(k, d)) displacement shapes of the k softest modes at state x (m) over the d free
     DOFs in scene.fixed_mask's order: eigenvectors of M^-1/2 K M^-1/2 (K the PSD-projected
-    static Hessian) with the lowest eigenvalues, mapped back by M^-1/2."""
-    free = (~scene.fixed_mask).ravel()
-    stiffness = hessian(scene, x, project=True)[free][:, free].toarray()
-    scale = 1.0 / np.sqrt(np.repeat(scene.masses, 3)[free])
-    k = min(k, free.sum())
-    _, modes = eigh(stiffness * scale[:, None] * scale[None, :], subset_by_index=[0, k - 1])
+    static Hessian, assembled on anisofem's dense layout of the free DOFs) with the lowest
+    eigenvalues, mapped back by M^-1/2."""
+    layout = scene.layout("dense")
+    _, _, data = Potential(scene).hessian_data(x, layout, project=True, want_grad=False)
+    scale = 1.0 / np.sqrt(np.repeat(scene.masses, 3)[layout.dofs])
+    k = min(k, layout.shape[0])
+    _, modes = eigh(layout.matrix(data) * scale[:, None] * scale[None, :],
+                    subset_by_index=[0, k - 1])
     return modes * scale[:, None]
-
-
-def _scaled(noise, rms):
-    """noise (d,) rescaled to root-mean-square rms."""
-    return noise * (rms / max(float(np.sqrt(np.mean(noise ** 2))), 1e-300))
 
 
 def _unit(rng, k):
