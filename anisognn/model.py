@@ -43,7 +43,11 @@ class ModelConfig:
     the fiber stress along the edge (Pa), a product of three inputs an MLP forms only slowly.
     elastic_force (not in the paper) adds the vertex input (f_elastic(x + dt v) + f_ext) / m
     (m/s^2, 0 on held components; anisognn.elastic): the explicit acceleration at the point
-    where a backward-Euler step's Newton iteration starts, which the network then corrects."""
+    where a backward-Euler step's Newton iteration starts, which the network then corrects.
+    force_scale (m/s^2, not in the paper; needs elastic_force) feeds that input as
+    sign(a) log(1 + |a| / force_scale): linear below force_scale, logarithmic above, so that the small
+    forces of near-equilibrium states stay readable beside the large ones of state noise in the
+    stiff modes (0: the acceleration itself)."""
     latent: int = 128
     hidden_layers: int = 2
     steps: int = 15
@@ -51,6 +55,7 @@ class ModelConfig:
     dt: float = 0.02
     fiber_stress: bool = False
     elastic_force: bool = False
+    force_scale: float = 0.0
 
     def __post_init__(self):
         if self.aggregation not in AGGREGATIONS:
@@ -65,6 +70,12 @@ class ModelConfig:
         for name in ("fiber_stress", "elastic_force"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected true or false, got {getattr(self, name)!r}")
+        if not self.force_scale >= 0:
+            raise ValueError(f"force_scale: expected an acceleration >= 0 m/s^2, got "
+                             f"{self.force_scale!r}")
+        if self.force_scale and not self.elastic_force:
+            raise ValueError("force_scale: compresses the elastic-force input, so it needs "
+                             "elastic_force = true")
 
     @property
     def edge_channels(self):
@@ -174,11 +185,13 @@ class GraphNet(nn.Module):
     def vertex_features(self, x, v, f_ext, graph):
         """(n, 7) raw vertex inputs: velocity, mass, external force; (n, 10) with the force
         acceleration (f_elastic(x + dt v) + f_ext) / m, 0 on held components
-        (ModelConfig.elastic_force)."""
+        (ModelConfig.elastic_force), as sign(a) log(1 + |a| / force_scale) when force_scale > 0."""
         features = [v, graph.mass, f_ext]
         if self.config.elastic_force:
             force = elastic_force(x + self.config.dt * v, graph) + f_ext
-            features.append(force / graph.mass * (1.0 - graph.fixed))
+            accel = force / graph.mass * (1.0 - graph.fixed)
+            scale = self.config.force_scale
+            features.append(signed_log(accel, scale) if scale else accel)
         return torch.cat(features, dim=1)
 
     def aggregation_weights(self, graph):
@@ -212,6 +225,12 @@ def fiber_stress(fiber, rest_unit, stretch):
     kappa = torch.linalg.vector_norm(fiber, dim=1, keepdim=True)
     along = (fiber * rest_unit).sum(dim=1, keepdim=True)
     return along * along / torch.clamp(kappa, min=1e-30) * 0.5 * (stretch * stretch - 1.0)
+
+
+def signed_log(a, scale):
+    """sign(a) log(1 + |a| / scale), elementwise: a / scale for |a| << scale, logarithmic
+    beyond (ONNX: Sign, Abs, Log; unlike asinh, exportable at opset 17)."""
+    return torch.sign(a) * torch.log1p(torch.abs(a) / scale)
 
 
 def integrate(x, v, a, dt, graph):

@@ -247,6 +247,10 @@ def test_config_validation():
         ModelConfig(fiber_stress=1)
     with pytest.raises(ValueError, match="elastic_force"):
         ModelConfig(elastic_force="yes")
+    with pytest.raises(ValueError, match="force_scale.*elastic_force"):
+        ModelConfig(force_scale=1.0)
+    with pytest.raises(ValueError, match="force_scale"):
+        ModelConfig(elastic_force=True, force_scale=-1.0)
     assert anisognn.ModelConfig().latent == 128 and ModelConfig().steps == 15
 
 
@@ -325,3 +329,26 @@ def test_elastic_force_input_vanishes_at_equilibrium_and_points_back_beyond_it()
         mean = weights @ channel(rest + scale * (x_eq - rest))[free, 2]
         assert mean == pytest.approx(expected, rel=0.25), scale
     assert np.all(channel(rest)[scene.fixed_mask] == 0.0)  # held components read 0
+
+
+def test_force_scale_compresses_the_force_input_and_keeps_small_forces_linear():
+    """sign(a) log(1 + |a| / force_scale): the plain channel's a / force_scale where
+    |a| << force_scale, sign(a) log(|a| / force_scale) where |a| >> force_scale; the other
+    inputs unchanged."""
+    scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
+    g = G.from_scene(scene, torch.float64)
+    f = torch.tensor(scene.external_force)
+    rng = np.random.default_rng(0)
+    noisy = torch.tensor(scene.initial_positions() + rng.normal(0, 1e-4, (g.n_vertices, 3)))
+    v = torch.zeros_like(noisy)
+    plain = GraphNet(ModelConfig(latent=8, steps=1, elastic_force=True))
+    squeezed = GraphNet(ModelConfig(latent=8, steps=1, elastic_force=True, force_scale=2.0))
+    a = plain.vertex_features(noisy, v, f, g)
+    b = squeezed.vertex_features(noisy, v, f, g)
+    assert torch.equal(a[:, :7], b[:, :7])
+    small, large = a[:, 7:].abs() < 0.02, a[:, 7:].abs() > 400.0
+    assert small.any() and large.any()
+    np.testing.assert_allclose(b[:, 7:][small] * 2.0, a[:, 7:][small], rtol=2e-2, atol=1e-12)
+    expected = torch.sign(a[:, 7:][large]) * torch.log(a[:, 7:][large].abs() / 2.0)
+    np.testing.assert_allclose(b[:, 7:][large], expected, rtol=0, atol=1e-2)
+
