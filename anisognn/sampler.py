@@ -6,7 +6,9 @@ draws exactly the samples an uninterrupted one would.
 Each sample: one of 36 beam geometries (box and cylinder, 60-120 tets, about 1 cm elements,
 held at the x = 0 end) made of the paper's material (E = 100 kPa, nu = 0.48, 1000 kg/m^3) with
 fibers of random direction and stiffness kappa in [0, 10 E] (uniform over the scene, or varying
-element by element, or rotating along the beam); a uniform body force of random direction and
+element by element, or rotating along the beam; with axis_fiber_probability, not in the paper,
+a uniform fiber lies along a random coordinate axis instead: along the beam or across it, where
+bending is stiffest and softest); a uniform body force of random direction and
 magnitude in [0, 10] kN/m^3, an extra force in [0, 15] kN/m^3 on 5% of the elements, and with
 probability 0.1 a +z traction on the free end. The paper gives that traction as 0-100 kN/m^3;
 here it is that force density times the mean edge length h (N/m^2), which puts it on the scale
@@ -49,6 +51,7 @@ class SamplerConfig:
     traction_density: float = 100e3    # N/m^3, times h gives N/m^2
     traction_probability: float = 0.1
     fiber_stiffness: float = 10.0      # in units of E
+    axis_fiber_probability: float = 0.0  # of a uniform fiber along a random coordinate axis
     varying_fiber_probability: float = 0.5
     deformed_probability: float = 0.5
     deform_steps: int = 15
@@ -62,7 +65,7 @@ class SamplerConfig:
 
     def __post_init__(self):
         for name in ("extra_force_probability", "traction_probability",
-                     "varying_fiber_probability", "deformed_probability",
+                     "varying_fiber_probability", "axis_fiber_probability", "deformed_probability",
                      "equilibrium_probability"):
             if not 0 <= getattr(self, name) <= 1:
                 raise ValueError(f"[sampler] {name}: must be in [0, 1], got "
@@ -159,7 +162,12 @@ class Sampler:
         m = mesh.n_tets
         kind = rng.random()
         if kind >= c.varying_fiber_probability:  # one fiber for the whole scene
-            return Material(YOUNG, POISSON, DENSITY, _unit(rng, 1)[0],
+            # no draw when axis_fiber_probability is 0: earlier configs keep their samples
+            if c.axis_fiber_probability and rng.random() < c.axis_fiber_probability:
+                direction = np.eye(3)[rng.integers(3)]
+            else:
+                direction = _unit(rng, 1)[0]
+            return Material(YOUNG, POISSON, DENSITY, direction,
                             rng.uniform(0, c.fiber_stiffness) * YOUNG)
         if kind < c.varying_fiber_probability / 2:  # each element its own fiber
             return Material(YOUNG, POISSON, DENSITY, _unit(rng, m),

@@ -94,3 +94,21 @@ def test_noise_decades_draw_the_noise_size_log_uniformly():
     assert logs.max() < 1.3 and logs.min() > 1e-3 / 1.3
     assert np.median(uniform) > 0.3 and np.median(logs) < 0.1
     assert (logs < 1e-2).sum() >= 5   # a third of them expected below a hundredth
+
+
+def test_axis_fibers_lie_along_the_coordinate_axes_and_default_samples_are_unchanged():
+    """axis_fiber_probability = 1: every scene-wide fiber is x, y or z (each seen); the
+    element-varying kinds stay random."""
+    config = SamplerConfig(axis_fiber_probability=1.0, deformed_probability=0.0, **QUIET)
+    sampler = Sampler(5, config)
+    axes, varying = set(), 0
+    for i in range(40):
+        d = sampler.sample(i).scene.elements.fiber
+        if np.allclose(d, d[0]):
+            assert np.sort(np.abs(d[0])).tolist() == [0.0, 0.0, 1.0], i
+            axes.add(int(np.argmax(np.abs(d[0]))))
+        else:
+            varying += 1
+    assert axes == {0, 1, 2} and 5 <= varying <= 35
+    with pytest.raises(ValueError, match="axis_fiber_probability"):
+        SamplerConfig(axis_fiber_probability=1.5)
