@@ -45,9 +45,9 @@ class ModelConfig:
     (m/s^2, 0 on held components; anisognn.elastic): the explicit acceleration at the point
     where a backward-Euler step's Newton iteration starts, which the network then corrects.
     force_scale (m/s^2, not in the paper; needs elastic_force) feeds that input as
-    sign(a) log(1 + |a| / force_scale): linear below force_scale, logarithmic above, so that the small
-    forces of near-equilibrium states stay readable beside the large ones of state noise in the
-    stiff modes (0: the acceleration itself)."""
+    sign(a) log(1 + |a| / force_scale): linear below force_scale, logarithmic above, so that
+    the small forces of near-equilibrium states stay readable beside the large ones of state
+    noise in the stiff modes (0: the acceleration itself)."""
     latent: int = 128
     hidden_layers: int = 2
     steps: int = 15

@@ -18,8 +18,8 @@ backward-Euler rollout under another random load for 1-15 steps. With probabilit
 equilibrium_probability (default 0, not in the paper) a sample instead starts at the static
 equilibrium of its own scene under its loads scaled by a factor in [1 - s, 1 + s]
 (s = equilibrium_spread): the states at which a rollout comes to rest, where the evaluation
-measures tip, force and volume errors and a rollout of dynamic states rarely lands. Then zero-mean Gaussian
-noise perturbs the free positions and velocities with standard deviations drawn uniformly from
+measures tip, force and volume errors and a rollout of dynamic states rarely lands. Then
+zero-mean Gaussian noise perturbs the free positions and velocities with standard deviations drawn uniformly from
 [0, noise_position h] and [0, noise_velocity h / s]: the paper's absolute 1e-3 m and 5e-2 m/s
 would drown 1 cm elements, so the noise is relative to the element size. With noise_modes = k > 0
 (not in the paper) the noise keeps those standard deviations but lies in the k softest modes of
@@ -111,7 +111,11 @@ class Sampler:
     def __init__(self, seed=0, config=None):
         self.seed = int(seed)
         self.config = config or SamplerConfig()
-        self.meshes = geometries()
+        self.use_meshes(geometries())
+
+    def use_meshes(self, meshes):
+        """Draw the scenes from meshes (a list of anisofem meshes held at x = 0) instead."""
+        self.meshes = list(meshes)
         self._h = [float(np.mean(np.linalg.norm(
             m.vertices[m.edges[:, 0]] - m.vertices[m.edges[:, 1]], axis=1)))
             for m in self.meshes]

@@ -32,6 +32,7 @@ import torch
 import anisofem
 from anisognn import evaluate
 from anisognn import train as T
+from at_rest import tip_accelerations  # scripts/ is on the path when run as a script
 from anisognn.model import GraphNet, ModelConfig
 from anisognn.sampler import DENSITY, POISSON, YOUNG, Sampler, SamplerConfig
 
@@ -64,10 +65,7 @@ class Restricted(Sampler):
 
     def __init__(self, seed, config, dirs, kappa_max, loads):
         super().__init__(seed, config)
-        self.meshes = [evaluate._beam("box"), evaluate._beam("cylinder")]
-        self._h = [float(np.mean(np.linalg.norm(m.vertices[m.edges[:, 0]]
-                                                - m.vertices[m.edges[:, 1]], axis=1)))
-                   for m in self.meshes]
+        self.use_meshes([evaluate._beam("box"), evaluate._beam("cylinder")])
         self.dirs, self.kappa_max, self.loads = dirs, kappa_max, loads
 
     def _material(self, rng, mesh):
@@ -100,19 +98,10 @@ class Aligned(GraphNet):
                           along * along / torch.clamp(kappa, min=1e-30)], dim=1)
 
 
-def tip_accelerations(run, cases, x_fem):
+def tip_table(run, cases, x_fem):
     """(4, 3) tip z accelerations (m/s^2) one step from rest at SHARES of the FEM deflection."""
-    out = []
-    for case, xf in zip(cases, x_fem):
-        X = case.scene.mesh.vertices
-        tip = X[:, 0] >= X[:, 0].max() - 1e-9
-        row = []
-        for s in SHARES:
-            x0 = X + s * (xf - X)
-            with torch.no_grad():
-                row.append(float((run(case.scene, 1, x0)[1] - x0)[tip, 2].mean() / DT ** 2))
-        out.append(row)
-    return np.round(np.array(out), 2).tolist()
+    return np.round([tip_accelerations(run, c.scene, xf, SHARES)
+                     for c, xf in zip(cases, x_fem)], 2).tolist()
 
 
 def learn(args):
@@ -129,7 +118,7 @@ def learn(args):
     x_fem = [anisofem.solve(c.scene).x for c in cases]
     print("rows: box parallel, box orthogonal, cylinder parallel, cylinder orthogonal; "
           f"columns: {SHARES} of the FEM deflection")
-    print("fem", tip_accelerations(evaluate.fem_rollout, cases, x_fem), flush=True)
+    print("fem", tip_table(evaluate.fem_rollout, cases, x_fem), flush=True)
     run = evaluate.model_rollout(model)
     for it in range(1, args.iterations + 1):
         for group in optimizer.param_groups:
@@ -143,7 +132,7 @@ def learn(args):
         optimizer.step()
         if it % 500 == 0:
             model.eval()
-            print(it, tip_accelerations(run, cases, x_fem), flush=True)
+            print(it, tip_table(run, cases, x_fem), flush=True)
             model.train()
 
 

@@ -96,7 +96,7 @@ def test_noise_decades_draw_the_noise_size_log_uniformly():
     assert (logs < 1e-2).sum() >= 5   # a third of them expected below a hundredth
 
 
-def test_axis_fibers_lie_along_the_coordinate_axes_and_default_samples_are_unchanged():
+def test_axis_fibers_lie_along_the_coordinate_axes():
     """axis_fiber_probability = 1: every scene-wide fiber is x, y or z (each seen); the
     element-varying kinds stay random."""
     config = SamplerConfig(axis_fiber_probability=1.0, deformed_probability=0.0, **QUIET)
