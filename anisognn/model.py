@@ -47,7 +47,11 @@ class ModelConfig:
     force_scale (m/s^2, not in the paper; needs elastic_force) feeds that input as
     sign(a) log(1 + |a| / force_scale): linear below force_scale, logarithmic above, so that
     the small forces of near-equilibrium states stay readable beside the large ones of state
-    noise in the stiff modes (0: the acceleration itself)."""
+    noise in the stiff modes (0: the acceleration itself).
+    anchored (not in the paper; needs elastic_force) subtracts from the output the network's
+    own output for the same positions with zero velocity and zero force acceleration: the
+    prediction vanishes wherever anisofem's forces balance at rest, so a rollout can only come
+    to rest at the FEM's equilibrium. Costs a second pass of the processor."""
     latent: int = 128
     hidden_layers: int = 2
     steps: int = 15
@@ -56,6 +60,7 @@ class ModelConfig:
     fiber_stress: bool = False
     elastic_force: bool = False
     force_scale: float = 0.0
+    anchored: bool = False
 
     def __post_init__(self):
         if self.aggregation not in AGGREGATIONS:
@@ -67,7 +72,7 @@ class ModelConfig:
                 raise ValueError(f"{name}: expected a positive integer, got {value!r}")
         if not self.dt > 0:
             raise ValueError(f"dt: expected a time step > 0 s, got {self.dt!r}")
-        for name in ("fiber_stress", "elastic_force"):
+        for name in ("fiber_stress", "elastic_force", "anchored"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected true or false, got {getattr(self, name)!r}")
         if not self.force_scale >= 0:
@@ -76,6 +81,9 @@ class ModelConfig:
         if self.force_scale and not self.elastic_force:
             raise ValueError("force_scale: compresses the elastic-force input, so it needs "
                              "elastic_force = true")
+        if self.anchored and not self.elastic_force:
+            raise ValueError("anchored: zeroes the elastic-force input at the anchor, so it "
+                             "needs elastic_force = true")
 
     @property
     def edge_channels(self):
@@ -203,9 +211,20 @@ class GraphNet(nn.Module):
     def forward(self, x, v, f_ext, graph):
         """Accelerations (n, 3) in m/s^2 for positions x (n, 3) m, velocities v (n, 3) m/s and
         external forces f_ext (n, 3) N on graph (anisognn.graph.Graph)."""
-        vert = self.vertex_encoder(torch.cat(
-            [graph.fixed, self.vertex_norm(self.vertex_features(x, v, f_ext, graph))], dim=1))
+        vertex_in = self.vertex_features(x, v, f_ext, graph)
         edge = self.edge_encoder(self.edge_norm(self.edge_features(x, graph)))
+        a = self.process(vertex_in, edge, graph)
+        if self.config.anchored:
+            # the same positions at rest with balanced forces: velocity and force input zero
+            at_rest = torch.cat([torch.zeros_like(vertex_in[:, :3]), vertex_in[:, 3:VERTEX_REAL],
+                                 torch.zeros_like(vertex_in[:, VERTEX_REAL:])], dim=1)
+            a = a - self.process(at_rest, edge, graph)
+        return a
+
+    def process(self, vertex_in, edge, graph):
+        """(n, 3) m/s^2 decoded after message passing from raw vertex inputs (n, vertex_channels)
+        and encoded edges (E, L)."""
+        vert = self.vertex_encoder(torch.cat([graph.fixed, self.vertex_norm(vertex_in)], dim=1))
         weights = self.aggregation_weights(graph).transpose(1, 2)  # (n, C, K)
         # padding slots (index E) read edge 0 instead: their weights are 0, so no pad row is
         # concatenated to the edges at every step

@@ -54,7 +54,8 @@ def simulator(path, scene, **kwargs):
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory):
     """{name: (torch model, onnx path)} for both shipped models and an untrained one with the
-    optional inputs (fiber stress, compressed elastic force; random decoder), exported fresh."""
+    optional inputs (fiber stress, compressed elastic force, anchored; random decoder), exported
+    fresh."""
     folder = tmp_path_factory.mktemp("onnx")
     out = {}
     for name in anisognn.shipped.NAMES:
@@ -62,13 +63,14 @@ def exported(tmp_path_factory):
         out[name] = net, to_onnx.export(net, str(folder / f"{name}.onnx"))
     torch.manual_seed(0)
     net = anisognn.GraphNet(anisognn.ModelConfig(latent=16, steps=2, fiber_stress=True,
-                                                 elastic_force=True, force_scale=1.0))
+                                                 elastic_force=True, force_scale=1.0,
+                                                 anchored=True))
     torch.nn.init.normal_(net.decoder[-1].weight)
     out[OPTIONAL] = net, to_onnx.export(net, str(folder / "optional.onnx"))
     return out
 
 
-OPTIONAL = "fiber stress + elastic force (signed log)"
+OPTIONAL = "fiber stress + elastic force (signed log), anchored"
 
 
 MESHES = {"box 3x2x1 (30 tets)": lambda: (box((3, 2, 1)), "x0"),

@@ -251,6 +251,10 @@ def test_config_validation():
         ModelConfig(force_scale=1.0)
     with pytest.raises(ValueError, match="force_scale"):
         ModelConfig(elastic_force=True, force_scale=-1.0)
+    with pytest.raises(ValueError, match="anchored.*elastic_force"):
+        ModelConfig(anchored=True)
+    with pytest.raises(ValueError, match="anchored"):
+        ModelConfig(elastic_force=True, anchored=1)
     assert anisognn.ModelConfig().latent == 128 and ModelConfig().steps == 15
 
 
@@ -352,3 +356,29 @@ def test_force_scale_compresses_the_force_input_and_keeps_small_forces_linear():
     expected = torch.sign(a[:, 7:][large]) * torch.log(a[:, 7:][large].abs() / 2.0)
     np.testing.assert_allclose(b[:, 7:][large], expected, rtol=0, atol=1e-2)
 
+
+@pytest.mark.parametrize("aggregation", ["directional", "sum"])
+def test_anchored_model_is_still_at_the_fem_equilibrium_and_nowhere_else(aggregation):
+    """With anchored = true the output is zero at anisofem's static equilibrium at rest (to the
+    solver's tolerance; a random network, not trained), and not at the rest shape under load
+    or at the equilibrium with a velocity; without anchoring the random network moves there."""
+    scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
+    g = G.from_scene(scene, torch.float64)
+    f = torch.tensor(scene.external_force)
+    x_eq = torch.tensor(af.solve(scene, rtol=1e-10).x)
+    still = torch.zeros_like(x_eq)
+    nets = {}
+    for anchored in (True, False):
+        torch.manual_seed(0)
+        net = GraphNet(ModelConfig(latent=16, steps=2, aggregation=aggregation,
+                                   elastic_force=True, force_scale=1.0, anchored=anchored))
+        torch.nn.init.normal_(net.decoder[-1].weight)
+        nets[anchored] = net.double()
+    with torch.no_grad():
+        def largest(net, x, v):
+            return float(net(x, v, f, g).abs().max())
+        at_equilibrium = largest(nets[True], x_eq, still)
+        under_load = largest(nets[True], torch.tensor(scene.initial_positions()), still)
+        moving = largest(nets[True], x_eq, torch.full_like(x_eq, 0.05))
+        assert at_equilibrium < 1e-4 * min(under_load, moving)
+        assert largest(nets[False], x_eq, still) > 1e3 * at_equilibrium
