@@ -50,8 +50,9 @@ class ModelConfig:
     noise in the stiff modes (0: the acceleration itself).
     anchored (not in the paper; needs elastic_force) subtracts from the output the network's
     own output for the same positions with zero velocity and zero force acceleration: the
-    prediction vanishes wherever anisofem's forces balance at rest, so a rollout can only come
-    to rest at the FEM's equilibrium. Costs a second pass of the processor."""
+    prediction vanishes wherever anisofem's forces balance at rest, so the FEM's equilibrium
+    is always a state the model holds still (not necessarily the only one: where the network
+    ignores the force input, it holds others too). Costs a second pass of the processor."""
     latent: int = 128
     hidden_layers: int = 2
     steps: int = 15
