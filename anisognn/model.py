@@ -33,6 +33,7 @@ AGGREGATIONS = ("directional", "sum")
 VERTEX_FLAGS = 3   # Dirichlet flags per component
 VERTEX_REAL = 7    # velocity 3, mass 1, external force 3 (+ 3 force accelerations)
 EDGE_FEATURES = 15  # rest unit 3 + length 1, current unit 3 + length 1, fiber 3, strain 4
+DEFORMATION_FEATURES = 8  # of those: current unit 3 + length 1, strain 4
 
 
 @dataclass
@@ -52,7 +53,11 @@ class ModelConfig:
     own output for the same positions with zero velocity and zero force acceleration: the
     prediction vanishes wherever anisofem's forces balance at rest, so the FEM's equilibrium
     is always a state the model holds still (not necessarily the only one: where the network
-    ignores the force input, it holds others too). Costs a second pass of the processor."""
+    ignores the force input, it holds others too). Costs a second pass of the processor.
+    deformation_inputs = false (not in the paper; needs elastic_force, excludes fiber_stress)
+    drops the current edge vector, length and strain channels: the network sees the
+    deformation only through the force input, so it cannot learn an elastic response of its
+    own beside anisofem's."""
     latent: int = 128
     hidden_layers: int = 2
     steps: int = 15
@@ -62,6 +67,7 @@ class ModelConfig:
     elastic_force: bool = False
     force_scale: float = 0.0
     anchored: bool = False
+    deformation_inputs: bool = True
 
     def __post_init__(self):
         if self.aggregation not in AGGREGATIONS:
@@ -73,7 +79,7 @@ class ModelConfig:
                 raise ValueError(f"{name}: expected a positive integer, got {value!r}")
         if not self.dt > 0:
             raise ValueError(f"dt: expected a time step > 0 s, got {self.dt!r}")
-        for name in ("fiber_stress", "elastic_force", "anchored"):
+        for name in ("fiber_stress", "elastic_force", "anchored", "deformation_inputs"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected true or false, got {getattr(self, name)!r}")
         if not self.force_scale >= 0:
@@ -85,11 +91,18 @@ class ModelConfig:
         if self.anchored and not self.elastic_force:
             raise ValueError("anchored: zeroes the elastic-force input at the anchor, so it "
                              "needs elastic_force = true")
+        if not self.deformation_inputs and not self.elastic_force:
+            raise ValueError("deformation_inputs: without them only the elastic-force input "
+                             "carries the deformation, so false needs elastic_force = true")
+        if not self.deformation_inputs and self.fiber_stress:
+            raise ValueError("deformation_inputs: false drops the strains fiber_stress is made "
+                             "of; set fiber_stress = false")
 
     @property
     def edge_channels(self):
-        """Number of raw edge features: 15, 16 with fiber_stress."""
-        return EDGE_FEATURES + int(self.fiber_stress)
+        """Number of raw edge features: 15, 16 with fiber_stress, 7 without deformation_inputs."""
+        return (EDGE_FEATURES + int(self.fiber_stress)
+                - DEFORMATION_FEATURES * int(not self.deformation_inputs))
 
     @property
     def vertex_channels(self):
@@ -175,11 +188,14 @@ class GraphNet(nn.Module):
     def edge_features(self, x, graph):
         """(E, 15) raw edge inputs: rest unit + length (m), current unit + length (m), fiber,
         and the edge's deformation: stretch - 1 and (x_ij - X_ij) / |X_ij|; (E, 16) with the
-        fiber stress along the edge (ModelConfig.fiber_stress).
+        fiber stress along the edge (ModelConfig.fiber_stress); (E, 7) rest unit + length and
+        fiber without ModelConfig.deformation_inputs.
 
         The deformation channels are not in the paper (which gives rest and current vectors
         only): strains of 1e-3 are the signal of the stiff modes, and recovering them as the
         difference of two normalized lengths costs the network most of its training."""
+        if not self.config.deformation_inputs:
+            return torch.cat([graph.rest, graph.fiber], dim=1)
         vec = x[graph.senders] - x[graph.receivers]
         length = torch.linalg.vector_norm(vec, dim=1, keepdim=True)
         unit = vec / torch.clamp(length, min=1e-12)

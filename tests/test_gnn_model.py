@@ -255,6 +255,10 @@ def test_config_validation():
         ModelConfig(anchored=True)
     with pytest.raises(ValueError, match="anchored"):
         ModelConfig(elastic_force=True, anchored=1)
+    with pytest.raises(ValueError, match="deformation_inputs.*elastic_force"):
+        ModelConfig(deformation_inputs=False)
+    with pytest.raises(ValueError, match="deformation_inputs.*fiber_stress"):
+        ModelConfig(deformation_inputs=False, elastic_force=True, fiber_stress=True)
     assert anisognn.ModelConfig().latent == 128 and ModelConfig().steps == 15
 
 
@@ -382,3 +386,26 @@ def test_anchored_model_is_still_at_the_fem_equilibrium_and_nowhere_else(aggrega
         moving = largest(nets[True], x_eq, torch.full_like(x_eq, 0.05))
         assert at_equilibrium < 1e-4 * min(under_load, moving)
         assert largest(nets[False], x_eq, still) > 1e3 * at_equilibrium
+
+
+def test_without_deformation_inputs_the_edges_see_only_the_rest_shape_and_fiber():
+    """deformation_inputs = false: edge inputs are the rest unit vector, rest length and fiber
+    feature (E, 7), the same for any positions; the output still changes with the positions,
+    through the elastic-force input."""
+    scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
+    g = G.from_scene(scene, torch.float64)
+    f = torch.tensor(scene.external_force)
+    torch.manual_seed(0)
+    net = GraphNet(ModelConfig(latent=16, steps=2, elastic_force=True,
+                               deformation_inputs=False)).double()
+    torch.nn.init.normal_(net.decoder[-1].weight)
+    rest = torch.tensor(scene.initial_positions())
+    bent = torch.tensor(af.solve(scene).x)
+    assert net.config.edge_channels == 7
+    expected = torch.cat([g.rest, g.fiber], dim=1)
+    assert torch.equal(net.edge_features(rest, g), expected)
+    assert torch.equal(net.edge_features(bent, g), expected)
+    still = torch.zeros_like(rest)
+    with torch.no_grad():
+        change = (net(bent, still, f, g) - net(rest, still, f, g)).abs().max()
+    assert change > 1e-3
