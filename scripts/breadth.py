@@ -202,6 +202,9 @@ def main():
     q.add_argument("--aggregation", choices=("directional", "sum"), default="directional")
     q.add_argument("--iterations", type=int, default=3000)
     args = p.parse_args()
+    if args.command == "learn" and args.tensor and args.no_deformation:
+        p.error("--tensor replaces the fiber channels of the full edge inputs; "
+                "it does not combine with --no-deformation")
     torch.set_num_threads(1)
     if args.command == "deflections":
         deflections()
