@@ -230,22 +230,23 @@ class GraphNet(nn.Module):
         external forces f_ext (n, 3) N on graph (anisognn.graph.Graph)."""
         vertex_in = self.vertex_features(x, v, f_ext, graph)
         edge = self.edge_encoder(self.edge_norm(self.edge_features(x, graph)))
-        a = self.process(vertex_in, edge, graph)
-        if self.config.anchored:
-            # the same positions at rest with balanced forces: velocity and force input zero
-            at_rest = torch.cat([torch.zeros_like(vertex_in[:, :3]), vertex_in[:, 3:VERTEX_REAL],
-                                 torch.zeros_like(vertex_in[:, VERTEX_REAL:])], dim=1)
-            a = a - self.process(at_rest, edge, graph)
-        return a
-
-    def process(self, vertex_in, edge, graph):
-        """(n, 3) m/s^2 decoded after message passing from raw vertex inputs (n, vertex_channels)
-        and encoded edges (E, L)."""
-        vert = self.vertex_encoder(torch.cat([graph.fixed, self.vertex_norm(vertex_in)], dim=1))
         weights = self.aggregation_weights(graph).transpose(1, 2)  # (n, C, K)
         # padding slots (index E) read edge 0 instead: their weights are 0, so no pad row is
         # concatenated to the edges at every step
         incoming = torch.where(graph.incoming < graph.n_edges, graph.incoming, 0)
+        a = self.process(vertex_in, edge, graph, weights, incoming)
+        if self.config.anchored:
+            # the same positions at rest with balanced forces: velocity and force input zero
+            at_rest = torch.cat([torch.zeros_like(vertex_in[:, :3]), vertex_in[:, 3:VERTEX_REAL],
+                                 torch.zeros_like(vertex_in[:, VERTEX_REAL:])], dim=1)
+            a = a - self.process(at_rest, edge, graph, weights, incoming)
+        return a
+
+    def process(self, vertex_in, edge, graph, weights, incoming):
+        """(n, 3) m/s^2 decoded after message passing from raw vertex inputs (n, vertex_channels)
+        and encoded edges (E, L), with the aggregation weights (n, C, K) and the incoming table
+        (n, K) whose padding slots read edge 0."""
+        vert = self.vertex_encoder(torch.cat([graph.fixed, self.vertex_norm(vertex_in)], dim=1))
         for edge_update, vertex_update in zip(self.edge_updates, self.vertex_updates):
             edge = edge + edge_update(edge, vert, graph.senders, graph.receivers)
             gathered = edge[incoming]  # (n, K, L)

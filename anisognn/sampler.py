@@ -19,13 +19,14 @@ equilibrium_probability (default 0, not in the paper) a sample instead starts at
 equilibrium of its own scene under its loads scaled by a factor in [1 - s, 1 + s]
 (s = equilibrium_spread): the states at which a rollout comes to rest, where the evaluation
 measures tip, force and volume errors and a rollout of dynamic states rarely lands. Then
-zero-mean Gaussian noise perturbs the free positions and velocities with standard deviations drawn uniformly from
-[0, noise_position h] and [0, noise_velocity h / s]: the paper's absolute 1e-3 m and 5e-2 m/s
-would drown 1 cm elements, so the noise is relative to the element size. With noise_modes = k > 0
-(not in the paper) the noise keeps those standard deviations but lies in the k softest modes of
-the scene at the sampled state (lowest eigenvectors of M^-1/2 K M^-1/2, K the PSD-projected
-static Hessian over the free DOFs): white noise mostly excites the stiff volumetric modes, whose
-forces then dwarf every other force in the state. With noise_decades = d > 0 (not in the paper)
+zero-mean Gaussian noise perturbs the free positions and velocities with standard deviations
+drawn uniformly from [0, noise_position h] and [0, noise_velocity h / s]: the paper's absolute
+1e-3 m and 5e-2 m/s would drown 1 cm elements, so the noise is relative to the element size.
+With noise_modes = k > 0 (not in the paper) the noise keeps those standard deviations but lies
+in the k softest modes of the scene at the sampled state (lowest eigenvectors of
+M^-1/2 K M^-1/2, K the PSD-projected static Hessian over the free DOFs): white noise mostly
+excites the stiff volumetric modes, whose forces then dwarf every other force in the state.
+With noise_decades = d > 0 (not in the paper)
 the two standard deviations are drawn log-uniformly from [10^-d, 1] times those maxima instead,
 so that more samples are nearly noise-free.
 """

@@ -4,6 +4,9 @@
                                                noise-free at-rest training samples
     python scripts/at_rest.py probe MODEL...   tip z acceleration (m/s^2) of one step from rest at
                                                0-1.5 times the FEM deflection, four cantilevers
+    python scripts/at_rest.py settle MODEL...  tip deflection (mm) of the four cantilevers after
+                                               100, 300 and 1,000 steps from rest, and how far
+                                               it still moves over the last 100, next to the FEM's
     python scripts/at_rest.py learn [--iterations N] [--floor C] [--energy-weight W]
                                     [--no-normalize] [--fixed]
                                                train a fresh 32 x 6 directional model on at-rest
@@ -70,6 +73,46 @@ def tip_accelerations(run, scene, x_fem, shares=SHARES):
     return out
 
 
+def tip_drop(scene, positions):
+    """Mean tip deflection along -z (mm) of positions (..., n, 3) m of scene; the tip is the
+    vertices at the largest x."""
+    X = scene.mesh.vertices
+    tip = X[:, 0] >= X[:, 0].max() - 1e-9
+    return -1e3 * (positions[..., tip, 2] - X[tip, 2]).mean(axis=-1)
+
+
+def tip_deflections(run, scene, steps):
+    """([tip_drop (mm) after each of steps from rest], swing): swing (mm) is the largest tip
+    excursion from the final state over the last 100 steps; nan where the rollout of
+    run(scene, steps, x0) is not finite."""
+    with torch.no_grad():
+        positions = evaluate._rollout(run, scene, max(steps))
+    if positions is None or not np.isfinite(positions).all():
+        return [np.nan] * len(steps), np.nan
+    drop = tip_drop(scene, positions)
+    return [float(drop[k]) for k in steps], float(np.abs(drop[-100:] - drop[-1]).max())
+
+
+def settle(models):
+    sims = [(name, evaluate.model_rollout(shipped.model(name))) for name in models]
+    for case in evaluate.cases()[:4]:
+        fem = tip_drop(case.scene, anisofem.solve(case.scene).x)
+        print(f"{case.label}; FEM {fem:.2f} mm; after 100, 300, 1000 steps, last-100 swing")
+        for name, run in sims:
+            drops, swing = tip_deflections(run, case.scene, (100, 300, 1000))
+            print(f"  {name[-40:]:40}" + "".join(f"{d:9.2f}" for d in drops) + f"{swing:9.3f}")
+
+
+def train_step(model, optimizer, batch, energy_weight=1.0):
+    """One optimizer step of the shipped loss (Newton weight 1000) on batch, gradient norm
+    clipped to 1."""
+    loss, _ = T.batch_loss(model, batch, DT, 1000.0, energy_weight)
+    optimizer.zero_grad()
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+    optimizer.step()
+
+
 def probe(models):
     sims = [("fem", evaluate.fem_rollout)] + [(n, evaluate.model_rollout(shipped.model(n)))
                                               for n in models]
@@ -97,11 +140,7 @@ def learn(iterations, floor, energy_weight, normalize, fixed):
             samples = [sampler.sample(it * 8 + j) for j in range(8)]
             batch = T.make_batch(samples, DT, "cpu", weights=np.full(8, 1 / 8),
                                  normalize=normalize, normalize_floor=floor)
-        loss, _ = T.batch_loss(model, batch, DT, 1000.0, energy_weight)
-        optimizer.zero_grad()
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
-        optimizer.step()
+        train_step(model, optimizer, batch, energy_weight)
         if it % 200 == 0:
             model.eval()
             q = np.quantile(taken_shares(run, held, steps), [0.25, 0.5, 0.75])
@@ -163,7 +202,7 @@ def force_channel(scale, modes=0, count=64):
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="command", required=True)
-    for name in ("taken", "probe"):
+    for name in ("taken", "probe", "settle"):
         sub.add_parser(name).add_argument("models", nargs="+")
     q = sub.add_parser("learn")
     q.add_argument("--iterations", type=int, default=1200)
@@ -178,6 +217,8 @@ def main():
         taken(args.models)
     elif args.command == "probe":
         probe(args.models)
+    elif args.command == "settle":
+        settle(args.models)
     elif args.command == "learn":
         learn(args.iterations, args.floor, args.energy_weight, not args.no_normalize, args.fixed)
     else:

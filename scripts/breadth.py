@@ -29,7 +29,8 @@ direction changes bending (README "What we learned").
 --alignment appends the edge channel kappa (d . n)^2 (Pa), the fiber's alignment with the rest
 edge; --tensor replaces the fiber feature kappa d by kappa d d^T (6 channels, even in d); neither
 is a ModelConfig option. --elastic-force, --force-scale and --anchored are the ModelConfig
-options of those names, --no-deformation is deformation_inputs = false. Run with OMP_NUM_THREADS=1; `learn` takes 5-10 minutes.
+options of those names, --no-deformation is deformation_inputs = false. Run with
+OMP_NUM_THREADS=1; `learn` takes 5-10 minutes.
 """
 import argparse
 
@@ -39,7 +40,8 @@ import torch
 import anisofem
 from anisognn import evaluate
 from anisognn import train as T
-from at_rest import tip_accelerations  # scripts/ is on the path when run as a script
+# scripts/ is on the path when run as a script
+from at_rest import tip_accelerations, tip_deflections, tip_drop, train_step
 from anisognn.model import GraphNet, ModelConfig
 from anisognn.sampler import DENSITY, POISSON, YOUNG, Sampler, SamplerConfig
 
@@ -51,9 +53,7 @@ SHARES = (0.0, 0.5, 1.0)
 def tip_deflection(direction):
     """FEM tip deflection (mm) of the evaluation box beam under gravity, fiber along direction."""
     scene = evaluate._scene(evaluate._beam("box"), direction, GRAVITY)
-    X = scene.mesh.vertices
-    tip = X[:, 0] >= X[:, 0].max() - 1e-9
-    return -1e3 * (anisofem.solve(scene).x - X)[tip, 2].mean()
+    return tip_drop(scene, anisofem.solve(scene).x)
 
 
 def deflections():
@@ -164,11 +164,7 @@ def learn(args):
             group["lr"] = 1e-3 * 0.5 ** (3 * it / args.iterations)  # halved 3 times per run
         samples = [sampler.sample(it * 8 + j) for j in range(8)]
         batch = T.make_batch(samples, DT, "cpu", weights=np.full(8, 1 / 8), normalize=True)
-        loss, _ = T.batch_loss(model, batch, DT, 1000.0, 1.0)
-        optimizer.zero_grad()
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
-        optimizer.step()
+        train_step(model, optimizer, batch)
         if it % 500 == 0:
             model.eval()
             print(it, tip_table(run, cases, x_fem), flush=True)
@@ -176,12 +172,8 @@ def learn(args):
     model.eval()
     print("tip deflection (mm) after 300 steps from rest, model / FEM:")
     for c, xf in zip(cases, x_fem):
-        X = c.scene.mesh.vertices
-        tip = X[:, 0] >= X[:, 0].max() - 1e-9
-        positions = evaluate._rollout(run, c.scene, 300)
-        model_tip = np.nan if positions is None else -1e3 * (positions[-1] - X)[tip, 2].mean()
-        print(f"  {c.label:40} {model_tip:8.2f} {-1e3 * (xf - X)[tip, 2].mean():6.2f}",
-              flush=True)
+        (model_tip,), _ = tip_deflections(run, c.scene, (300,))
+        print(f"  {c.label:40} {model_tip:8.2f} {tip_drop(c.scene, xf):6.2f}", flush=True)
 
 
 def main():

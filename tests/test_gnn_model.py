@@ -362,7 +362,7 @@ def test_force_scale_compresses_the_force_input_and_keeps_small_forces_linear():
 
 
 @pytest.mark.parametrize("aggregation", ["directional", "sum"])
-def test_anchored_model_is_still_at_the_fem_equilibrium_and_nowhere_else(aggregation):
+def test_anchored_model_is_still_at_the_fem_equilibrium_not_under_load_or_moving(aggregation):
     """With anchored = true the output is zero at anisofem's static equilibrium at rest (to the
     solver's tolerance; a random network, not trained), and not at the rest shape under load
     or at the equilibrium with a velocity; without anchoring the random network moves there."""
