@@ -26,6 +26,8 @@ With noise_modes = k > 0 (not in the paper) the noise keeps those standard devia
 in the k softest modes of the scene at the sampled state (lowest eigenvectors of
 M^-1/2 K M^-1/2, K the PSD-projected static Hessian over the free DOFs): white noise mostly
 excites the stiff volumetric modes, whose forces then dwarf every other force in the state.
+With white_noise_probability (not in the paper) a sample's noise is white instead of in the
+soft modes: a mixture, whose white-noise samples show the stiff modes a rollout excites.
 With noise_decades = d > 0 (not in the paper)
 the two standard deviations are drawn log-uniformly from [10^-d, 1] times those maxima instead,
 so that more samples are nearly noise-free.
@@ -61,13 +63,14 @@ class SamplerConfig:
     noise_position: float = 1e-3       # in units of h
     noise_velocity: float = 5e-2       # in units of h per second
     noise_modes: int = 0               # 0: white noise; k > 0: in the k softest modes
+    white_noise_probability: float = 0.0  # with noise_modes: share of samples with white noise
     noise_decades: float = 0.0         # 0: noise sizes uniform in [0, max]; d: log-uniform
     dt: float = 0.02
 
     def __post_init__(self):
         for name in ("extra_force_probability", "traction_probability",
                      "varying_fiber_probability", "axis_fiber_probability", "deformed_probability",
-                     "equilibrium_probability"):
+                     "equilibrium_probability", "white_noise_probability"):
             if not 0 <= getattr(self, name) <= 1:
                 raise ValueError(f"[sampler] {name}: must be in [0, 1], got "
                                  f"{getattr(self, name)}")
@@ -81,6 +84,9 @@ class SamplerConfig:
         if not (isinstance(self.noise_modes, int) and self.noise_modes >= 0):
             raise ValueError(f"[sampler] noise_modes: must be an integer >= 0, got "
                              f"{self.noise_modes!r}")
+        if self.white_noise_probability and not self.noise_modes:
+            raise ValueError("[sampler] white_noise_probability: mixes white into soft-mode "
+                             "noise, so it needs noise_modes > 0")
         if not self.dt > 0:
             raise ValueError(f"[sampler] dt: must be > 0 s, got {self.dt}")
 
@@ -144,7 +150,10 @@ class Sampler:
             x = self._equilibrium(mesh, material, fixed, loads,
                                   rng.uniform(1 - c.equilibrium_spread, 1 + c.equilibrium_spread))
         free = ~scene.fixed_mask
-        shapes = _soft_modes(scene, x, c.noise_modes) if c.noise_modes else None
+        # no draw when white_noise_probability is 0: earlier configs keep their samples
+        soft = c.noise_modes and not (c.white_noise_probability
+                                      and rng.random() < c.white_noise_probability)
+        shapes = _soft_modes(scene, x, c.noise_modes) if soft else None
         x[free] += self._noise(rng, free.sum(), shapes, c.noise_position * h)
         v[free] += self._noise(rng, free.sum(), shapes, c.noise_velocity * h)
         return Sample(scene, x, v)

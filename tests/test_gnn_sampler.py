@@ -74,6 +74,29 @@ def test_noise_options_are_validated():
         SamplerConfig(noise_modes=2.5)
     with pytest.raises(ValueError, match="noise_decades"):
         SamplerConfig(noise_decades=-1.0)
+    with pytest.raises(ValueError, match="white_noise_probability"):
+        SamplerConfig(white_noise_probability=0.5)
+    with pytest.raises(ValueError, match="white_noise_probability"):
+        SamplerConfig(noise_modes=8, white_noise_probability=1.5)
+
+
+def test_white_noise_probability_mixes_white_and_soft_mode_noise():
+    """With noise_modes = 8 and white_noise_probability = 0.5, each sample's noise is either
+    about as stiff per unit mass as white noise on the same scene or 100 times less stiff,
+    and both kinds occur."""
+    rest = dict(equilibrium_probability=1.0, equilibrium_spread=0.0, noise_velocity=0.0)
+    clean = Sampler(4, SamplerConfig(**rest, noise_position=0.0))
+    white = Sampler(4, SamplerConfig(**rest))
+    mixed = Sampler(4, SamplerConfig(**rest, noise_modes=8, white_noise_probability=0.5))
+    ratios = []
+    for i in range(12):
+        c, w, s = clean.sample(i), white.sample(i), mixed.sample(i)
+        ratios.append(_stiffness_per_mass(c.scene, c.x, s.x - c.x)
+                      / _stiffness_per_mass(c.scene, c.x, w.x - c.x))
+    ratios = np.array(ratios)
+    is_white = ratios > 0.3
+    assert np.all(is_white | (ratios < 1e-2)), ratios
+    assert 2 <= is_white.sum() <= 10, ratios
 
 
 def test_noise_decades_draw_the_noise_size_log_uniformly():
