@@ -57,7 +57,15 @@ class ModelConfig:
     deformation_inputs = false (not in the paper; needs elastic_force, excludes fiber_stress)
     drops the current edge vector, length and strain channels: the network sees the
     deformation only through the force input, so it cannot learn an elastic response of its
-    own beside anisofem's."""
+    own beside anisofem's.
+    force_only (not in the paper; needs elastic_force and deformation_inputs = false, excludes
+    anchored and force_scale) makes the step a function of the force acceleration g at the
+    inertial predictor alone, as backward Euler's is: vertex inputs mass, g / s and
+    log(1 + s / S), where s (m/s^2) is the rms of |g| smoothed over `steps` hops and S the
+    acceleration scale; the output is s S / (s + S) (P(g / s) - P(-g / s)) / 2 for the
+    network P with the force input flipped: odd in g, proportional to it while s << S and
+    bounded like the other models' beyond (velocity and external force enter only through g;
+    zero wherever the forces balance). Costs a second pass of the processor."""
     latent: int = 128
     hidden_layers: int = 2
     steps: int = 15
@@ -68,6 +76,7 @@ class ModelConfig:
     force_scale: float = 0.0
     anchored: bool = False
     deformation_inputs: bool = True
+    force_only: bool = False
 
     def __post_init__(self):
         if self.aggregation not in AGGREGATIONS:
@@ -79,7 +88,8 @@ class ModelConfig:
                 raise ValueError(f"{name}: expected a positive integer, got {value!r}")
         if not self.dt > 0:
             raise ValueError(f"dt: expected a time step > 0 s, got {self.dt!r}")
-        for name in ("fiber_stress", "elastic_force", "anchored", "deformation_inputs"):
+        for name in ("fiber_stress", "elastic_force", "anchored", "deformation_inputs",
+                     "force_only"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected true or false, got {getattr(self, name)!r}")
         if not self.force_scale >= 0:
@@ -97,6 +107,14 @@ class ModelConfig:
         if not self.deformation_inputs and self.fiber_stress:
             raise ValueError("deformation_inputs: false drops the strains fiber_stress is made "
                              "of; set fiber_stress = false")
+        if self.force_only and (self.deformation_inputs or not self.elastic_force):
+            raise ValueError("force_only: the step is a function of the elastic-force input "
+                             "alone, so it needs elastic_force = true and deformation_inputs "
+                             "= false")
+        if self.force_only and (self.anchored or self.force_scale):
+            raise ValueError("force_only: the output is already zero where the forces "
+                             "balance and scales with them; set anchored = false and "
+                             "force_scale = 0")
 
     @property
     def edge_channels(self):
@@ -106,7 +124,10 @@ class ModelConfig:
 
     @property
     def vertex_channels(self):
-        """Number of normalized vertex features: 7, 10 with elastic_force."""
+        """Number of normalized vertex features: 7, 10 with elastic_force, 5 with force_only
+        (mass, the scaled force input and the force size)."""
+        if self.force_only:
+            return 5
         return VERTEX_REAL + 3 * int(self.elastic_force)
 
     def to_dict(self):
@@ -209,15 +230,45 @@ class GraphNet(nn.Module):
 
     def vertex_features(self, x, v, f_ext, graph):
         """(n, 7) raw vertex inputs: velocity, mass, external force; (n, 10) with the force
-        acceleration (f_elastic(x + dt v) + f_ext) / m, 0 on held components
-        (ModelConfig.elastic_force), as sign(a) log(1 + |a| / force_scale) when force_scale > 0."""
+        acceleration g (ModelConfig.elastic_force; force_input), as sign(g) log(1 + |g| /
+        force_scale) when force_scale > 0; (n, 5) mass, g / s and log(1 + s / S) with
+        force_only (scaled_force)."""
+        if self.config.force_only:
+            return self.scaled_force(self.force_input(x, v, f_ext, graph), graph)[0]
         features = [v, graph.mass, f_ext]
         if self.config.elastic_force:
-            force = elastic_force(x + self.config.dt * v, graph) + f_ext
-            accel = force / graph.mass * (1.0 - graph.fixed)
+            accel = self.force_input(x, v, f_ext, graph)
             scale = self.config.force_scale
             features.append(signed_log(accel, scale) if scale else accel)
         return torch.cat(features, dim=1)
+
+    def force_input(self, x, v, f_ext, graph):
+        """(n, 3) m/s^2: (f_elastic(x + dt v) + f_ext) / m, 0 on held components: the
+        acceleration the forces give at the inertial predictor."""
+        force = elastic_force(x + self.config.dt * v, graph) + f_ext
+        return force / graph.mass * (1.0 - graph.fixed)
+
+    def scaled_force(self, g, graph):
+        """((n, 5) raw force_only vertex inputs: mass, g / s, log(1 + s / S); (n, 1) the
+        output scale s S / (s + S), m/s^2) for the force input g (n, 3) m/s^2, with s its
+        size (force_size) and S the acceleration scale."""
+        size = self.force_size(g, graph)
+        ratio = size / self.accel_scale
+        inputs = torch.cat([graph.mass, g / size, torch.log1p(ratio)], dim=1)
+        return inputs, size / (1.0 + ratio)
+
+    def force_size(self, g, graph, floor=1e-12):
+        """(n, 1) m/s^2: the rms of |g| (n, 3) over each vertex's neighbourhood, averaged with
+        its in-neighbours `steps` times (floored at floor m/s^2): positively homogeneous in g,
+        and as far-reaching as the message passing."""
+        valid = (graph.incoming < graph.n_edges).to(g.dtype)
+        neighbours = graph.senders[torch.where(graph.incoming < graph.n_edges,
+                                               graph.incoming, 0)]  # (n, K)
+        count = 1.0 + valid.sum(dim=1, keepdim=True)
+        q = (g * g).sum(dim=1, keepdim=True)
+        for _ in range(self.config.steps):
+            q = (q + (q[neighbours, 0] * valid).sum(dim=1, keepdim=True)) / count
+        return torch.sqrt(q) + floor
 
     def aggregation_weights(self, graph):
         """(n, K, C) weights of each vertex's incoming edges: C = 3 directional, 1 sum."""
@@ -228,31 +279,40 @@ class GraphNet(nn.Module):
     def forward(self, x, v, f_ext, graph):
         """Accelerations (n, 3) in m/s^2 for positions x (n, 3) m, velocities v (n, 3) m/s and
         external forces f_ext (n, 3) N on graph (anisognn.graph.Graph)."""
-        vertex_in = self.vertex_features(x, v, f_ext, graph)
+        if self.config.force_only:
+            vertex_in, scale = self.scaled_force(self.force_input(x, v, f_ext, graph), graph)
+        else:
+            vertex_in = self.vertex_features(x, v, f_ext, graph)
         edge = self.edge_encoder(self.edge_norm(self.edge_features(x, graph)))
         weights = self.aggregation_weights(graph).transpose(1, 2)  # (n, C, K)
         # padding slots (index E) read edge 0 instead: their weights are 0, so no pad row is
         # concatenated to the edges at every step
         incoming = torch.where(graph.incoming < graph.n_edges, graph.incoming, 0)
+        if self.config.force_only:
+            # odd in the force: the same network on the flipped force input, subtracted
+            flipped = torch.cat([vertex_in[:, :1], -vertex_in[:, 1:4], vertex_in[:, 4:]], dim=1)
+            return 0.5 * scale * (self.process(vertex_in, edge, graph, weights, incoming)
+                                  - self.process(flipped, edge, graph, weights, incoming))
         a = self.process(vertex_in, edge, graph, weights, incoming)
         if self.config.anchored:
             # the same positions at rest with balanced forces: velocity and force input zero
             at_rest = torch.cat([torch.zeros_like(vertex_in[:, :3]), vertex_in[:, 3:VERTEX_REAL],
                                  torch.zeros_like(vertex_in[:, VERTEX_REAL:])], dim=1)
             a = a - self.process(at_rest, edge, graph, weights, incoming)
-        return a
+        return a * self.accel_scale
 
     def process(self, vertex_in, edge, graph, weights, incoming):
-        """(n, 3) m/s^2 decoded after message passing from raw vertex inputs (n, vertex_channels)
-        and encoded edges (E, L), with the aggregation weights (n, C, K) and the incoming table
-        (n, K) whose padding slots read edge 0."""
+        """(n, 3) decoded after message passing from raw vertex inputs (n, vertex_channels) and
+        encoded edges (E, L), with the aggregation weights (n, C, K) and the incoming table
+        (n, K) whose padding slots read edge 0: in units of accel_scale (forward), or of the
+        force size (force_only)."""
         vert = self.vertex_encoder(torch.cat([graph.fixed, self.vertex_norm(vertex_in)], dim=1))
         for edge_update, vertex_update in zip(self.edge_updates, self.vertex_updates):
             edge = edge + edge_update(edge, vert, graph.senders, graph.receivers)
             gathered = edge[incoming]  # (n, K, L)
             agg = torch.matmul(weights, gathered).flatten(1)  # (n, C L)
             vert = vert + vertex_update(torch.cat([vert, agg], dim=1))
-        return self.decoder(vert) * self.accel_scale
+        return self.decoder(vert)
 
 
 def fiber_stress(fiber, rest_unit, stretch):

@@ -8,8 +8,8 @@ direction changes bending (README "What we learned").
     python scripts/breadth.py learn [--dirs axes|random|curriculum] [--kappa-max K]
                                     [--loads gravity|random] [--fiber-stress] [--alignment]
                                     [--tensor] [--elastic-force] [--force-scale S]
-                                    [--anchored] [--no-deformation] [--aggregation sum]
-                                    [--iterations N]
+                                    [--anchored] [--no-deformation] [--force-only]
+                                    [--aggregation sum] [--iterations N]
                                                train a fresh 32 x 6 model for N iterations
                                                (shipped loss, learning rate 1e-3 halved
                                                three times over the run, no own-rollout
@@ -28,8 +28,8 @@ direction changes bending (README "What we learned").
 
 --alignment appends the edge channel kappa (d . n)^2 (Pa), the fiber's alignment with the rest
 edge; --tensor replaces the fiber feature kappa d by kappa d d^T (6 channels, even in d); neither
-is a ModelConfig option. --elastic-force, --force-scale and --anchored are the ModelConfig
-options of those names, --no-deformation is deformation_inputs = false. Run with
+is a ModelConfig option. --elastic-force, --force-scale, --anchored and --force-only are the
+ModelConfig options of those names, --no-deformation is deformation_inputs = false. Run with
 OMP_NUM_THREADS=1; `learn` takes 5-10 minutes.
 """
 import argparse
@@ -147,7 +147,7 @@ def learn(args):
     kind, model_config = ((Aligned, AlignedConfig) if args.alignment else
                           (Tensor, TensorConfig) if args.tensor else (GraphNet, ModelConfig))
     force = dict(elastic_force=True, force_scale=args.force_scale, anchored=args.anchored,
-                 deformation_inputs=not args.no_deformation)
+                 deformation_inputs=not args.no_deformation, force_only=args.force_only)
     model = kind(model_config(latent=32, hidden_layers=2, steps=6, aggregation=args.aggregation,
                               fiber_stress=args.fiber_stress,
                               **(force if args.elastic_force else {})))
@@ -191,6 +191,7 @@ def main():
     q.add_argument("--force-scale", type=float, default=0.0)
     q.add_argument("--anchored", action="store_true")
     q.add_argument("--no-deformation", action="store_true")
+    q.add_argument("--force-only", action="store_true")
     q.add_argument("--aggregation", choices=("directional", "sum"), default="directional")
     q.add_argument("--iterations", type=int, default=3000)
     args = p.parse_args()

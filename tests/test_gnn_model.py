@@ -259,6 +259,15 @@ def test_config_validation():
         ModelConfig(deformation_inputs=False)
     with pytest.raises(ValueError, match="deformation_inputs.*fiber_stress"):
         ModelConfig(deformation_inputs=False, elastic_force=True, fiber_stress=True)
+    force_only = dict(elastic_force=True, deformation_inputs=False, force_only=True)
+    with pytest.raises(ValueError, match="force_only.*deformation_inputs"):
+        ModelConfig(**dict(force_only, deformation_inputs=True))
+    with pytest.raises(ValueError, match="force_only.*anchored"):
+        ModelConfig(**force_only, anchored=True)
+    with pytest.raises(ValueError, match="force_only.*force_scale"):
+        ModelConfig(**force_only, force_scale=1.0)
+    with pytest.raises(ValueError, match="force_only"):
+        ModelConfig(**dict(force_only, force_only="yes"))
     assert anisognn.ModelConfig().latent == 128 and ModelConfig().steps == 15
 
 
@@ -409,3 +418,67 @@ def test_without_deformation_inputs_the_edges_see_only_the_rest_shape_and_fiber(
     with torch.no_grad():
         change = (net(bent, still, f, g) - net(rest, still, f, g)).abs().max()
     assert change > 1e-3
+
+
+def force_only_net(aggregation="directional"):
+    """A random (decoder normal-initialized) 16 x 2 force_only network in float64."""
+    torch.manual_seed(0)
+    net = GraphNet(ModelConfig(latent=16, steps=2, aggregation=aggregation, elastic_force=True,
+                               deformation_inputs=False, force_only=True))
+    torch.nn.init.normal_(net.decoder[-1].weight)
+    return net.double()
+
+
+@pytest.mark.parametrize("aggregation", ["directional", "sum"])
+def test_force_only_output_is_odd_in_the_force_and_scales_with_it(aggregation, monkeypatch):
+    """force_only: for any force input g, the output for -g is minus the output for g; while
+    g is small against the acceleration scale S, for 3 g it is three times the output for g,
+    for 0 zero, and for two different g the outputs are not proportional; for g far above S
+    the output stops growing."""
+    scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
+    g = G.from_scene(scene, torch.float64)
+    x = torch.tensor(scene.initial_positions())
+    v, f = torch.zeros_like(x), torch.tensor(scene.external_force)
+    net = force_only_net(aggregation)
+    rng = np.random.default_rng(1)
+    first = torch.tensor(rng.normal(0, 5.0, x.shape)) * (1 - g.fixed)
+    second = torch.tensor(rng.normal(0, 5.0, x.shape)) * (1 - g.fixed)
+
+    def out(force):
+        monkeypatch.setattr(net, "force_input", lambda *args: force)
+        with torch.no_grad():
+            return net(x, v, f, g)
+    net.accel_scale.fill_(1e12)  # m/s^2: the forces above are small against it
+    a = out(first)
+    assert float(a.abs().max()) > 1e-2
+    np.testing.assert_allclose(out(-first), -a, rtol=0, atol=1e-12 * float(a.abs().max()))
+    np.testing.assert_allclose(out(3.0 * first), 3.0 * a, rtol=1e-8, atol=1e-12)
+    assert float(out(0.0 * first).abs().max()) == 0.0
+    b = out(second)
+    ratio = (b * a).sum() / (a * a).sum()
+    assert float((b - ratio * a).abs().max()) > 1e-3 * float(b.abs().max())
+    net.accel_scale.fill_(1.0)
+    big, bigger = out(1e3 * first), out(1e6 * first)
+    np.testing.assert_allclose(out(-1e3 * first), -big, rtol=0, atol=1e-12 * float(big.abs().max()))
+    assert float(bigger.abs().max()) < 2.0 * float(big.abs().max())
+
+
+def test_force_only_model_sees_the_state_only_through_the_predictor_force():
+    """force_only: the output for (x, v) is the output for (x + dt v, 0); it is zero at
+    anisofem's static equilibrium at rest and not under load from the rest shape."""
+    scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
+    g = G.from_scene(scene, torch.float64)
+    f = torch.tensor(scene.external_force)
+    net = force_only_net()
+    x_eq = torch.tensor(af.solve(scene, rtol=1e-10).x)
+    rest = torch.tensor(scene.initial_positions())
+    v = torch.tensor(np.random.default_rng(2).normal(0, 0.05, x_eq.shape)) * (1 - g.fixed)
+    with torch.no_grad():
+        moving = net(rest, v, f, g)
+        predicted = net(rest + net.config.dt * v, torch.zeros_like(v), f, g)
+        np.testing.assert_allclose(moving, predicted, rtol=0,
+                                   atol=1e-9 * float(moving.abs().max()))
+        under_load = float(net(rest, torch.zeros_like(v), f, g).abs().max())
+        at_equilibrium = float(net(x_eq, torch.zeros_like(v), f, g).abs().max())
+    assert under_load > 1e-2
+    assert at_equilibrium < 1e-4 * under_load
