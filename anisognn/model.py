@@ -34,6 +34,7 @@ VERTEX_FLAGS = 3   # Dirichlet flags per component
 VERTEX_REAL = 7    # velocity 3, mass 1, external force 3 (+ 3 force accelerations)
 EDGE_FEATURES = 15  # rest unit 3 + length 1, current unit 3 + length 1, fiber 3, strain 4
 DEFORMATION_FEATURES = 8  # of those: current unit 3 + length 1, strain 4
+FORCE_SATURATION = 100.0  # force_only: output scale bound, in units of the acceleration scale
 
 
 @dataclass
@@ -60,12 +61,14 @@ class ModelConfig:
     own beside anisofem's.
     force_only (not in the paper; needs elastic_force and deformation_inputs = false, excludes
     anchored and force_scale) makes the step a function of the force acceleration g at the
-    inertial predictor alone, as backward Euler's is: vertex inputs mass, g / s and
-    log(1 + s / S), where s (m/s^2) is the rms of |g| smoothed over `steps` hops and S the
-    acceleration scale; the output is s S / (s + S) (P(g / s) - P(-g / s)) / 2 for the
-    network P with the force input flipped: odd in g, proportional to it while s << S and
-    bounded like the other models' beyond (velocity and external force enter only through g;
-    zero wherever the forces balance). Costs a second pass of the processor."""
+    inertial predictor alone, as backward Euler's is: vertex inputs mass and g / s, where s
+    (m/s^2) is the rms of |g| smoothed over `steps` hops; the output is
+    s C / (s + C) (P(g / s) - P(-g / s)) / 2 for the network P, with C = FORCE_SATURATION
+    times the acceleration scale: odd in g, proportional to it while s << C (gravity-sized
+    forces) and bounded beyond (the stiff-mode forces of noisy or dynamic states, 1e4 m/s^2
+    and more, which with an unbounded scale made training diverge). Velocity and external
+    force enter only through g; the output is zero wherever the forces balance. Costs a
+    second pass of the processor."""
     latent: int = 128
     hidden_layers: int = 2
     steps: int = 15
@@ -124,10 +127,10 @@ class ModelConfig:
 
     @property
     def vertex_channels(self):
-        """Number of normalized vertex features: 7, 10 with elastic_force, 5 with force_only
-        (mass, the scaled force input and the force size)."""
+        """Number of normalized vertex features: 7, 10 with elastic_force, 4 with force_only
+        (mass and the scaled force input)."""
         if self.force_only:
-            return 5
+            return 4
         return VERTEX_REAL + 3 * int(self.elastic_force)
 
     def to_dict(self):
@@ -231,8 +234,8 @@ class GraphNet(nn.Module):
     def vertex_features(self, x, v, f_ext, graph):
         """(n, 7) raw vertex inputs: velocity, mass, external force; (n, 10) with the force
         acceleration g (ModelConfig.elastic_force; force_input), as sign(g) log(1 + |g| /
-        force_scale) when force_scale > 0; (n, 5) mass, g / s and log(1 + s / S) with
-        force_only (scaled_force)."""
+        force_scale) when force_scale > 0; (n, 4) mass and g / s with force_only
+        (scaled_force)."""
         if self.config.force_only:
             return self.scaled_force(self.force_input(x, v, f_ext, graph), graph)[0]
         features = [v, graph.mass, f_ext]
@@ -249,13 +252,12 @@ class GraphNet(nn.Module):
         return force / graph.mass * (1.0 - graph.fixed)
 
     def scaled_force(self, g, graph):
-        """((n, 5) raw force_only vertex inputs: mass, g / s, log(1 + s / S); (n, 1) the
-        output scale s S / (s + S), m/s^2) for the force input g (n, 3) m/s^2, with s its
-        size (force_size) and S the acceleration scale."""
+        """((n, 4) raw force_only vertex inputs: mass, g / s; (n, 1) the output scale
+        s C / (s + C), m/s^2) for the force input g (n, 3) m/s^2, with s its size
+        (force_size) and C = FORCE_SATURATION times the acceleration scale."""
         size = self.force_size(g, graph)
-        ratio = size / self.accel_scale
-        inputs = torch.cat([graph.mass, g / size, torch.log1p(ratio)], dim=1)
-        return inputs, size / (1.0 + ratio)
+        bound = FORCE_SATURATION * self.accel_scale
+        return torch.cat([graph.mass, g / size], dim=1), size * bound / (size + bound)
 
     def force_size(self, g, graph, floor=1e-12):
         """(n, 1) m/s^2: the rms of |g| (n, 3) over each vertex's neighbourhood, averaged with
@@ -290,7 +292,7 @@ class GraphNet(nn.Module):
         incoming = torch.where(graph.incoming < graph.n_edges, graph.incoming, 0)
         if self.config.force_only:
             # odd in the force: the same network on the flipped force input, subtracted
-            flipped = torch.cat([vertex_in[:, :1], -vertex_in[:, 1:4], vertex_in[:, 4:]], dim=1)
+            flipped = torch.cat([vertex_in[:, :1], -vertex_in[:, 1:]], dim=1)
             return 0.5 * scale * (self.process(vertex_in, edge, graph, weights, incoming)
                                   - self.process(flipped, edge, graph, weights, incoming))
         a = self.process(vertex_in, edge, graph, weights, incoming)

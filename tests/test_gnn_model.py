@@ -432,9 +432,9 @@ def force_only_net(aggregation="directional"):
 @pytest.mark.parametrize("aggregation", ["directional", "sum"])
 def test_force_only_output_is_odd_in_the_force_and_scales_with_it(aggregation, monkeypatch):
     """force_only: for any force input g, the output for -g is minus the output for g; while
-    g is small against the acceleration scale S, for 3 g it is three times the output for g,
-    for 0 zero, and for two different g the outputs are not proportional; for g far above S
-    the output stops growing."""
+    g is small against the saturation C, for 3 g it is three times the output for g, for 0
+    zero, and for two different g the outputs are not proportional; for g far above C the
+    output stops growing."""
     scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
     g = G.from_scene(scene, torch.float64)
     x = torch.tensor(scene.initial_positions())
@@ -448,7 +448,7 @@ def test_force_only_output_is_odd_in_the_force_and_scales_with_it(aggregation, m
         monkeypatch.setattr(net, "force_input", lambda *args: force)
         with torch.no_grad():
             return net(x, v, f, g)
-    net.accel_scale.fill_(1e12)  # m/s^2: the forces above are small against it
+    net.accel_scale.fill_(1e12)  # m/s^2: the forces above are small against C
     a = out(first)
     assert float(a.abs().max()) > 1e-2
     np.testing.assert_allclose(out(-first), -a, rtol=0, atol=1e-12 * float(a.abs().max()))
@@ -457,9 +457,10 @@ def test_force_only_output_is_odd_in_the_force_and_scales_with_it(aggregation, m
     b = out(second)
     ratio = (b * a).sum() / (a * a).sum()
     assert float((b - ratio * a).abs().max()) > 1e-3 * float(b.abs().max())
-    net.accel_scale.fill_(1.0)
-    big, bigger = out(1e3 * first), out(1e6 * first)
-    np.testing.assert_allclose(out(-1e3 * first), -big, rtol=0, atol=1e-12 * float(big.abs().max()))
+    net.accel_scale.fill_(1.0)  # C = FORCE_SATURATION m/s^2
+    big, bigger = out(1e4 * first), out(1e7 * first)
+    np.testing.assert_allclose(out(-1e4 * first), -big, rtol=0,
+                               atol=1e-12 * float(big.abs().max()))
     assert float(bigger.abs().max()) < 2.0 * float(big.abs().max())
 
 
