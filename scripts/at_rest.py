@@ -4,9 +4,11 @@
                                                noise-free at-rest training samples
     python scripts/at_rest.py probe MODEL...   tip z acceleration (m/s^2) of one step from rest at
                                                0-1.5 times the FEM deflection, four cantilevers
-    python scripts/at_rest.py settle MODEL...  tip deflection (mm) of the four cantilevers after
-                                               100, 300 and 1,000 steps from rest, and how far
-                                               it still moves over the last 100, next to the FEM's
+    python scripts/at_rest.py settle MODEL... [--steps N...]
+                                               tip deflection (mm) of the four cantilevers after
+                                               N steps from rest (100, 300 and 1,000), and how
+                                               far it still moves over the last 100, next to the
+                                               FEM's
     python scripts/at_rest.py learn [--iterations N] [--floor C] [--energy-weight W]
                                     [--no-normalize] [--fixed]
                                                train a fresh 32 x 6 directional model on at-rest
@@ -93,13 +95,14 @@ def tip_deflections(run, scene, steps):
     return [float(drop[k]) for k in steps], float(np.abs(drop[-100:] - drop[-1]).max())
 
 
-def settle(models):
+def settle(models, steps=(100, 300, 1000)):
     sims = [(name, evaluate.model_rollout(shipped.model(name))) for name in models]
     for case in evaluate.cases()[:4]:
         fem = tip_drop(case.scene, anisofem.solve(case.scene).x)
-        print(f"{case.label}; FEM {fem:.2f} mm; after 100, 300, 1000 steps, last-100 swing")
+        print(f"{case.label}; FEM {fem:.2f} mm; after {', '.join(map(str, steps))} steps, "
+              "last-100 swing")
         for name, run in sims:
-            drops, swing = tip_deflections(run, case.scene, (100, 300, 1000))
+            drops, swing = tip_deflections(run, case.scene, steps)
             print(f"  {name[-40:]:40}" + "".join(f"{d:9.2f}" for d in drops) + f"{swing:9.3f}")
 
 
@@ -204,6 +207,7 @@ def main():
     sub = p.add_subparsers(dest="command", required=True)
     for name in ("taken", "probe", "settle"):
         sub.add_parser(name).add_argument("models", nargs="+")
+    sub.choices["settle"].add_argument("--steps", type=int, nargs="+", default=[100, 300, 1000])
     q = sub.add_parser("learn")
     q.add_argument("--iterations", type=int, default=1200)
     q.add_argument("--floor", type=float, default=0.0)
@@ -218,7 +222,7 @@ def main():
     elif args.command == "probe":
         probe(args.models)
     elif args.command == "settle":
-        settle(args.models)
+        settle(args.models, args.steps)
     elif args.command == "learn":
         learn(args.iterations, args.floor, args.energy_weight, not args.no_normalize, args.fixed)
     else:
