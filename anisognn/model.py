@@ -3,10 +3,12 @@ aggregation), decode to end-of-step accelerations (paper section 3.1).
 
 Inputs per vertex: Dirichlet flags (3, one per component, not normalized), velocity (3, m/s),
 mass (1, kg), external force (3, N), and with ModelConfig.elastic_force the acceleration the
-forces give at the inertial predictor, (f_elastic(x + dt v) + f_ext) / m (3, m/s^2). Inputs
+forces give at the inertial predictor, (f_elastic(x + dt v) + f_ext) / m (3, m/s^2); with
+ModelConfig.force_only the flags, mass and that acceleration over its size only. Inputs
 per directed edge (sender s -> receiver r): unit rest vector and rest length (4), unit current
 vector x_s - x_r and current length (4), fiber feature (3, Pa), the edge's deformation (4), and
-with ModelConfig.fiber_stress the fiber stress along the edge (1, Pa). All but the flags are
+with ModelConfig.fiber_stress the fiber stress along the edge (1, Pa); without
+ModelConfig.deformation_inputs the rest vector, rest length and fiber only. All but the flags are
 normalized with statistics stored as buffers.
 
 Processor step l (paper eq. 3):
@@ -306,8 +308,8 @@ class GraphNet(nn.Module):
     def process(self, vertex_in, edge, graph, weights, incoming):
         """(n, 3) decoded after message passing from raw vertex inputs (n, vertex_channels) and
         encoded edges (E, L), with the aggregation weights (n, C, K) and the incoming table
-        (n, K) whose padding slots read edge 0: in units of accel_scale (forward), or of the
-        force size (force_only)."""
+        (n, K) whose padding slots read edge 0: in units of accel_scale, or of the force_only
+        output scale (scaled_force)."""
         vert = self.vertex_encoder(torch.cat([graph.fixed, self.vertex_norm(vertex_in)], dim=1))
         for edge_update, vertex_update in zip(self.edge_updates, self.vertex_updates):
             edge = edge + edge_update(edge, vert, graph.senders, graph.receivers)
