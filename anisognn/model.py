@@ -265,9 +265,9 @@ class GraphNet(nn.Module):
         """(n, 1) m/s^2: the rms of |g| (n, 3) over each vertex's neighbourhood, averaged with
         its in-neighbours `steps` times (floored at floor m/s^2): positively homogeneous in g,
         and as far-reaching as the message passing."""
-        valid = (graph.incoming < graph.n_edges).to(g.dtype)
-        neighbours = graph.senders[torch.where(graph.incoming < graph.n_edges,
-                                               graph.incoming, 0)]  # (n, K)
+        incoming, valid = incoming_slots(graph)
+        valid = valid.to(g.dtype)
+        neighbours = graph.senders[incoming]  # (n, K)
         count = 1.0 + valid.sum(dim=1, keepdim=True)
         q = (g * g).sum(dim=1, keepdim=True)
         for _ in range(self.config.steps):
@@ -278,7 +278,7 @@ class GraphNet(nn.Module):
         """(n, K, C) weights of each vertex's incoming edges: C = 3 directional, 1 sum."""
         if self.config.aggregation == "directional":
             return graph.in_weights
-        return (graph.incoming < graph.n_edges).to(graph.in_weights.dtype).unsqueeze(-1)
+        return incoming_slots(graph)[1].to(graph.in_weights.dtype).unsqueeze(-1)
 
     def forward(self, x, v, f_ext, graph):
         """Accelerations (n, 3) in m/s^2 for positions x (n, 3) m, velocities v (n, 3) m/s and
@@ -289,9 +289,7 @@ class GraphNet(nn.Module):
             vertex_in = self.vertex_features(x, v, f_ext, graph)
         edge = self.edge_encoder(self.edge_norm(self.edge_features(x, graph)))
         weights = self.aggregation_weights(graph).transpose(1, 2)  # (n, C, K)
-        # padding slots (index E) read edge 0 instead: their weights are 0, so no pad row is
-        # concatenated to the edges at every step
-        incoming = torch.where(graph.incoming < graph.n_edges, graph.incoming, 0)
+        incoming = incoming_slots(graph)[0]
         if self.config.force_only:
             # odd in the force: the same network on the flipped force input, subtracted
             flipped = torch.cat([vertex_in[:, :1], -vertex_in[:, 1:]], dim=1)
@@ -317,6 +315,14 @@ class GraphNet(nn.Module):
             agg = torch.matmul(weights, gathered).flatten(1)  # (n, C L)
             vert = vert + vertex_update(torch.cat([vert, agg], dim=1))
         return self.decoder(vert)
+
+
+def incoming_slots(graph):
+    """((n, K) int64 incoming edge per slot, (n, K) bool whether the slot holds one) of
+    graph's padded incoming table: padding slots (index E) read edge 0 instead, and their
+    weights are 0, so no pad row is concatenated to the edges at every step."""
+    valid = graph.incoming < graph.n_edges
+    return torch.where(valid, graph.incoming, 0), valid
 
 
 def fiber_stress(fiber, rest_unit, stretch):

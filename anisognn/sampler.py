@@ -28,9 +28,9 @@ M^-1/2 K M^-1/2, K the PSD-projected static Hessian over the free DOFs): white n
 excites the stiff volumetric modes, whose forces then dwarf every other force in the state.
 With white_noise_probability (not in the paper) a sample's noise is white instead of in the
 soft modes: a mixture, whose white-noise samples show the stiff modes a rollout excites.
-With noise_decades = d > 0 (not in the paper)
-the two standard deviations are drawn log-uniformly from [10^-d, 1] times those maxima instead,
-so that more samples are nearly noise-free.
+With noise_decades = d > 0 (not in the paper) the two standard deviations are drawn
+log-uniformly from [10^-d, 1] times those maxima instead, so that more samples are nearly
+noise-free.
 """
 from dataclasses import dataclass
 
