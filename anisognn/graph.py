@@ -25,6 +25,8 @@ class Graph:
     tets (m, 4) int64, tet_gradients (m, 4, 3) 1/m, tet_material (m, 4) volume m^3 and mu, lam,
     kappa Pa, tet_fiber (m, 3) unit, corners (n, C) int64 corner slots padded with 4 m: the
     per-tet constants of the elastic force (export/runtime.py).
+    sample: (n,) int64 the batch member of each vertex (set by batch; None for one mesh): the
+    Galerkin step (anisognn.galerkin) solves one small system per member.
     """
     senders: torch.Tensor
     receivers: torch.Tensor
@@ -40,6 +42,7 @@ class Graph:
     tet_material: torch.Tensor
     tet_fiber: torch.Tensor
     corners: torch.Tensor
+    sample: torch.Tensor = None
 
     @classmethod
     def from_inputs(cls, tensors):
@@ -62,6 +65,8 @@ class Graph:
         out = {}
         for f in fields(self):
             t = getattr(self, f.name)
+            if t is None:
+                continue
             out[f.name] = t.to(device=device, dtype=dtype if t.is_floating_point() else None)
         return Graph(**out)
 
@@ -108,9 +113,11 @@ def batch(graphs):
     joined = {name: torch.cat([getattr(g, name) for g in graphs])
               for name in ("rest", "fiber", "mass", "fixed", "fixed_positions", "tet_gradients",
                            "tet_material", "tet_fiber")}
+    sample = torch.cat([torch.full((g.n_vertices,), k, dtype=torch.int64)
+                        for k, g in enumerate(graphs)])
     return Graph(senders=torch.cat(senders), receivers=torch.cat(receivers),
                  incoming=torch.cat(incoming), in_weights=torch.cat(in_weights),
-                 tets=torch.cat(tets), corners=torch.cat(corners), **joined)
+                 tets=torch.cat(tets), corners=torch.cat(corners), sample=sample, **joined)
 
 
 def _offset_table(table, own_pad, offset, pad_index, width):

@@ -30,6 +30,7 @@ import torch
 from torch import nn
 
 from .elastic import elastic_force
+from .galerkin import galerkin_acceleration
 
 AGGREGATIONS = ("directional", "sum")
 VERTEX_FLAGS = 3   # Dirichlet flags per component
@@ -82,6 +83,7 @@ class ModelConfig:
     anchored: bool = False
     deformation_inputs: bool = True
     force_only: bool = False
+    galerkin: bool = False
 
     def __post_init__(self):
         if self.aggregation not in AGGREGATIONS:
@@ -94,7 +96,7 @@ class ModelConfig:
         if not self.dt > 0:
             raise ValueError(f"dt: expected a time step > 0 s, got {self.dt!r}")
         for name in ("fiber_stress", "elastic_force", "anchored", "deformation_inputs",
-                     "force_only"):
+                     "force_only", "galerkin"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected true or false, got {getattr(self, name)!r}")
         if not self.force_scale >= 0:
@@ -207,9 +209,11 @@ class GraphNet(nn.Module):
         self.vertex_updates = nn.ModuleList(
             mlp(L * (1 + channels), L, L, H, layer_norm=True) for _ in range(c.steps))
         self.decoder = mlp(L, L, 3, H, layer_norm=False)
-        # start from "no acceleration beyond what the inputs imply": a zero output layer
-        nn.init.zeros_(self.decoder[-1].weight)
-        nn.init.zeros_(self.decoder[-1].bias)
+        if not c.galerkin:
+            # start from "no acceleration beyond what the inputs imply": a zero output layer
+            # (with galerkin only the output's direction counts, and a zero one has none)
+            nn.init.zeros_(self.decoder[-1].weight)
+            nn.init.zeros_(self.decoder[-1].bias)
 
     def edge_features(self, x, graph):
         """(E, 15) raw edge inputs: rest unit + length (m), current unit + length (m), fiber,
@@ -283,6 +287,13 @@ class GraphNet(nn.Module):
     def forward(self, x, v, f_ext, graph):
         """Accelerations (n, 3) in m/s^2 for positions x (n, 3) m, velocities v (n, 3) m/s and
         external forces f_ext (n, 3) N on graph (anisognn.graph.Graph)."""
+        a = self.network_acceleration(x, v, f_ext, graph)
+        if self.config.galerkin:
+            return galerkin_acceleration(a, x, v, f_ext, graph, self.config.dt)
+        return a
+
+    def network_acceleration(self, x, v, f_ext, graph):
+        """(n, 3) m/s^2: the network's own acceleration (forward without galerkin)."""
         if self.config.force_only:
             vertex_in, scale = self.scaled_force(self.force_input(x, v, f_ext, graph), graph)
         else:

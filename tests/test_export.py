@@ -54,8 +54,8 @@ def simulator(path, scene, **kwargs):
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory):
     """{name: (torch model, onnx path)} for both shipped models and an untrained one with the
-    optional inputs (fiber stress, compressed elastic force, anchored) and a force_only one
-    (random decoders), exported fresh."""
+    optional inputs (fiber stress, compressed elastic force, anchored), a force_only one and
+    a galerkin one (random decoders), exported fresh."""
     folder = tmp_path_factory.mktemp("onnx")
     out = {}
     for name in anisognn.shipped.NAMES:
@@ -71,11 +71,14 @@ def exported(tmp_path_factory):
                                                  deformation_inputs=False, force_only=True))
     torch.nn.init.normal_(net.decoder[-1].weight)
     out[FORCE_ONLY] = net, to_onnx.export(net, str(folder / "force_only.onnx"))
+    net = anisognn.GraphNet(anisognn.ModelConfig(latent=16, steps=2, galerkin=True))
+    out[GALERKIN] = net, to_onnx.export(net, str(folder / "galerkin.onnx"))
     return out
 
 
 OPTIONAL = "fiber stress + elastic force (signed log), anchored"
 FORCE_ONLY = "force only"
+GALERKIN = "galerkin step"
 
 
 MESHES = {"box 3x2x1 (30 tets)": lambda: (box((3, 2, 1)), "x0"),
@@ -97,7 +100,7 @@ def states(mesh, count, seed=0):
         yield x, rng.normal(0, 0.05, x.shape)
 
 
-@pytest.mark.parametrize("name", anisognn.shipped.NAMES + (OPTIONAL, FORCE_ONLY))
+@pytest.mark.parametrize("name", anisognn.shipped.NAMES + (OPTIONAL, FORCE_ONLY, GALERKIN))
 @pytest.mark.parametrize("mesh_name", list(MESHES))
 def test_parity_with_torch(exported, name, mesh_name):
     net, path = exported[name]
