@@ -62,7 +62,11 @@ class TrainConfig:
     states its own rollouts visit (a state that leaves the bounds of own_rollout keeps its
     sampled start). learning_rate
     decays by lr_decay every decay_every iterations (continuously); grad_clip bounds the global
-    gradient norm (0: off)."""
+    gradient norm (0: off).
+    through_galerkin (for a model with ModelConfig.galerkin): true trains the network through
+    the Galerkin step (the loss, the own-rollout states and the held-out evaluation see the
+    model's step); false trains its own acceleration exactly as without galerkin (same
+    initialization, same arithmetic), and the projection acts only in the finished model."""
     newton_weight: float = 0.0
     energy_weight: float = 1.0
     rest_weight: float = 0.0
@@ -84,6 +88,7 @@ class TrainConfig:
     checkpoint_every: int = 100
     normalization_samples: int = 64
     out: str = "runs/default"
+    through_galerkin: bool = True
 
     def __post_init__(self):
         for name in ("newton_weight", "energy_weight", "rest_weight", "normalize_floor"):
@@ -98,6 +103,9 @@ class TrainConfig:
         if not (isinstance(self.rollout_steps, int) and self.rollout_steps >= 1):
             raise ValueError(f"[train] rollout_steps: must be an integer >= 1, got "
                              f"{self.rollout_steps!r}")
+        if not isinstance(self.through_galerkin, bool):
+            raise ValueError(f"[train] through_galerkin: expected true or false, got "
+                             f"{self.through_galerkin!r}")
         if self.newton_weight == 0 and self.energy_weight == 0 and self.rest_weight == 0:
             raise ValueError("[train] newton_weight, energy_weight, rest_weight: at least one "
                              "must be > 0")
@@ -370,6 +378,14 @@ def _check_resumable(payload, config, path):
                          f"iterations = {config.train.iterations}")
 
 
+def trained_config(config):
+    """The ModelConfig of the network a RunConfig trains: its model's, without galerkin when
+    [train] through_galerkin = false."""
+    if config.model.galerkin and not config.train.through_galerkin:
+        return dataclasses.replace(config.model, galerkin=False)
+    return config.model
+
+
 def _train(config, progress, rank, world, device):
     tc = config.train
     out = tc.out
@@ -378,7 +394,7 @@ def _train(config, progress, rank, world, device):
     if rank == 0:
         os.makedirs(out, exist_ok=True)
     torch.manual_seed(tc.seed)
-    model = GraphNet(config.model)
+    model = GraphNet(trained_config(config))
     sampler = Sampler(tc.seed, config.sampler)
     optimizer = torch.optim.Adam(model.parameters(), lr=tc.learning_rate)
     start = 0
@@ -460,7 +476,9 @@ def _train(config, progress, rank, world, device):
         dist.all_gather_object(digests, summary["digest"])
         summary["rank_digests"] = digests
     if rank == 0:
-        checkpoint.save(os.path.join(out, "model.pt"), model)
+        finished = GraphNet(config.model)  # with galerkin, whatever through_galerkin said
+        finished.load_state_dict(model.state_dict())
+        checkpoint.save(os.path.join(out, "model.pt"), finished)
         log.write({"iteration": tc.iterations, "event": "done", **summary})
     return model, summary
 
