@@ -164,6 +164,8 @@ def test_a_fresh_galerkin_model_learns_and_its_float32_step_matches_float64():
 def test_config_validation():
     with pytest.raises(ValueError, match="galerkin"):
         ModelConfig(galerkin="yes")
+    with pytest.raises(ValueError, match="through_galerkin"):
+        T.make_config({"train": {"through_galerkin": "no"}})
 
 
 def test_the_energy_never_grows_in_the_small_strain_limit():
