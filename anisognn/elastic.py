@@ -19,22 +19,25 @@ def elastic_force(x, graph):
     return _vertex_forces(torch.matmul(F, _second_piola(F, graph)), graph).squeeze(1)
 
 
-def force_differentials(x, p, graph):
-    """(n, k, 3) N: the derivatives of elastic_force at positions x (n, 3) m along k
-    displacements p (n, k, 3) m, i.e. minus the elastic energy's Hessian at x times each (the
-    exact Hessian, not its PSD projection)."""
+def elastic_force_and_differential(x, graph):
+    """((n, 3) N, function): elastic_force at positions x (n, 3) m, and the function that maps
+    k displacements p (n, k, 3) m to the force's derivatives along them (n, k, 3) N, i.e.
+    minus the elastic energy's Hessian at x times each (the exact Hessian, not its PSD
+    projection). F and S are computed once for both."""
     F = _deformation_gradient(x.unsqueeze(1), graph)            # (m, 1, 3, 3)
     S = _second_piola(F, graph)
-    dF = _deformation_gradient(p, graph)                        # (m, k, 3, 3)
-    dC = torch.matmul(dF.transpose(-1, -2), F)
-    dC = dC + dC.transpose(-1, -2)
-    eye = torch.eye(3, dtype=x.dtype, device=x.device)
-    mu, lam, kappa, dd = _material(graph)
-    d_stretch = (dC * dd).sum(dim=(-2, -1), keepdim=True)       # d^T dC d
-    d_trace = 0.5 * (dC * eye).sum(dim=(-2, -1), keepdim=True)
-    dS = mu * dC + lam * d_trace * eye + 4.0 * kappa * d_stretch * dd
-    dP = torch.matmul(dF, S) + torch.matmul(F, dS)
-    return _vertex_forces(dP, graph)
+
+    def differential(p):
+        dF = _deformation_gradient(p, graph)                    # (m, k, 3, 3)
+        dC = torch.matmul(dF.transpose(-1, -2), F)
+        dC = dC + dC.transpose(-1, -2)
+        eye = torch.eye(3, dtype=x.dtype, device=x.device)
+        mu, lam, kappa, dd = _material(graph)
+        d_stretch = (dC * dd).sum(dim=(-2, -1), keepdim=True)   # d^T dC d
+        d_trace = 0.5 * (dC * eye).sum(dim=(-2, -1), keepdim=True)
+        dS = mu * dC + lam * d_trace * eye + 4.0 * kappa * d_stretch * dd
+        return _vertex_forces(torch.matmul(dF, S) + torch.matmul(F, dS), graph)
+    return _vertex_forces(torch.matmul(F, S), graph).squeeze(1), differential
 
 
 def _deformation_gradient(x, graph):

@@ -14,9 +14,10 @@ is minimized here over s in the span of four directions on the free components:
     x - X  the displacement from the rest shape (X: the graph's fixed_positions, the rest
            positions of the free components).
 The step is then dt^2 a = sum_i c_i p_i over the A-conjugate directions p_i (Gram-Schmidt in
-A's inner product, no linear solve: ONNX has none), c_i = (p_i . r) / (p_i . A p_i); a
-direction whose curvature is not positive, or that the previous ones already span, is left
-out. Hessian products are anisognn.elastic.force_differentials (exact, in the model's dtype).
+A's inner product on the 4 x 4 Gram matrix, no linear solve: ONNX has none), c_i = (p_i . r)
+/ (p_i . A p_i); a direction whose curvature is not positive, or that the previous ones
+already span, is left out. Hessian products are anisognn.elastic's (exact, in the model's
+dtype).
 
 What it guarantees: the step is zero only where the forces balance (r = 0 gives a zero step,
 and r != 0 gives a step at least as good, in the model, as the best gradient step), so a
@@ -27,10 +28,12 @@ difference between converging and not (README, "What we learned").
 """
 import torch
 
-from .elastic import elastic_force, force_differentials
+from .elastic import elastic_force_and_differential
 
 #: a direction counts only if its curvature after conjugation keeps this share of its own
 REDUNDANT = 1e-4
+#: floor of a direction's rms (its unit): a zero direction stays zero
+FLOOR = 1e-15
 
 
 def galerkin_acceleration(a_net, x, v, f_ext, graph, dt):
@@ -41,39 +44,68 @@ def galerkin_acceleration(a_net, x, v, f_ext, graph, dt):
     x_hat = x + dt * v
     # fixed_positions is float64 where the exported step reads it, x float32
     displacement = (x - graph.fixed_positions).to(x.dtype)
-    residual = (elastic_force(x_hat, graph) + f_ext) * free
-    basis = [b * free for b in (a_net, residual / graph.mass, v, displacement)]
-    basis = torch.stack([b / _rms(b, graph) for b in basis], dim=1)   # (n, 4, 3)
-    differentials = force_differentials(x_hat, basis, graph)
-    products = (graph.mass.unsqueeze(-1) / (dt * dt) * basis - differentials) * free.unsqueeze(1)
-    step = torch.zeros_like(x)
-    conjugate = []  # (p, A p, p . A p) of the directions kept so far
-    for b, Ab in zip(basis.unbind(dim=1), products.unbind(dim=1)):
-        own = _dot(b, Ab, graph)
-        p, Ap = b, Ab
-        for q, Aq, qAq in conjugate:
-            coef = _dot(b, Aq, graph) / qAq
-            p, Ap = p - coef * q, Ap - coef * Aq
-        pAp = _dot(p, Ap, graph)
-        kept = (pAp > REDUNDANT * own) & (own > 0)
-        pAp = torch.where(kept, pAp, torch.ones_like(pAp))
-        p, Ap = p * kept, Ap * kept
-        step = step + _dot(p, residual, graph) / pAp * p
-        conjugate.append((p, Ap, pAp))
-    return step / (dt * dt)
+    force, differential = elastic_force_and_differential(x_hat, graph)
+    residual = (force + f_ext) * free
+    basis = torch.stack([a_net, residual / graph.mass, v, displacement], dim=1) * free[:, None]
+    count = _member_sum(3.0 * torch.ones_like(graph.mass), graph)            # (S, 1)
+    rms = torch.sqrt(_member_sum((basis * basis).sum(dim=2), graph) / count + FLOOR ** 2)
+    basis = basis / _per_vertex(rms, graph)[:, :, None]                      # (n, 4, 3)
+    products = (graph.mass[:, None] / (dt * dt) * basis - differential(basis)) * free[:, None]
+    gram = _gram(basis, products, graph)                                     # (S, 4, 4)
+    rhs = _member_sum((basis * residual[:, None]).sum(dim=2), graph)          # (S, 4)
+    weights = _conjugate_solve(gram, rhs)                                    # (S, 4)
+    return (basis * _per_vertex(weights, graph)[:, :, None]).sum(dim=1) / (dt * dt)
 
 
-def _dot(a, b, graph):
-    """(n, 1) the inner product of a and b (n, 3) over each vertex's batch member."""
-    per_vertex = (a * b).sum(dim=1, keepdim=True)
+def _conjugate_solve(gram, rhs):
+    """(S, k) w with p = sum_i w_i b_i the minimizer of 1/2 p.A p - p.r over the span of the
+    directions kept: gram (S, k, k) <b_i, A b_j>, rhs (S, k) <b_i, r>. Gram-Schmidt in A's inner
+    product on coefficient vectors; a direction whose remaining curvature is below REDUNDANT of
+    its own (or not positive) is left out."""
+    k = gram.shape[-1]
+    eye = torch.eye(k, dtype=gram.dtype, device=gram.device)
+    kept_rows, curvatures = [], []
+    weights = torch.zeros_like(rhs)
+    for i in range(k):
+        c = eye[i].expand_as(rhs)                                            # (S, k)
+        if kept_rows:
+            previous = torch.stack(kept_rows, dim=1)                          # (S, i, k)
+            coupling = (previous * gram[:, i, None, :]).sum(dim=2)            # <b_i, A p_j>
+            c = c - ((coupling / torch.stack(curvatures, dim=1))[:, :, None]
+                     * previous).sum(dim=1)
+        curvature = (c * (gram * c[:, None, :]).sum(dim=2)).sum(dim=1)         # c.G c
+        own = gram[:, i, i]
+        kept = ((curvature > REDUNDANT * own) & (own > 0)).to(rhs.dtype)
+        curvature = kept * curvature + (1.0 - kept)
+        c = c * kept[:, None]
+        weights = weights + ((c * rhs).sum(dim=1) / curvature)[:, None] * c
+        kept_rows.append(c)
+        curvatures.append(curvature)
+    return weights
+
+
+def _gram(a, b, graph):
+    """(S, k, k) the inner products <a_i, b_j> over each batch member of k fields a, b
+    (n, k, 3): one matrix product for a single mesh (the exported case)."""
     if graph.sample is None:
-        return per_vertex.sum(dim=0, keepdim=True).expand_as(per_vertex)
-    members = torch.zeros(int(graph.sample.max()) + 1, 1, dtype=a.dtype, device=a.device)
-    return members.index_add(0, graph.sample, per_vertex)[graph.sample]
+        flat_a = a.transpose(0, 1).reshape(a.shape[1], -1)
+        flat_b = b.transpose(0, 1).reshape(b.shape[1], -1)
+        return torch.matmul(flat_a, flat_b.transpose(0, 1)).unsqueeze(0)
+    return _member_sum(torch.matmul(a, b.transpose(1, 2)), graph)
 
 
-def _rms(b, graph, floor=1e-15):
-    """(n, 1) the root mean square of b (n, 3) over each batch member, floored (sqrt(ms +
-    floor^2), differentiable at zero): a zero direction stays zero."""
-    count = _dot(torch.ones_like(b), torch.ones_like(b), graph)
-    return torch.sqrt(_dot(b, b, graph) / count + floor * floor)
+def _member_sum(values, graph):
+    """(S, ...) the sums of per-vertex values (n, ...) over each batch member (S = 1 for a
+    single mesh)."""
+    if graph.sample is None:
+        return values.sum(dim=0, keepdim=True)
+    members = torch.zeros((int(graph.sample.max()) + 1,) + values.shape[1:], dtype=values.dtype,
+                          device=values.device)
+    return members.index_add(0, graph.sample, values)
+
+
+def _per_vertex(values, graph):
+    """(n, ...) each vertex's batch member's entry of values (S, ...)."""
+    if graph.sample is None:
+        return values.expand((graph.n_vertices,) + values.shape[1:])
+    return values[graph.sample]

@@ -3,6 +3,7 @@ alone, and OnnxSimulator.step with its input checks) vs the same step in torch (
 box-beam cantilevers of about 100, 1,000 and 10,000 tets, for the shipped directional model
 and the paper's configuration (128 wide, 15 steps; random weights: the cost
 does not depend on their values). Prints a table and writes JSON (atomically)."""
+import dataclasses
 import os
 import tempfile
 
@@ -24,13 +25,20 @@ PAPER_STEP_S = 9e-3
 
 
 def models():
-    """{label: GraphNet}: the shipped directional model and a paper-sized directional one."""
+    """{label: GraphNet}: the shipped directional model, its network alone (the same weights
+    without the Galerkin step, when it has one) and a paper-sized directional one."""
     torch.manual_seed(0)
     paper = GraphNet(ModelConfig(latent=128, steps=15, aggregation="directional"))
     torch.nn.init.normal_(paper.decoder[-1].weight, std=0.01)
     ours = shipped.pretrained("directional")
-    return {f"shipped ({ours.config.latent} wide, {ours.config.steps} steps)": ours,
-            "paper (128 wide, 15 steps)": paper.eval()}
+    size = f"{ours.config.latent} wide, {ours.config.steps} steps"
+    out = {f"shipped ({size})": ours}
+    if ours.config.galerkin:
+        alone = GraphNet(dataclasses.replace(ours.config, galerkin=False))
+        alone.load_state_dict(ours.state_dict())
+        out["its network alone"] = alone.eval()
+    out["paper (128 wide, 15 steps)"] = paper.eval()
+    return out
 
 
 def bench_case(net, onnx_path, cells):
