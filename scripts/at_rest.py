@@ -4,11 +4,12 @@
                                                noise-free at-rest training samples
     python scripts/at_rest.py probe MODEL...   tip z acceleration (m/s^2) of one step from rest at
                                                0-1.5 times the FEM deflection, four cantilevers
-    python scripts/at_rest.py settle MODEL... [--steps N...]
+    python scripts/at_rest.py settle MODEL... [--steps N...] [--network on|zero|alone]
                                                tip deflection (mm) of the four cantilevers after
                                                N steps from rest (100, 300 and 1,000), and how
                                                far it still moves over the last 100, next to the
-                                               FEM's
+                                               FEM's; a galerkin model with its network's
+                                               direction zeroed, or its network alone
     python scripts/at_rest.py learn [--iterations N] [--floor C] [--energy-weight W]
                                     [--no-normalize] [--fixed]
                                                train a fresh 32 x 6 directional model on at-rest
@@ -20,6 +21,7 @@
 MODEL: a shipped name or a model.pt / checkpoint.pt path. Run with OMP_NUM_THREADS=1.
 """
 import argparse
+import dataclasses
 
 import numpy as np
 import torch
@@ -95,8 +97,12 @@ def tip_deflections(run, scene, steps):
     return [float(drop[k]) for k in steps], float(np.abs(drop[-100:] - drop[-1]).max())
 
 
-def settle(models, steps=(100, 300, 1000)):
-    sims = [(name, evaluate.model_rollout(shipped.model(name))) for name in models]
+def settle(models, steps=(100, 300, 1000), network="on"):
+    """network: "on"; "zero" takes the Galerkin step of a galerkin model without the
+    network's direction (force, velocity, displacement only); "alone" the network's own
+    acceleration without the Galerkin step."""
+    sims = [(name, evaluate.model_rollout(with_network(shipped.model(name), network)))
+            for name in models]
     for case in evaluate.cases()[:4]:
         fem = tip_drop(case.scene, anisofem.solve(case.scene).x)
         print(f"{case.label}; FEM {fem:.2f} mm; after {', '.join(map(str, steps))} steps, "
@@ -104,6 +110,20 @@ def settle(models, steps=(100, 300, 1000)):
         for name, run in sims:
             drops, swing = tip_deflections(run, case.scene, steps)
             print(f"  {name[-40:]:40}" + "".join(f"{d:9.2f}" for d in drops) + f"{swing:9.3f}")
+
+
+def with_network(model, network):
+    """model as settle's network option asks (module docstring)."""
+    if network == "on":
+        return model
+    if not model.config.galerkin:
+        raise SystemExit(f"--network {network}: the model has no Galerkin step")
+    if network == "zero":
+        model.network_acceleration = lambda x, v, f_ext, graph: torch.zeros_like(x)
+        return model
+    alone = GraphNet(dataclasses.replace(model.config, galerkin=False))
+    alone.load_state_dict(model.state_dict())
+    return alone.eval()
 
 
 def train_step(model, optimizer, batch, energy_weight=1.0):
@@ -208,6 +228,8 @@ def main():
     for name in ("taken", "probe", "settle"):
         sub.add_parser(name).add_argument("models", nargs="+")
     sub.choices["settle"].add_argument("--steps", type=int, nargs="+", default=[100, 300, 1000])
+    sub.choices["settle"].add_argument("--network", choices=("on", "zero", "alone"),
+                                       default="on")
     q = sub.add_parser("learn")
     q.add_argument("--iterations", type=int, default=1200)
     q.add_argument("--floor", type=float, default=0.0)
@@ -222,7 +244,7 @@ def main():
     elif args.command == "probe":
         probe(args.models)
     elif args.command == "settle":
-        settle(args.models, args.steps)
+        settle(args.models, args.steps, args.network)
     elif args.command == "learn":
         learn(args.iterations, args.floor, args.energy_weight, not args.no_normalize, args.fixed)
     else:
