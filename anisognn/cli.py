@@ -5,6 +5,7 @@ import os
 import sys
 
 from . import bench, evaluate, shipped, train
+from .model import with_galerkin
 
 
 def main(argv=None):
@@ -22,6 +23,9 @@ def main(argv=None):
     p.add_argument("--steps", type=int, default=evaluate.STEPS,
                    help="rollout steps per scene (default %(default)s)")
     p.add_argument("--json", default="evaluation.json", help="where to write the JSON")
+    p.add_argument("--galerkin", choices=("on", "off"),
+                   help="take the Galerkin step (on) or the network's own acceleration (off), "
+                   "whatever the models' configs say (default: as they say)")
     p = sub.add_parser("bench", help="time the network, the loss and a training iteration")
     p.add_argument("--json", default="bench_anisognn.json", help="where to write the JSON")
     args = parser.parse_args(argv)
@@ -41,6 +45,8 @@ def main(argv=None):
             models = {_label(m): shipped.model(m) for m in args.models}
         except (ValueError, FileNotFoundError) as err:
             sys.exit(f"error: {err}")
+        if args.galerkin:
+            models = {k: with_galerkin(m, args.galerkin == "on") for k, m in models.items()}
         evaluate.run(models, steps=args.steps, out=args.json)
     else:
         bench.run(out=args.json)

@@ -24,7 +24,7 @@ export/README.md). f_e's first layer is split into an edge part and per-vertex s
 receiver parts, computed once per vertex and then gathered (the same function as one layer on
 the concatenation, with about a third fewer FLOPs).
 """
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import torch
 from torch import nn
@@ -326,6 +326,15 @@ class GraphNet(nn.Module):
             agg = torch.matmul(weights, gathered).flatten(1)  # (n, C L)
             vert = vert + vertex_update(torch.cat([vert, agg], dim=1))
         return self.decoder(vert)
+
+
+def with_galerkin(model, galerkin=True):
+    """A copy of the GraphNet model (same weights, in eval mode) whose config has
+    ModelConfig.galerkin = galerkin: the trained network with or without the Galerkin step."""
+    param = next(model.parameters())
+    out = GraphNet(replace(model.config, galerkin=galerkin)).to(param.device, param.dtype)
+    out.load_state_dict(model.state_dict())
+    return out.eval()
 
 
 def incoming_slots(graph):

@@ -3,7 +3,6 @@ alone, and OnnxSimulator.step with its input checks) vs the same step in torch (
 box-beam cantilevers of about 100, 1,000 and 10,000 tets, for the shipped directional model
 and the paper's configuration (128 wide, 15 steps; random weights: the cost
 does not depend on their values). Prints a table and writes JSON (atomically)."""
-import dataclasses
 import os
 import tempfile
 
@@ -15,7 +14,7 @@ from anisofem import box_beam, default_scene
 from anisofem.bench import best_time, write_json_atomic
 from anisognn import shipped
 from anisognn.bench import MESHES
-from anisognn.model import GraphNet, ModelConfig
+from anisognn.model import GraphNet, ModelConfig, with_galerkin
 
 from .runtime import INPUTS, OnnxSimulator
 from .to_onnx import Step, export
@@ -34,9 +33,7 @@ def models():
     size = f"{ours.config.latent} wide, {ours.config.steps} steps"
     out = {f"shipped ({size})": ours}
     if ours.config.galerkin:
-        alone = GraphNet(dataclasses.replace(ours.config, galerkin=False))
-        alone.load_state_dict(ours.state_dict())
-        out["its network alone"] = alone.eval()
+        out["its network alone"] = with_galerkin(ours, False)
     out["paper (128 wide, 15 steps)"] = paper.eval()
     return out
 

@@ -21,7 +21,6 @@
 MODEL: a shipped name or a model.pt / checkpoint.pt path. Run with OMP_NUM_THREADS=1.
 """
 import argparse
-import dataclasses
 
 import numpy as np
 import torch
@@ -32,7 +31,7 @@ from anisognn import evaluate, shipped
 from anisognn import train as T
 from anisognn.graph import from_scene
 from anisognn.loss import optimal_decrease
-from anisognn.model import GraphNet, ModelConfig
+from anisognn.model import GraphNet, ModelConfig, with_galerkin
 from anisognn.sampler import Sampler, SamplerConfig
 
 DT = 0.02
@@ -121,9 +120,7 @@ def with_network(model, network):
     if network == "zero":
         model.network_acceleration = lambda x, v, f_ext, graph: torch.zeros_like(x)
         return model
-    alone = GraphNet(dataclasses.replace(model.config, galerkin=False))
-    alone.load_state_dict(model.state_dict())
-    return alone.eval()
+    return with_galerkin(model, False)
 
 
 def train_step(model, optimizer, batch, energy_weight=1.0):

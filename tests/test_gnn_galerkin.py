@@ -8,7 +8,7 @@ from anisognn import graph as G
 from anisognn import train as T
 from anisognn.elastic import elastic_force, elastic_force_and_differential
 from anisognn.galerkin import galerkin_acceleration
-from anisognn.model import GraphNet, ModelConfig
+from anisognn.model import GraphNet, ModelConfig, with_galerkin
 from anisognn.sampler import Sampler, SamplerConfig
 
 DT = 0.02
@@ -199,3 +199,21 @@ def test_the_energy_never_grows_in_the_small_strain_limit():
     drop = energies[0] - energies.min()
     assert drop > 0
     assert np.diff(energies).max() <= 1e-6 * drop
+
+
+def test_with_galerkin_switches_the_step_and_keeps_the_network():
+    torch.manual_seed(1)
+    plain = GraphNet(ModelConfig(latent=16, steps=2)).double()
+    torch.nn.init.normal_(plain.decoder[-1].weight)
+    scene = scene_of(af.box_beam(cells=(4, 2, 2)))
+    x, v = state(scene, 12)
+    graph = G.from_scene(scene, torch.float64)
+    inputs = (torch.tensor(x), torch.tensor(v), torch.tensor(scene.external_force), graph)
+    on = with_galerkin(plain)
+    assert on.config.galerkin and not plain.config.galerkin
+    with torch.no_grad():
+        a_net = plain(*inputs)
+        np.testing.assert_array_equal(on.network_acceleration(*inputs), a_net)
+        np.testing.assert_allclose(on(*inputs).numpy(), galerkin(scene, x, v, a_net.numpy()),
+                                   rtol=0, atol=1e-9 * np.abs(a_net.numpy()).max())
+        np.testing.assert_array_equal(with_galerkin(on, False)(*inputs), a_net)
