@@ -21,10 +21,11 @@ dtype).
 
 What it guarantees: the step is zero only where the forces balance (r = 0 gives a zero step,
 and r != 0 gives a step at least as good, in the model, as the best gradient step), so a
-rollout rests only at anisofem's equilibrium; and each step is the best combination of the
-network's direction with the physical ones, which dissipates the motion along v like backward
-Euler. What the network adds is a direction the other three do not contain: the measured
-difference between converging and not (README, "What we learned").
+rollout rests only at anisofem's equilibrium; and, with v in the span, the residual of the
+step's equation is orthogonal to the displacement over the step, so for a linear material the
+energy 1/2 v^T M v + E - f_ext . x cannot grow, as under backward Euler (which dissipates
+more: it solves in every direction). What the network adds is a direction the other three do
+not contain, which decides how fast a rollout converges (README, "What we learned").
 """
 import torch
 
