@@ -26,6 +26,8 @@ def main(argv=None):
     p.add_argument("--galerkin", choices=("on", "off"),
                    help="take the Galerkin step (on) or the network's own acceleration (off), "
                    "whatever the models' configs say (default: as they say)")
+    p.add_argument("--galerkin-passes", type=int, default=1,
+                   help="with --galerkin on: Galerkin passes per step (default %(default)s)")
     p = sub.add_parser("bench", help="time the network, the loss and a training iteration")
     p.add_argument("--json", default="bench_anisognn.json", help="where to write the JSON")
     args = parser.parse_args(argv)
@@ -46,7 +48,8 @@ def main(argv=None):
         except (ValueError, FileNotFoundError) as err:
             sys.exit(f"error: {err}")
         if args.galerkin:
-            models = {k: with_galerkin(m, args.galerkin == "on") for k, m in models.items()}
+            models = {k: with_galerkin(m, args.galerkin == "on", args.galerkin_passes)
+                      for k, m in models.items()}
         evaluate.run(models, steps=args.steps, out=args.json)
     else:
         bench.run(out=args.json)

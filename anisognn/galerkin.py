@@ -37,25 +37,41 @@ REDUNDANT = 1e-4
 FLOOR = 1e-15
 
 
-def galerkin_acceleration(a_net, x, v, f_ext, graph, dt):
+def galerkin_acceleration(a_net, x, v, f_ext, graph, dt, passes=1):
     """(n, 3) m/s^2: the Galerkin step over dt^2 (module docstring) for the network's
     acceleration a_net (n, 3) m/s^2 at positions x (n, 3) m, velocities v (n, 3) m/s and
-    external force f_ext (n, 3) N on graph; one system per batch member (graph.sample)."""
+    external force f_ext (n, 3) N on graph; one system per batch member (graph.sample).
+    passes > 1 solves again from the point the previous pass reached, over its residual
+    acceleration, the step so far, v and the displacement (the same model of G, now at that
+    point: its inertia term no longer vanishes)."""
     free = 1.0 - graph.fixed
     x_hat = x + dt * v
     # fixed_positions is float64 where the exported step reads it, x float32
     displacement = (x - graph.fixed_positions).to(x.dtype)
-    force, differential = elastic_force_and_differential(x_hat, graph)
-    residual = (force + f_ext) * free
-    basis = torch.stack([a_net, residual / graph.mass, v, displacement], dim=1) * free[:, None]
+    inertia = graph.mass / (dt * dt)
+    step, first = torch.zeros_like(x), a_net
+    for _ in range(passes):
+        force, differential = elastic_force_and_differential(x_hat + step, graph)
+        residual = (force + f_ext - inertia * step) * free
+        basis = torch.stack([first, residual / graph.mass, v, displacement], dim=1) * free[:, None]
+        step = step + _subspace_step(basis, residual, differential, inertia, graph)
+        first = step
+    return step / (dt * dt)
+
+
+def _subspace_step(basis, residual, differential, inertia, graph):
+    """(n, 3) m: the minimizer of -r . s + 1/2 s^T A s over the span of the directions basis
+    (n, k, 3) (zero off the free components), A = M / dt^2 - differential (inertia (n, 1) the
+    mass over dt^2), r = residual (n, 3) N."""
+    free = 1.0 - graph.fixed
     count = _member_sum(3.0 * torch.ones_like(graph.mass), graph)            # (S, 1)
     rms = torch.sqrt(_member_sum((basis * basis).sum(dim=2), graph) / count + FLOOR ** 2)
-    basis = basis / _per_vertex(rms, graph)[:, :, None]                      # (n, 4, 3)
-    products = (graph.mass[:, None] / (dt * dt) * basis - differential(basis)) * free[:, None]
-    gram = _gram(basis, products, graph)                                     # (S, 4, 4)
-    rhs = _member_sum((basis * residual[:, None]).sum(dim=2), graph)          # (S, 4)
-    weights = _conjugate_solve(gram, rhs)                                    # (S, 4)
-    return (basis * _per_vertex(weights, graph)[:, :, None]).sum(dim=1) / (dt * dt)
+    basis = basis / _per_vertex(rms, graph)[:, :, None]                      # (n, k, 3)
+    products = (inertia[:, None] * basis - differential(basis)) * free[:, None]
+    gram = _gram(basis, products, graph)                                     # (S, k, k)
+    rhs = _member_sum((basis * residual[:, None]).sum(dim=2), graph)          # (S, k)
+    weights = _conjugate_solve(gram, rhs)                                    # (S, k)
+    return (basis * _per_vertex(weights, graph)[:, :, None]).sum(dim=1)
 
 
 def _conjugate_solve(gram, rhs):

@@ -71,7 +71,14 @@ class ModelConfig:
     forces) and bounded beyond (the stiff-mode forces of noisy or dynamic states, 1e4 m/s^2
     and more, which with an unbounded scale made training diverge). Velocity and external
     force enter only through g; the output is zero wherever the forces balance. Costs a
-    second pass of the processor."""
+    second pass of the processor.
+    galerkin (not in the paper; with any of the above) makes the network's acceleration one
+    direction of the step: the step minimizes the second-order model of the backward-Euler
+    potential at the predictor over it, the force acceleration there, the velocity and the
+    displacement from rest (anisognn.galerkin), so a rollout rests only where anisofem's
+    forces balance. Costs the elastic force and four products with its derivative per step.
+    galerkin_passes = k > 1 solves k times per step, each from where the previous pass ended
+    (k times that cost)."""
     latent: int = 128
     hidden_layers: int = 2
     steps: int = 15
@@ -84,6 +91,7 @@ class ModelConfig:
     deformation_inputs: bool = True
     force_only: bool = False
     galerkin: bool = False
+    galerkin_passes: int = 1
 
     def __post_init__(self):
         if self.aggregation not in AGGREGATIONS:
@@ -99,6 +107,13 @@ class ModelConfig:
                      "force_only", "galerkin"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected true or false, got {getattr(self, name)!r}")
+        if not (isinstance(self.galerkin_passes, int) and not isinstance(self.galerkin_passes, bool)
+                and self.galerkin_passes >= 1):
+            raise ValueError(f"galerkin_passes: expected an integer >= 1, got "
+                             f"{self.galerkin_passes!r}")
+        if self.galerkin_passes > 1 and not self.galerkin:
+            raise ValueError("galerkin_passes: repeats the Galerkin step, so more than 1 needs "
+                             "galerkin = true")
         if not self.force_scale >= 0:
             raise ValueError(f"force_scale: expected an acceleration >= 0 m/s^2, got "
                              f"{self.force_scale!r}")
@@ -289,7 +304,8 @@ class GraphNet(nn.Module):
         external forces f_ext (n, 3) N on graph (anisognn.graph.Graph)."""
         a = self.network_acceleration(x, v, f_ext, graph)
         if self.config.galerkin:
-            return galerkin_acceleration(a, x, v, f_ext, graph, self.config.dt)
+            return galerkin_acceleration(a, x, v, f_ext, graph, self.config.dt,
+                                         self.config.galerkin_passes)
         return a
 
     def network_acceleration(self, x, v, f_ext, graph):
@@ -328,11 +344,13 @@ class GraphNet(nn.Module):
         return self.decoder(vert)
 
 
-def with_galerkin(model, galerkin=True):
+def with_galerkin(model, galerkin=True, passes=1):
     """A copy of the GraphNet model (same weights, in eval mode) whose config has
-    ModelConfig.galerkin = galerkin: the trained network with or without the Galerkin step."""
+    ModelConfig.galerkin = galerkin and galerkin_passes = passes (1 without it): the trained
+    network with or without the Galerkin step."""
     param = next(model.parameters())
-    out = GraphNet(replace(model.config, galerkin=galerkin)).to(param.device, param.dtype)
+    config = replace(model.config, galerkin=galerkin, galerkin_passes=passes if galerkin else 1)
+    out = GraphNet(config).to(param.device, param.dtype)
     out.load_state_dict(model.state_dict())
     return out.eval()
 
