@@ -15,8 +15,7 @@ import torch
 def elastic_force(x, graph):
     """(n, 3) N: minus the gradient of the elastic energy at positions x (n, 3) m, on
     anisognn.graph.Graph graph (its tets, tet_gradients, tet_material, tet_fiber, corners)."""
-    F = _deformation_gradient(x.unsqueeze(1), graph)
-    return _vertex_forces(torch.matmul(F, _second_piola(F, graph)), graph).squeeze(1)
+    return elastic_force_and_differential(x, graph)[0]
 
 
 def elastic_force_and_differential(x, graph):
@@ -26,13 +25,13 @@ def elastic_force_and_differential(x, graph):
     projection). F and S are computed once for both."""
     F = _deformation_gradient(x.unsqueeze(1), graph)            # (m, 1, 3, 3)
     S = _second_piola(F, graph)
+    eye = torch.eye(3, dtype=x.dtype, device=x.device)
+    mu, lam, kappa, dd = _material(graph)
 
     def differential(p):
         dF = _deformation_gradient(p, graph)                    # (m, k, 3, 3)
         dC = torch.matmul(dF.transpose(-1, -2), F)
         dC = dC + dC.transpose(-1, -2)
-        eye = torch.eye(3, dtype=x.dtype, device=x.device)
-        mu, lam, kappa, dd = _material(graph)
         d_stretch = (dC * dd).sum(dim=(-2, -1), keepdim=True)   # d^T dC d
         d_trace = 0.5 * (dC * eye).sum(dim=(-2, -1), keepdim=True)
         dS = mu * dC + lam * d_trace * eye + 4.0 * kappa * d_stretch * dd
