@@ -24,9 +24,9 @@ def elastic_force_and_differential(x, graph):
     minus the elastic energy's Hessian at x times each (the exact Hessian, not its PSD
     projection). F and S are computed once for both."""
     F = _deformation_gradient(x.unsqueeze(1), graph)            # (m, 1, 3, 3)
-    S = _second_piola(F, graph)
     eye = torch.eye(3, dtype=x.dtype, device=x.device)
     mu, lam, kappa, dd = _material(graph)
+    S = _second_piola(F, mu, lam, kappa, dd)
 
     def differential(p):
         dF = _deformation_gradient(p, graph)                    # (m, k, 3, 3)
@@ -56,11 +56,11 @@ def _material(graph):
     return mu, lam, kappa, (d.unsqueeze(-1) * d.unsqueeze(-2))
 
 
-def _second_piola(F, graph):
-    """(m, k, 3, 3) Pa: S of the deformation gradients F (m, k, 3, 3)."""
+def _second_piola(F, mu, lam, kappa, dd):
+    """(m, k, 3, 3) Pa: S of the deformation gradients F (m, k, 3, 3), for _material's per-tet
+    constants."""
     C = torch.matmul(F.transpose(-1, -2), F)
     eye = torch.eye(3, dtype=F.dtype, device=F.device)
-    mu, lam, kappa, dd = _material(graph)
     stretch = (C * dd).sum(dim=(-2, -1), keepdim=True)          # d^T C d
     trace = 0.5 * ((C * eye).sum(dim=(-2, -1), keepdim=True) - 3.0)
     return mu * (C - eye) + lam * trace * eye + 4.0 * kappa * (stretch - 1.0) * dd

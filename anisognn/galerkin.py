@@ -76,29 +76,25 @@ def _subspace_step(basis, residual, differential, inertia, graph):
 
 def _conjugate_solve(gram, rhs):
     """(S, k) w with p = sum_i w_i b_i the minimizer of 1/2 p.A p - p.r over the span of the
-    directions kept: gram (S, k, k) <b_i, A b_j>, rhs (S, k) <b_i, r>. Gram-Schmidt in A's inner
-    product on coefficient vectors; a direction whose remaining curvature is below REDUNDANT of
-    its own (or not positive) is left out."""
+    directions kept: gram (S, k, k) <b_i, A b_j>, rhs (S, k) <b_i, r>. Gauss-Jordan elimination
+    of [gram | rhs] in the directions' order, i.e. Gram-Schmidt in A's inner product: a pivot is
+    the curvature direction i keeps after the previous ones, and a direction whose pivot is below
+    REDUNDANT of its own curvature (or not positive) is left out, with weight zero."""
     k = gram.shape[-1]
-    eye = torch.eye(k, dtype=gram.dtype, device=gram.device)
-    kept_rows, curvatures = [], []
-    weights = torch.zeros_like(rhs)
+    others = 1.0 - torch.eye(k, dtype=gram.dtype, device=gram.device)
+    own = torch.diagonal(gram, dim1=1, dim2=2)                               # (S, k)
+    thresholds = torch.where(own > 0, REDUNDANT * own, float("inf")).unbind(dim=1)
+    table = torch.cat([gram, rhs.unsqueeze(2)], dim=2)                       # (S, k, k + 1)
+    inverse_pivots = torch.zeros_like(rhs)
     for i in range(k):
-        c = eye[i].expand_as(rhs)                                            # (S, k)
-        if kept_rows:
-            previous = torch.stack(kept_rows, dim=1)                          # (S, i, k)
-            coupling = (previous * gram[:, i, None, :]).sum(dim=2)            # <b_i, A p_j>
-            c = c - ((coupling / torch.stack(curvatures, dim=1))[:, :, None]
-                     * previous).sum(dim=1)
-        curvature = (c * (gram * c[:, None, :]).sum(dim=2)).sum(dim=1)         # c.G c
-        own = gram[:, i, i]
-        kept = ((curvature > REDUNDANT * own) & (own > 0)).to(rhs.dtype)
-        curvature = kept * curvature + (1.0 - kept)
-        c = c * kept[:, None]
-        weights = weights + ((c * rhs).sum(dim=1) / curvature)[:, None] * c
-        kept_rows.append(c)
-        curvatures.append(curvature)
-    return weights
+        row = table[:, i]                                                    # (S, k + 1)
+        keep = row[:, i] > thresholds[i]
+        inverse = keep.to(gram.dtype) / torch.where(keep, row[:, i], 1.0)
+        # the other rows lose their multiple of row i, which stays (nothing if it is dropped)
+        factor = table[:, :, i] * others[i] * inverse.unsqueeze(1)           # (S, k)
+        table = table - factor.unsqueeze(2) * row.unsqueeze(1)
+        inverse_pivots = inverse_pivots + inverse.unsqueeze(1) * others[i].neg().add(1.0)
+    return table[:, :, k] * inverse_pivots
 
 
 def _gram(a, b, graph):
