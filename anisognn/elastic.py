@@ -30,8 +30,9 @@ def elastic_force_and_differential(x, graph):
 
     def differential(p):
         dF = _deformation_gradient(p, graph)                    # (m, k, 3, 3)
-        dC = torch.matmul(dF.transpose(-1, -2), F)
-        dC = dC + dC.transpose(-1, -2)
+        # two products rather than A + A^T: onnxruntime folds a transposed MatMul operand into
+        # the product, but runs a standalone Transpose of (m, k, 3, 3) slowly
+        dC = torch.matmul(dF.transpose(-1, -2), F) + torch.matmul(F.transpose(-1, -2), dF)
         d_stretch = (dC * dd).sum(dim=(-2, -1), keepdim=True)   # d^T dC d
         d_trace = 0.5 * (dC * eye).sum(dim=(-2, -1), keepdim=True)
         dS = mu * dC + lam * d_trace * eye + 4.0 * kappa * d_stretch * dd
