@@ -1,5 +1,5 @@
-"""`python -m anisognn train --config FILE [--out DIR]`, `python -m anisognn evaluate MODEL...`
-and `python -m anisognn bench`."""
+"""`python -m anisognn train --config FILE [--out DIR] [--seed N]`, `python -m anisognn evaluate
+MODEL...` and `python -m anisognn bench`."""
 import argparse
 import os
 import sys
@@ -15,6 +15,7 @@ def main(argv=None):
     p.add_argument("--config", required=True, help="TOML file with [model], [sampler], [train]")
     p.add_argument("--out", help="output folder (overrides [train] out)")
     p.add_argument("--iterations", type=int, help="overrides [train] iterations")
+    p.add_argument("--seed", type=int, help="overrides [train] seed (samples and initial weights)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p = sub.add_parser("evaluate", help="the evaluation suite against anisofem (paper Tables "
                        "1, 2, Fig. 6), models side by side")
@@ -32,8 +33,8 @@ def main(argv=None):
     p.add_argument("--json", default="bench_anisognn.json", help="where to write the JSON")
     args = parser.parse_args(argv)
     if args.command == "train":
-        overrides = {k: v for k, v in (("out", args.out), ("iterations", args.iterations))
-                     if v is not None}
+        overrides = {k: v for k, v in (("out", args.out), ("iterations", args.iterations),
+                                       ("seed", args.seed)) if v is not None}
         try:
             config = train.load_config(args.config, **overrides)
             _, summary = train.train(config, progress=not args.no_progress)

@@ -85,7 +85,7 @@ def _conjugate_solve(gram, rhs):
     own = torch.diagonal(gram, dim1=1, dim2=2)                               # (S, k)
     thresholds = torch.where(own > 0, REDUNDANT * own, float("inf")).unbind(dim=1)
     table = torch.cat([gram, rhs.unsqueeze(2)], dim=2)                       # (S, k, k + 1)
-    inverse_pivots = torch.zeros_like(rhs)
+    inverse_pivots = []
     for i in range(k):
         row = table[:, i]                                                    # (S, k + 1)
         keep = row[:, i] > thresholds[i]
@@ -93,8 +93,8 @@ def _conjugate_solve(gram, rhs):
         # the other rows lose their multiple of row i, which stays (nothing if it is dropped)
         factor = table[:, :, i] * others[i] * inverse.unsqueeze(1)           # (S, k)
         table = table - factor.unsqueeze(2) * row.unsqueeze(1)
-        inverse_pivots = inverse_pivots + inverse.unsqueeze(1) * others[i].neg().add(1.0)
-    return table[:, :, k] * inverse_pivots
+        inverse_pivots.append(inverse)
+    return table[:, :, k] * torch.stack(inverse_pivots, dim=1)
 
 
 def _gram(a, b, graph):

@@ -70,6 +70,22 @@ def test_training_on_a_fixed_scene_closes_most_of_the_energy_gap():
     assert gaps[0] > 0 and gaps[-1] < gaps[0] / 20
 
 
+def test_the_train_command_seed_overrides_the_config_seed(tmp_path):
+    """`train --seed N` trains what a config with [train] seed = N trains, and seeds differ."""
+    from anisognn import cli
+    config = write_config(tmp_path / "tiny.toml", TINY)
+    seeded = write_config(tmp_path / "seeded.toml",
+                          {**TINY, "train": {**TINY["train"], "seed": 1}})
+    by_file = train.train(train.load_config(seeded, out=str(tmp_path / "file")),
+                          progress=False)[1]
+    cli.main(["train", "--config", config, "--out", str(tmp_path / "flag"), "--seed", "1",
+              "--no-progress"])
+    by_flag = [r for r in read_log(tmp_path / "flag") if r.get("event") == "done"][0]
+    unseeded = train.train(train.load_config(config, out=str(tmp_path / "zero")),
+                           progress=False)[1]
+    assert by_flag["digest"] == by_file["digest"] != unseeded["digest"]
+
+
 def test_resume_after_kill_gives_the_parameters_of_an_uninterrupted_run(tmp_path):
     config = write_config(tmp_path / "rich.toml", RICH)
     os.makedirs(tmp_path / "whole")
