@@ -292,8 +292,12 @@ def _device(name):
 def _distributed(device):
     """Yields (rank, world size, this process's device). Under torchrun (WORLD_SIZE > 1) it
     initializes the process group (nccl on GPUs, one per process; gloo on the CPU) unless the
-    caller already did, and destroys the group it made on the way out (a gloo group left to
-    interpreter exit aborts the process: "terminate called without an active exception")."""
+    caller already did, and destroys the group it made on the way out: a gloo group that lives
+    to interpreter exit aborts the process now and then ("terminate called without an active
+    exception": a worker thread releases a finished collective's tensors after the interpreter
+    began to shut down). torch._dynamo is imported first because importing it later (the first
+    optimizer or DistributedDataParallel does) keeps references to the live group in torch 2.13,
+    so that destroy_process_group could not free it."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
     if world == 1:
         yield 0, 1, device
@@ -307,6 +311,7 @@ def _distributed(device):
         device = torch.device("cuda", local)
     owned = not dist.is_initialized()
     if owned:
+        import torch._dynamo  # noqa: F401  (see the docstring)
         dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
     try:
         yield dist.get_rank(), world, device
