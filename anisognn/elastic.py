@@ -12,8 +12,8 @@ projection, anisognn.galerkin).
 Layout: per-tet values keep the tets on the last axis (k matrices: (k, 3, 3, m); corner
 vectors: (4, k, 3, m)), so that a 3 x 3 product is a broadcast multiply and a sum over long
 rows. As m k tiny matrix products (MatMul) with Transposes between them, onnxruntime ran the
-Galerkin step of a 10,000-tet mesh 5 times slower than torch; this layout needs two 2-D
-transposes per call, which are fast.
+Galerkin step of a 10,000-tet mesh about 3 times slower than torch; this layout needs two 2-D
+transposes per call, which are fast (export/README.md, Latency).
 """
 import torch
 
