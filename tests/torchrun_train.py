@@ -25,3 +25,6 @@ group = made.pop()
 # sys.getrefcount counts its own argument and the name `group`
 print(f"rank {os.environ['RANK']}: other references to the group: {sys.getrefcount(group) - 2}",
       flush=True)
+# dropping the last reference frees the group (and joins gloo's worker threads) now, not at
+# interpreter exit, where this script's own reference would make it abort now and then
+del group
