@@ -43,26 +43,32 @@ def galerkin_acceleration(a_net, x, v, f_ext, graph, dt, passes=1):
     external force f_ext (n, 3) N on graph; one system per batch member (graph.sample).
     passes > 1 solves again from the point the previous pass reached, over its residual
     acceleration, the step so far, v and the displacement (the same model of G, now at that
-    point: its inertia term no longer vanishes)."""
+    point: its inertia term no longer vanishes). The step so far enters as its part along the
+    passes' first two directions: the same span, but the whole step is mostly v and the
+    displacement, and with it among the directions the Gram matrix was near singular (float32
+    then moved the step by up to 1e-3 of itself; tests/test_gnn_galerkin.py)."""
     free = 1.0 - graph.fixed
     x_hat = x + dt * v
     # fixed_positions is float64 where the exported step reads it, x float32
     displacement = (x - graph.fixed_positions).to(x.dtype)
     inertia = graph.mass / (dt * dt)
     step, first = torch.zeros_like(x), a_net
-    for _ in range(passes):
+    for k in range(passes):
         force, differential = elastic_force_and_differential(x_hat + step, graph)
         residual = (force + f_ext - inertia * step) * free
         basis = torch.stack([first, residual / graph.mass, v, displacement], dim=1) * free[:, None]
-        step = step + _subspace_step(basis, residual, differential, inertia, graph)
-        first = step
+        parts = _subspace_parts(basis, residual, differential, inertia, graph)
+        step = step + parts.sum(dim=1)
+        if k + 1 < passes:
+            first = parts[:, :2].sum(dim=1) + (first if k > 0 else 0.0)
     return step / (dt * dt)
 
 
-def _subspace_step(basis, residual, differential, inertia, graph):
-    """(n, 3) m: the minimizer of -r . s + 1/2 s^T A s over the span of the directions basis
+def _subspace_parts(basis, residual, differential, inertia, graph):
+    """(n, k, 3) m: the minimizer of -r . s + 1/2 s^T A s over the span of the directions basis
     (n, k, 3) (zero off the free components), A = M / dt^2 - differential (inertia (n, 1) the
-    mass over dt^2), r = residual (n, 3) N."""
+    mass over dt^2), r = residual (n, 3) N, as its part along each direction (s is their
+    sum)."""
     free = 1.0 - graph.fixed
     count = _member_sum(3.0 * torch.ones_like(graph.mass), graph)            # (S, 1)
     rms = torch.sqrt(_member_sum((basis * basis).sum(dim=2), graph) / count + FLOOR ** 2)
@@ -71,7 +77,7 @@ def _subspace_step(basis, residual, differential, inertia, graph):
     gram = _gram(basis, products, graph)                                     # (S, k, k)
     rhs = _member_sum((basis * residual[:, None]).sum(dim=2), graph)          # (S, k)
     weights = _conjugate_solve(gram, rhs)                                    # (S, k)
-    return (basis * _per_vertex(weights, graph)[:, :, None]).sum(dim=1)
+    return basis * _per_vertex(weights, graph)[:, :, None]
 
 
 def _conjugate_solve(gram, rhs):
