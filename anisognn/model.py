@@ -344,11 +344,14 @@ class GraphNet(nn.Module):
         return self.decoder(vert)
 
 
-def with_galerkin(model, galerkin=True, passes=1):
+def with_galerkin(model, galerkin=True, passes=None):
     """A copy of the GraphNet model (same weights, in eval mode) whose config has
-    ModelConfig.galerkin = galerkin and galerkin_passes = passes (1 without it): the trained
-    network with or without the Galerkin step."""
+    ModelConfig.galerkin = galerkin and galerkin_passes = passes (1 without the step; None:
+    the model's own count if it takes the step, else 1): the trained network with or without
+    the Galerkin step."""
     param = next(model.parameters())
+    if passes is None:
+        passes = model.config.galerkin_passes
     config = replace(model.config, galerkin=galerkin, galerkin_passes=passes if galerkin else 1)
     out = GraphNet(config).to(param.device, param.dtype)
     out.load_state_dict(model.state_dict())

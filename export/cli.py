@@ -4,6 +4,7 @@ import argparse
 import sys
 
 from anisognn import shipped
+from anisognn.cli import add_galerkin_arguments, stepping
 
 from . import bench, to_onnx
 
@@ -25,12 +26,15 @@ def main(argv=None):
     parser.add_argument("model", metavar="MODEL",
                         help=f"a model.pt / checkpoint.pt file or a shipped name {shipped.NAMES}")
     parser.add_argument("-o", "--output", default="model.onnx", help="the .onnx file to write")
+    add_galerkin_arguments(parser)
     args = parser.parse_args(argv)
     try:
-        net = shipped.model(args.model)
+        net = stepping(shipped.model(args.model), args)
     except (ValueError, FileNotFoundError) as err:
         sys.exit(f"error: {err}")
     to_onnx.export(net, args.output)
     c = net.config
+    passes = c.galerkin_passes
+    step = f"{passes} Galerkin pass{'es' * (passes > 1)}" if c.galerkin else "no Galerkin step"
     print(f"wrote {args.output}: {c.aggregation} aggregation, {c.latent} wide, {c.steps} steps, "
-          f"dt = {c.dt} s")
+          f"{step}, dt = {c.dt} s")
