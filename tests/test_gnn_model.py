@@ -1,4 +1,6 @@
 """anisognn graph, model and loss: conventions, equivariance, aggregation, loss derivative."""
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import torch
@@ -92,13 +94,19 @@ def test_aggregations_differ_only_in_the_processor_aggregation():
     assert shapes["sum"]["vertex_updates.0.0.weight"] == (16, 16 * 2)
 
 
+def noisy_state(scene, rng):
+    """Positions 1 mm and velocities 5 cm/s off rest (both (n, 3), m and m/s), held ones kept."""
+    n = scene.mesh.n_vertices
+    x = scene.initial_positions() + 1e-3 * rng.normal(size=(n, 3))
+    x[scene.fixed_mask] = scene.fixed_positions[scene.fixed_mask]
+    return x, 0.05 * rng.normal(size=(n, 3))
+
+
 def test_loss_gradient_wrt_acceleration_matches_finite_differences():
     scene = fiber_scene(af.box_beam(cells=(3, 1, 1)))
     n = scene.mesh.n_vertices
     rng = np.random.default_rng(0)
-    x = scene.initial_positions() + 1e-3 * rng.normal(size=(n, 3))
-    x[scene.fixed_mask] = scene.fixed_positions[scene.fixed_mask]
-    v = 0.05 * rng.normal(size=(n, 3))
+    x, v = noisy_state(scene, rng)
     dt = 0.02
     g = G.from_scene(scene, torch.float64)
     pot = BatchPotential.backward_euler([scene], x, v, dt)
@@ -119,28 +127,34 @@ def test_loss_gradient_wrt_acceleration_matches_finite_differences():
     assert held.any() and (a.grad.numpy()[held] == 0).all()  # held components ignore a
 
 
+def newton_setup(kappa, seed, dt=0.02):
+    """A 3 x 1 x 1 box beam (fiber stiffness kappa, Pa) at a noisy state, its backward-Euler
+    potential over dt (s), the potential's value e0 and gradient g ((n, 3)) there, the free
+    components (3n mask), W = M/dt^2 and the projected Hessian H at dt on them."""
+    scene = fiber_scene(af.box_beam(cells=(3, 1, 1)), kappa=kappa)
+    x, v = noisy_state(scene, np.random.default_rng(seed))
+    pot = BatchPotential.backward_euler([scene], x, v, dt)
+    e0, g = pot.energy_gradient(x)
+    free = ~scene.fixed_mask.reshape(-1)
+    H = af.hessian(scene, x, x + dt * v, dt, project=True).toarray()[np.ix_(free, free)]
+    W = np.repeat(scene.masses / dt ** 2, 3)[free]
+    return SimpleNamespace(scene=scene, x=x, v=v, dt=dt, pot=pot, e0=e0, g=g, free=free, W=W, H=H)
+
+
 @pytest.mark.parametrize("kappa", [2e5, 1e7])
 def test_newton_term_is_the_mass_scaled_newton_step(kappa):
     """gradient(beta) - gradient(0) = beta (M/dt^2) H^-1 g on free components, H the projected
     Hessian (checked by multiplying back), nothing added on held ones; ordinary and stiff fibers."""
-    scene = fiber_scene(af.box_beam(cells=(3, 1, 1)), kappa=kappa)
-    rng = np.random.default_rng(1)
-    n, dt, beta = scene.mesh.n_vertices, 0.02, 50.0
-    x = scene.initial_positions() + 1e-3 * rng.normal(size=(n, 3))
-    x[scene.fixed_mask] = scene.fixed_positions[scene.fixed_mask]
-    v = 0.05 * rng.normal(size=(n, 3))
-    pot = BatchPotential.backward_euler([scene], x, v, dt)
-    e0, g = pot.energy_gradient(x)
-    e1, gb = pot.energy_gradient(x, beta)
-    free = ~scene.fixed_mask.reshape(-1)
-    mass = np.repeat(scene.masses / dt ** 2, 3)[free]
-    step = ((gb - g).reshape(-1)[free] / beta / mass)
-    H = af.hessian(scene, x, x + dt * v, dt, project=True).toarray()[np.ix_(free, free)]
-    assert np.allclose(H @ step, g.reshape(-1)[free], rtol=1e-9, atol=1e-9 * np.abs(g).max())
-    assert (gb[scene.fixed_mask] == g[scene.fixed_mask]).all()  # integrate() drops these
-    assert e1 == pytest.approx(e0 + 0.5 * beta * step @ (mass * step), rel=1e-12)
+    s, beta = newton_setup(kappa, seed=1), 50.0
+    e1, gb = s.pot.energy_gradient(s.x, beta)
+    g, e0 = s.g, s.e0
+    step = ((gb - g).reshape(-1)[s.free] / beta / s.W)
+    assert np.allclose(s.H @ step, g.reshape(-1)[s.free], rtol=1e-9, atol=1e-9 * np.abs(g).max())
+    held = s.scene.fixed_mask
+    assert (gb[held] == g[held]).all()  # integrate() drops these
+    assert e1 == pytest.approx(e0 + 0.5 * beta * step @ (s.W * step), rel=1e-12)
     # the Newton term alone: no energy gradient left
-    e2, gn = pot.energy_gradient(x, beta, energy_weight=0.0)
+    e2, gn = s.pot.energy_gradient(s.x, beta, energy_weight=0.0)
     assert np.allclose(gn, gb - g, rtol=1e-12, atol=1e-12 * np.abs(gb).max())
     assert e2 == pytest.approx(e1 - e0, rel=1e-9)
 
@@ -150,24 +164,16 @@ def test_rest_term_is_the_newton_step_through_the_long_step_hessian(kappa):
     """gradient(rest=beta) - gradient(0) = beta W K_r^-1 W H^-1 g on free components (W = M/dt^2,
     K_r the projected Hessian at 10 dt, H at dt; against dense solves), nothing on held
     ones, loss beta/2 (W s) . K_r^-1 W s; ordinary and stiff fibers."""
-    scene = fiber_scene(af.box_beam(cells=(3, 1, 1)), kappa=kappa)
-    rng = np.random.default_rng(2)
-    n, dt, beta = scene.mesh.n_vertices, 0.02, 30.0
-    x = scene.initial_positions() + 1e-3 * rng.normal(size=(n, 3))
-    x[scene.fixed_mask] = scene.fixed_positions[scene.fixed_mask]
-    v = 0.05 * rng.normal(size=(n, 3))
-    pot = BatchPotential.backward_euler([scene], x, v, dt)
-    e0, g = pot.energy_gradient(x)
-    e1, gr = pot.energy_gradient(x, rest_weight=beta)
-    free = ~scene.fixed_mask.reshape(-1)
-    W = np.repeat(scene.masses / dt ** 2, 3)[free]
-    H = af.hessian(scene, x, x + dt * v, dt, project=True).toarray()[np.ix_(free, free)]
-    K_r = af.hessian(scene, x, x + dt * v, 10 * dt, project=True).toarray()[np.ix_(free, free)]
-    Ws = W * np.linalg.solve(H, g.reshape(-1)[free])
-    rest, dense = (gr - g).reshape(-1)[free] / beta / W, np.linalg.solve(K_r, Ws)
+    s, beta = newton_setup(kappa, seed=2), 30.0
+    e1, gr = s.pot.energy_gradient(s.x, rest_weight=beta)
+    g, free = s.g, s.free
+    K_r = af.hessian(s.scene, s.x, s.x + s.dt * s.v, 10 * s.dt, project=True).toarray()
+    Ws = s.W * np.linalg.solve(s.H, g.reshape(-1)[free])
+    rest = (gr - g).reshape(-1)[free] / beta / s.W
+    dense = np.linalg.solve(K_r[np.ix_(free, free)], Ws)
     assert np.allclose(rest, dense, rtol=1e-9, atol=1e-9 * np.abs(dense).max())
-    assert (gr[scene.fixed_mask] == g[scene.fixed_mask]).all()
-    assert e1 == pytest.approx(e0 + 0.5 * beta * Ws @ rest, rel=1e-12)
+    assert (gr[s.scene.fixed_mask] == g[s.scene.fixed_mask]).all()
+    assert e1 == pytest.approx(s.e0 + 0.5 * beta * Ws @ rest, rel=1e-12)
 
 
 @pytest.mark.parametrize("dt", [1e-4, 0.02])
