@@ -139,6 +139,13 @@ class ModelConfig:
                              "force_scale = 0")
 
     @property
+    def stepping(self):
+        """How the model steps, in words: "K Galerkin pass(es)" or "no Galerkin step"."""
+        if not self.galerkin:
+            return "no Galerkin step"
+        return f"{self.galerkin_passes} Galerkin pass{'es' * (self.galerkin_passes > 1)}"
+
+    @property
     def edge_channels(self):
         """Number of raw edge features: 15, 16 with fiber_stress, 7 without deformation_inputs."""
         return (EDGE_FEATURES + int(self.fiber_stress)

@@ -34,10 +34,10 @@ def models():
     c = ours.config
     size = f"{c.latent} wide, {c.steps} steps" + (f", {c.galerkin_passes} passes" * c.galerkin)
     out = {f"shipped ({size})": ours}
-    if ours.config.galerkin:
+    if c.galerkin:
         out["its network alone"] = with_galerkin(ours, False)
-        other = 1 if ours.config.galerkin_passes > 1 else 2
-        out[f"it, {other} Galerkin pass{'es' * (other > 1)}"] = with_galerkin(ours, True, other)
+        other = with_galerkin(ours, True, 1 if c.galerkin_passes > 1 else 2)
+        out[f"it, {other.config.stepping}"] = other
     out["paper (128 wide, 15 steps)"] = paper.eval()
     return out
 

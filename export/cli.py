@@ -34,7 +34,5 @@ def main(argv=None):
         sys.exit(f"error: {err}")
     to_onnx.export(net, args.output)
     c = net.config
-    passes = c.galerkin_passes
-    step = f"{passes} Galerkin pass{'es' * (passes > 1)}" if c.galerkin else "no Galerkin step"
     print(f"wrote {args.output}: {c.aggregation} aggregation, {c.latent} wide, {c.steps} steps, "
-          f"{step}, dt = {c.dt} s")
+          f"{c.stepping}, dt = {c.dt} s")

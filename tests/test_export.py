@@ -318,8 +318,9 @@ def test_cli_galerkin_flags_choose_how_the_exported_model_steps(tmp_path, capsys
         path = str(tmp_path / f"{len(steps)}.onnx")
         cli.main(["directional", "-o", path] + flags)
         assert said in capsys.readouterr().out
-        assert_within_float32_reach(net, simulator(path, scene), scene, 1)
-        steps[said] = simulator(path, scene).run(x, v, scene.external_force)[0]
+        sim = simulator(path, scene)
+        assert_within_float32_reach(net, sim, scene, 1)
+        steps[said] = sim.run(x, v, scene.external_force)[0]
     one, two = steps["1 Galerkin pass,"], steps["2 Galerkin passes"]
     assert np.abs(one - two).max() > 1e-3 * np.abs(two).max()
     for flags, error in ((["--galerkin", "off", "--galerkin-passes", "2"], "--galerkin-passes"),
