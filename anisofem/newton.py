@@ -1,23 +1,21 @@
-"""Newton's method with backtracking line search on a scene's potential G.
+"""The minimization loop every method shares (see anisofem.methods for the methods).
 
 Unknowns are the free vertex components; fixed ones stay at their prescribed positions.
 Converged means |dG/dx|_free <= max(rtol * scale, atol), with scale = max(|dG/dx(x0)|_free,
 |f_ext|_free) in N. The default atol is the round-off level of the gradient,
 ROUNDOFF * E_max * l^2 * sqrt(unknowns) (l: mean rest edge length), below which the gradient
-cannot be resolved; pass atol=0 to insist on rtol alone. The result is never NaN: a failure returns the last iterate, converged=False
-and a message saying why.
+cannot be resolved; pass atol=0 to insist on rtol alone. Each iteration line-searches the
+method's directions in turn (backtracking to the Armijo condition on G) until one makes
+progress. The result is never NaN: a failure returns the last iterate, converged=False,
+failed=True and a message saying why.
 
-Hessian choice (`projection`):
-- "adaptive" (default): each iteration first tries the true Hessian; it is used when it is
-  positive definite (the Cholesky-type factorization succeeds) and its step makes progress in
-  the line search; otherwise the iteration uses the PSD-projected Hessian (see
-  anisofem.kernels). Near a stable equilibrium the assembled true Hessian is positive definite
-  even though compressed elements are indefinite on their own, so convergence ends
-  quadratically; and requiring definiteness keeps Newton from converging to saddle points
-  (a buckled beam's straight state).
-- "always": the projected Hessian at every iteration (robust, but only linear convergence
-  near equilibria that have compressed elements).
-- "never": the true Hessian only (fails where it is indefinite).
+Newton's Hessian choice (`projection`, see anisofem.methods.Newton): "adaptive" (default)
+first tries the true Hessian; it is used when it is positive definite (the Cholesky-type
+factorization succeeds) and its step makes progress in the line search; otherwise the
+iteration uses the PSD-projected Hessian (see anisofem.kernels). Near a stable equilibrium the
+assembled true Hessian is positive definite even though compressed elements are indefinite on
+their own, so convergence ends quadratically; and requiring definiteness keeps Newton from
+converging to saddle points (a buckled beam's straight state).
 """
 import math
 import time
@@ -26,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import linsolve
+from . import methods
 
 ROUNDOFF = 1e-14
 ARMIJO = 1e-4
@@ -34,17 +32,22 @@ MIN_STEP = 1e-10
 
 
 class ConvergenceWarning(RuntimeWarning):
-    """Newton's method stopped without reaching its tolerance."""
+    """A solve stopped without reaching its tolerance (and not because of a fixed budget)."""
+
+
+#: NewtonResult.message of a solve that spent its fixed iteration budget.
+BUDGET_SPENT = "iteration budget spent"
 
 
 @dataclass
 class NewtonResult:
-    """Outcome of a Newton solve.
+    """Outcome of a minimization, whatever the method (see anisofem.methods).
 
-    x: (n, 3) final positions, m. converged: whether the tolerance was met. iterations: Newton
+    x: (n, 3) final positions, m. converged: whether the tolerance was met. iterations:
     iterations taken. residuals: relative free-gradient norms, one per iterate (the first is the
-    start). energy: G(x), J. projected: iterations that used the projected Hessian.
-    message: why it stopped. seconds: wall time.
+    start). energy: G(x), J. projected: directions from the PSD-projected Hessian.
+    factorizations: sparse or dense factorizations. linear_iterations: conjugate-gradient
+    iterations. method: the method's name. message: why it stopped. seconds: wall time.
     """
     x: np.ndarray
     converged: bool
@@ -52,81 +55,78 @@ class NewtonResult:
     residuals: list = field(default_factory=list)
     energy: float = float("nan")
     projected: int = 0
+    factorizations: int = 0
+    linear_iterations: int = 0
+    method: str = "newton"
     message: str = ""
     seconds: float = 0.0
 
+    @property
+    def failed(self):
+        """Stopped short of the tolerance for a reason other than a fixed iteration budget."""
+        return not self.converged and self.message != BUDGET_SPENT
+
     def __repr__(self):
-        return (f"NewtonResult(converged={self.converged}, iterations={self.iterations}, "
-                f"residual={self.residuals[-1]:.3g}, projected={self.projected}, "
+        return (f"NewtonResult(method={self.method!r}, converged={self.converged}, "
+                f"iterations={self.iterations}, residual={self.residuals[-1]:.3g}, "
+                f"projected={self.projected}, factorizations={self.factorizations}, "
                 f"message={self.message!r})")
 
 
-_PROJECTIONS = ("adaptive", "always", "never")
-
-
-def minimize(potential, x0, *, rtol=1e-8, atol=None, max_iter=100, projection="adaptive",
-             linear_solver="auto", warn=True):
+def minimize(potential, x0, method="newton", *, warn=True, **options):
     """Minimize potential (an anisofem.potential.Potential) from x0 (n, 3), fixed components
-    already at their prescribed positions. Returns a NewtonResult."""
-    if projection not in _PROJECTIONS:
-        raise ValueError(f"projection: expected one of {_PROJECTIONS}, got {projection!r}")
-    if not (rtol >= 0 and (atol is None or atol >= 0)) or rtol == atol == 0:
-        raise ValueError(f"rtol, atol: must be >= 0 and not both 0, got {rtol}, {atol}")
-    if int(max_iter) < 0:
-        raise ValueError(f"max_iter: must be >= 0, got {max_iter}")
+    already at their prescribed positions, by `method`: a name of anisofem.methods.METHODS with
+    its options, or a Method instance (which keeps its factorizations across calls). Returns a
+    NewtonResult; warns (ConvergenceWarning) when it failed."""
+    method = methods.make(method, **options)
     t0 = time.perf_counter()
-    solver = linsolve.make(linear_solver, potential.scene.n_free)
-    with solver.threads():
-        x, converged, it, res, energy, n_projected, message = _iterate(
-            potential, x0, solver, rtol, atol, max_iter, projection)
+    method.start(potential)
+    with method.threads():
+        x, converged, it, res, energy, message = _iterate(potential, x0, method)
     result = NewtonResult(x=x, converged=converged, iterations=it, residuals=res, energy=energy,
-                          projected=n_projected, message=message,
-                          seconds=time.perf_counter() - t0)
-    if warn and not converged:
-        warnings.warn(f"Newton did not converge: {message} after {it} iterations, relative "
-                      f"residual {res[-1]:.3g}", ConvergenceWarning, stacklevel=3)
+                          method=method.name, message=message,
+                          seconds=time.perf_counter() - t0, **method.counts)
+    if warn and result.failed:
+        warnings.warn(f"{method.name} did not converge: {message} after {it} iterations, "
+                      f"relative residual {res[-1]:.3g}", ConvergenceWarning, stacklevel=3)
     return result
 
 
-def _iterate(potential, x0, solver, rtol, atol, max_iter, projection):
-    """The Newton loop of minimize: (x, converged, iterations, residuals, energy, projected
-    iterations, message)."""
+def _iterate(potential, x0, method):
+    """The loop of minimize: (x, converged, iterations, residuals, energy, message)."""
     scene = potential.scene
-    layout = scene.layout(solver.layout)
-    free = layout.dofs  # flat DOF index (3 i + c) of each unknown
+    free = scene.free_dofs
     x = np.array(x0, dtype=float)
     energy, grad = potential.energy_gradient(x)
     g = grad.ravel()[free]
     scale = max(_norm(g), _norm(scene.external_force.ravel()[free]))
+    atol = method.atol
     if atol is None:
         atol = ROUNDOFF * scene.force_unit * math.sqrt(free.size)
-    tol = max(rtol * scale, atol)
-    res = [_norm(g) / scale if scale > 0 else 0.0]
-    choices = {"adaptive": (False, True), "always": (True,), "never": (False,)}[projection]
-    n_projected = 0
-    message = "max_iter reached"
-    converged = False
+    tol = max(method.rtol * scale, atol)
+    gnorm = _norm(g)
+    res = [gnorm / scale if scale > 0 else 0.0]
     it = 0
     while True:
-        if _norm(g) <= tol:
-            converged, message = True, "converged"
-            break
-        if it >= max_iter:
-            break
+        if gnorm <= tol:
+            return x, True, it, res, energy, "converged"
+        if it >= method.limit:
+            return x, False, it, res, energy, (BUDGET_SPENT if method.budget
+                                               else "max_iter reached")
+        it += 1
         step = None
-        for projected in choices:
-            step = _newton_step(potential, x, energy, g, free, layout, solver, projected)
+        for p in method.directions(x, g, res[-1]):
+            step = _line_search(potential, x, energy, g, gnorm, free, p)
             if step is not None:
                 break
-        it += 1
         if step is None:
-            message = "no descent direction: the line search stalled"
-            break
-        x, energy, grad, projected = step
-        n_projected += projected
-        g = grad.ravel()[free]
-        res.append(_norm(g) / scale)
-    return x, converged, it, res, energy, n_projected, message
+            return x, False, it, res, energy, "no descent direction: the line search stalled"
+        x, energy, grad, s = step
+        g_new = grad.ravel()[free]
+        norm_new = _norm(g_new)
+        method.accepted(s, g_new - g, norm_new / gnorm)
+        g, gnorm = g_new, norm_new
+        res.append(gnorm / scale)
 
 
 def _norm(v):
@@ -134,15 +134,11 @@ def _norm(v):
     return math.sqrt(float(np.dot(v, v)))
 
 
-def _newton_step(potential, x, energy, g, free, layout, solver, projected):
-    """One damped Newton step; (x, energy, gradient, projected) or None if no progress."""
-    _, _, data = potential.hessian_data(x, layout, project=projected, want_grad=False)
-    try:
-        p = -solver.factor(layout, data)(g)
-    except linsolve.FactorizationError:
-        return None
+def _line_search(potential, x, energy, g, gnorm, free, p):
+    """Backtracking along direction p (unknown space) from x: (x_new, energy, gradient (n, 3),
+    step taken (unknown space)) or None if p is no descent direction or nothing makes
+    progress."""
     slope = float(np.dot(p, g))
-    gnorm = _norm(g)
     if not math.isfinite(slope) or slope >= -1e-14 * _norm(p) * gnorm:
         return None
     noise = 1e-13 * max(abs(energy), 1e-300)
@@ -154,8 +150,8 @@ def _newton_step(potential, x, energy, g, free, layout, solver, projected):
         if abs(et - energy) <= noise:
             # below round-off the energy cannot rank the points: accept if the gradient halves
             if _norm(gt.ravel()[free]) < 0.5 * gnorm:
-                return xt, et, gt, projected
+                return xt, et, gt, alpha * p
         elif et <= energy + ARMIJO * alpha * slope:
-            return xt, et, gt, projected
+            return xt, et, gt, alpha * p
         alpha *= 0.5
     return None

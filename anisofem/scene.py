@@ -132,6 +132,11 @@ class Scene:
         dof[free] = np.arange(free.sum())
         return dof
 
+    @cached_property
+    def free_dofs(self):
+        """(k,) int64 flat DOF index (3 i + c) of each unknown, in unknown order."""
+        return np.flatnonzero(~self.fixed_mask.ravel())
+
     @property
     def n_free(self):
         """Number of unknowns (free vertex components)."""

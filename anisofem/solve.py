@@ -3,6 +3,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import methods
 from ._validate import as_scalar
 from .material import Material
 from .mesh import TetMesh
@@ -22,13 +23,15 @@ def default_scene(mesh):
     return Scene(mesh, Material.paper(), fixed=fixed, gravity=GRAVITY)
 
 
-def solve(scene, x0=None, **newton):
+def solve(scene, x0=None, method="newton", **options):
     """Static equilibrium of a Scene (or of a TetMesh with default_scene's defaults).
 
     x0: (n, 3) start, m (default: rest positions with fixed vertices at their prescribed
-    positions). newton: rtol, atol, max_iter, projection, linear_solver (see anisofem.newton).
-    Returns a NewtonResult; .x is the (n, 3) equilibrium. Raises ValueError if the scene holds
-    too little to have a unique equilibrium.
+    positions). method: "newton" (default), "reuse", "lbfgs", "cg" or an
+    anisofem.methods.Method; options: the method's (rtol, atol, max_iter, iterations,
+    projection, linear_solver, ...; see anisofem.methods). Returns a NewtonResult; .x is the
+    (n, 3) equilibrium. Raises ValueError if the scene holds too little to have a unique
+    equilibrium.
     """
     if isinstance(scene, TetMesh):
         scene = default_scene(scene)
@@ -38,7 +41,7 @@ def solve(scene, x0=None, **newton):
     scene.check_static()
     x0 = scene.initial_positions() if x0 is None else scene.with_fixed(check_positions(
         scene, x0, "x0"))
-    return minimize(Potential(scene), x0, **newton)
+    return minimize(Potential(scene), x0, method, **options)
 
 
 @dataclass
@@ -53,13 +56,15 @@ class StepResult:
         return self.newton.converged
 
 
-def step(scene, x, v, dt, a_guess=None, **newton):
+def step(scene, x, v, dt, a_guess=None, method="newton", **options):
     """One backward-Euler step of length dt (s) from positions x and velocities v (n, 3).
 
     Minimizes G(y) = 1/(2 dt^2) |y - x - dt v|_M^2 + elastic(y) - f_ext . y, starting from
     y = x + dt v + dt^2 a_guess (a_guess: (n, 3) expected acceleration in m/s^2, default 0;
-    simulate passes the previous step's). Returns StepResult with v_new = (x_new - x) / dt.
-    Fixed components end at their prescribed positions.
+    simulate passes the previous step's when the method iterates to its tolerance), by
+    `method` with `options` (see solve and anisofem.methods; pass a Method instance to keep
+    its factorizations from one call to the next). Returns StepResult with
+    v_new = (x_new - x) / dt. Fixed components end at their prescribed positions.
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
@@ -71,25 +76,56 @@ def step(scene, x, v, dt, a_guess=None, **newton):
     x_hat = x + dt * v
     start = x_hat if a_guess is None else x_hat + dt ** 2 * check_positions(scene, a_guess,
                                                                            "a_guess")
-    result = minimize(Potential(scene, x_hat, dt), scene.with_fixed(start), **newton)
+    result = minimize(Potential(scene, x_hat, dt), scene.with_fixed(start), method, **options)
     return StepResult(result.x, (result.x - x) / dt, result)
 
 
 @dataclass
 class Rollout:
-    """positions, velocities: (k + 1, n, 3) states from the start through the last converged
-    step; steps: the StepResults. converged: all requested steps converged."""
+    """positions, velocities: (k + 1, n, 3) states from the start through the last step that
+    did not fail; steps: the StepResults. completed: all requested steps were taken, none
+    failed. converged: completed, and every step met its tolerance (False for a method with
+    a fixed iteration budget that stopped short of it)."""
     positions: np.ndarray
     velocities: np.ndarray
     steps: list
-    converged: bool
+    completed: bool
+
+    @property
+    def converged(self):
+        return self.completed and all(s.converged for s in self.steps)
 
 
-def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, **newton):
+class Stepper:
+    """Backward-Euler steps of length dt (s) of one scene by one method, carrying what the
+    method keeps from step to step (factorizations, curvature pairs) and the warm start.
+
+    stepper(x, v) -> StepResult. A method that iterates to its tolerance starts each step from
+    the previous step's acceleration, one with a fixed iteration budget from the inertial
+    predictor (see anisofem.methods).
+    """
+
+    def __init__(self, scene, dt, method="newton", **options):
+        self.scene, self.dt = scene, dt
+        self.method = methods.make(method, **options)
+        self._a = None
+
+    def __call__(self, x, v):
+        res = step(self.scene, x, v, self.dt, self._a, self.method)
+        if self.method.warm_start == "previous" and not res.newton.failed:
+            self._a = (res.v - v) / self.dt
+        return res
+
+
+def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, method="newton",
+             **options):
     """Roll out `steps` backward-Euler steps from x0 (default rest), v0 (default 0).
 
-    callback(k, StepResult) is called after each step. Stops early, with converged=False, at
-    the first step whose Newton solve fails; what came before is kept.
+    method, options: how each step is solved (see step); one Method serves the whole rollout
+    (a Stepper), so "reuse" and "lbfgs" keep their factorizations and curvature pairs from
+    step to step. callback(k, StepResult) is called after each step. Stops early, with
+    completed=False, at the first step whose solve fails (a step that spends a fixed iteration
+    budget does not fail); what came before is kept.
     """
     steps = int(steps)
     if steps < 0:
@@ -97,14 +133,13 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, **newton):
     x = scene.with_fixed(scene.initial_positions() if x0 is None
                     else check_positions(scene, x0, "x0"))
     v = np.zeros_like(x) if v0 is None else check_positions(scene, v0, "v0")
+    stepper = Stepper(scene, dt, method, **options)
     xs, vs, results = [x], [v], []
-    a = None
     for k in range(steps):
-        res = step(scene, x, v, dt, a, **newton)
+        res = stepper(x, v)
         results.append(res)
-        if not res.converged:
+        if res.newton.failed:
             break
-        a = (res.v - v) / dt
         x, v = res.x, res.v
         xs.append(x)
         vs.append(v)

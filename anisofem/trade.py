@@ -1,0 +1,262 @@
+"""The speed/accuracy trade on a user's own scene: every rung of the ladder against the exact
+rollout.
+
+    table = anisofem.trade(scene, steps=100, dt=0.02)
+    print(anisofem.trade_table(table))
+
+A rung is one way of rolling the scene forward: exact Newton (the reference), Newton with a
+fixed iteration budget, factorization reuse, L-BFGS, inexact Newton (CG), exact Newton at a
+larger time step, and, where anisognn and its shipped models are installed, the surrogate
+(alone, with its Galerkin passes, as the warm start of one Newton iteration). Each rung rolls
+the scene out from rest in the same process; what is compared:
+
+- errors: at each checked time, the tip error |u(tip) - u_exact(tip)| / |u_static(tip)|, where
+  the tip is the set of vertices whose static displacement is within 1% of the largest (for a
+  cantilever: its free end) and u_static the converged static solution;
+- field_errors: max over vertices |u - u_exact| over the largest static displacement;
+- ms_per_step: wall time per step of the scene's dt, all steps but the first (which holds
+  one-time set-up and compilation) averaged, so amortized refactorizations count; a rung with a
+  larger step reports its time per dt of simulated time (ms per own step / dt_factor);
+- energy_drift: max over time of H(t) - H(0), H = kinetic + elastic - f_ext . x, over |the
+  static potential|: backward Euler never gains energy (<= 0), a rung that does is unstable;
+- stable: every step was taken (none failed), every state finite, energy_drift <= 0.01;
+- min_volume_ratio: the smallest det(F) over tets and time (<= 0: an inverted element).
+"""
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from . import methods
+from ._files import atomic_path
+from .metrics import volume_change
+from .potential import Potential
+from .scene import Scene
+from .solve import Stepper, solve
+
+#: Energy gain (over |static potential|) above which a rung is called unstable.
+ENERGY_GAIN_MAX = 0.01
+#: Vertices whose static displacement is within this fraction of the largest form the tip.
+TIP_FRACTION = 0.99
+
+
+@dataclass
+class Rung:
+    """One way of rolling a scene forward.
+
+    name: shown in tables. kind: "fem" or "surrogate". make(scene, dt) returns advance(x, v)
+    -> (x, v, info) for one step of dt, with info a dict holding "failed" (bool) and any of
+    "iterations", "factorizations", "linear_iterations". dt_factor: the rung steps dt_factor
+    times the scene's dt.
+    """
+    name: str
+    kind: str
+    make: Callable
+    dt_factor: int = 1
+
+
+def fem_rung(name, method="newton", dt_factor=1, **options):
+    """A Rung stepping by anisofem.step with `method` and its options (anisofem.methods)."""
+    def make(scene, dt):
+        stepper = Stepper(scene, dt, method, **options)
+
+        def advance(x, v):
+            res = stepper(x, v)
+            n = res.newton
+            return res.x, res.v, {"failed": n.failed, "iterations": n.iterations,
+                                  "factorizations": n.factorizations,
+                                  "linear_iterations": n.linear_iterations}
+        return advance
+    methods.make(method, **options)  # bad options fail here, before any rollout
+    return Rung(name, "fem", make, dt_factor)
+
+
+def fem_rungs():
+    """The anisofem ladder, exact first."""
+    return [fem_rung("exact"),
+            fem_rung("newton x1", iterations=1),
+            fem_rung("newton x2", iterations=2),
+            fem_rung("reuse", "reuse"),
+            fem_rung("reuse x2", "reuse", iterations=2),
+            fem_rung("lbfgs x5", "lbfgs", iterations=5),
+            fem_rung("lbfgs x10", "lbfgs", iterations=10),
+            fem_rung("cg", "cg"),
+            fem_rung("cg x2", "cg", iterations=2),
+            fem_rung("exact dt x2", dt_factor=2),
+            fem_rung("exact dt x5", dt_factor=5)]
+
+
+def checked_steps(steps, multiple):
+    """Steps (of the scene's dt) at which errors are measured: about steps/10 (early
+    transient), steps/4, steps/2 and the last, rounded up to multiples of `multiple` so that
+    rungs with a larger step land on them."""
+    picks = {max(multiple, multiple * math.ceil(steps * f / multiple)) for f in
+             (0.1, 0.25, 0.5)}
+    return sorted(k for k in picks | {steps} if k <= steps)
+
+
+def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, surrogates=True,
+          progress=True):
+    """Run every rung on scene and compare it with the exact rollout.
+
+    scene: an anisofem.Scene (held enough for a static solve: its static deflection is the
+    error scale). steps: steps of dt (s) from rest. rungs: Rungs (default fem_rungs(), plus
+    the surrogate's rungs from anisognn when surrogates and it is installed). tolerance:
+    recommend the cheapest stable rung whose errors are all within it. progress: a line on
+    stderr per rung.
+
+    Returns a dict: {"scene": {...}, "times": [s], "rungs": [{"name", "kind", "ms_per_step",
+    "errors", "max_error", "stable", ...}], "recommended": name or None, "notes": [...]}.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
+    steps, dt = int(steps), float(dt)
+    if steps < 1:
+        raise ValueError(f"steps: must be >= 1, got {steps}")
+    if not dt > 0:
+        raise ValueError(f"dt: must be > 0 s, got {dt}")
+    notes = []
+    if rungs is None:
+        rungs = fem_rungs()
+        if surrogates:
+            rungs += _surrogate_rungs(scene, dt, notes)
+    if not rungs or rungs[0].name != "exact":
+        raise ValueError("rungs: the first rung must be the exact one (named 'exact')")
+    multiple = math.lcm(*(r.dt_factor for r in rungs))
+    if steps % multiple:
+        raise ValueError(f"steps: must be a multiple of {multiple} (the rungs' dt factors)")
+    check = checked_steps(steps, multiple)
+    static = solve(scene)
+    if not static.converged:
+        raise RuntimeError(f"trade: the static solve failed ({static.message}); no error scale")
+    u_static = static.x - scene.mesh.vertices
+    size = np.linalg.norm(u_static, axis=1)
+    tip = np.flatnonzero(size >= TIP_FRACTION * size.max())
+    deflection = float(np.linalg.norm(u_static[tip].mean(0)))
+    if deflection == 0:
+        raise ValueError("scene: the static solution does not move; nothing to compare")
+    static_energy = abs(Potential(scene).energy(static.x))
+    runs = []
+    for i, rung in enumerate(rungs):
+        label = f"[{i + 1}/{len(rungs)}] {rung.name}"
+        runs.append(_roll(rung, scene, dt, steps, label if progress else None))
+    ref = runs[0]["positions"]
+    rows = []
+    for rung, run in zip(rungs, runs):
+        rows.append(_row(rung, run, ref, check, tip, deflection, size.max(), static_energy,
+                         scene, dt))
+    good = [r for r in rows if r["stable"] and r["max_error"] <= tolerance]
+    recommended = min(good, key=lambda r: r["ms_per_step"])["name"] if good else None
+    return {"scene": {"tets": scene.mesh.n_tets, "vertices": scene.mesh.n_vertices,
+                      "unknowns": scene.n_free, "dt": dt, "steps": steps,
+                      "deflection": deflection, "tip_vertices": tip.size},
+            "times": [k * dt for k in check], "tolerance": tolerance, "rungs": rows,
+            "recommended": recommended, "notes": notes}
+
+
+def _surrogate_rungs(scene, dt, notes):
+    try:
+        from anisognn.rungs import surrogate_rungs
+    except ImportError as err:
+        notes.append(f"surrogate rungs skipped: anisognn cannot be imported ({err})")
+        return []
+    return surrogate_rungs(scene, dt, notes)
+
+
+def _roll(rung, scene, dt, steps, label):
+    """Roll rung out for steps of dt: positions and velocities at every scene step it lands on
+    (dict keyed by scene step), per-step seconds, infos, whether it completed."""
+    h = dt * rung.dt_factor
+    n_own = steps // rung.dt_factor
+    advance = rung.make(scene, h)
+    x = scene.initial_positions()
+    v = np.zeros_like(x)
+    states = {0: (x, v)}
+    seconds, infos, completed = [], [], True
+    t_last = time.perf_counter()
+    for k in range(n_own):
+        try:
+            x, v, info = advance(x, v)
+        except FloatingPointError as err:
+            info = {"failed": True, "message": str(err)}
+        now = time.perf_counter()
+        seconds.append(now - t_last)
+        t_last = now
+        infos.append(info)
+        if info["failed"] or not (np.isfinite(x).all() and np.isfinite(v).all()):
+            completed = False
+            break
+        states[(k + 1) * rung.dt_factor] = (x, v)
+        if label is not None and (k + 1 == n_own or (k + 1) % max(1, n_own // 10) == 0):
+            print(f"\r{label}: step {k + 1}/{n_own}", end="", file=sys.stderr, flush=True)
+    if label is not None:
+        print(f"\r{label}: {sum(seconds):.1f} s" + " " * 20, file=sys.stderr, flush=True)
+    return {"positions": states, "seconds": seconds, "infos": infos, "completed": completed}
+
+
+def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt):
+    """One rung's table row (see the module docstring for the quantities)."""
+    states = run["positions"]
+    errors, field_errors = [], []
+    for k in check:
+        if k not in states:
+            errors.append(float("inf"))
+            field_errors.append(float("inf"))
+            continue
+        d = states[k][0] - ref[k][0]
+        errors.append(float(np.linalg.norm(d[tip].mean(0))) / deflection)
+        field_errors.append(float(np.linalg.norm(d, axis=1).max()) / u_max)
+    pot = Potential(scene)
+    mass = scene.masses
+    energies = [pot.energy(x) + 0.5 * float((mass[:, None] * v * v).sum())
+                for x, v in states.values()]
+    drift = (max(energies) - energies[0]) / static_energy
+    ratio = min(float(volume_change(scene.mesh, x).min()) + 1.0 for x, _ in states.values())
+    secs = run["seconds"]
+    timed = secs[1:] if len(secs) > 1 else secs
+    per_step = 1e3 * float(np.mean(timed)) / rung.dt_factor
+    row = {"name": rung.name, "kind": rung.kind, "dt": dt * rung.dt_factor,
+           "ms_per_step": per_step,
+           "ms_median": 1e3 * float(np.median(timed)) / rung.dt_factor,
+           "errors": errors, "max_error": max(errors), "field_errors": field_errors,
+           "energy_drift": drift, "min_volume_ratio": ratio,
+           "stable": bool(run["completed"] and drift <= ENERGY_GAIN_MAX),
+           "steps_taken": len(secs)}
+    for key in ("iterations", "factorizations", "linear_iterations"):
+        values = [info[key] for info in run["infos"] if key in info]
+        if values:
+            row[key + "_per_step"] = float(np.mean(values))
+    return row
+
+
+def trade_table(result):
+    """The trade result as a text table."""
+    times = "/".join(f"{t:g}" for t in result["times"])
+    head = (f"{'rung':<22} {'ms/step':>8} {'x exact':>8} {'tip error at t = ' + times + ' s':<36}"
+            f" {'its':>5} {'drift':>8} {'min J':>6} stable")
+    exact = result["rungs"][0]["ms_per_step"]
+    lines = [head, "-" * len(head)]
+    for r in result["rungs"]:
+        errs = " / ".join(f"{e:.2g}" for e in r["errors"])
+        its = r.get("iterations_per_step")
+        lines.append(f"{r['name']:<22} {r['ms_per_step']:8.3g} {exact / r['ms_per_step']:8.2f} "
+                     f"{errs:<36} {'' if its is None else f'{its:.1f}':>5} "
+                     f"{r['energy_drift']:8.1e} {r['min_volume_ratio']:6.2f} {r['stable']}")
+    s = result["scene"]
+    lines.append(f"{s['tets']} tets, {s['unknowns']} unknowns, dt = {s['dt']} s, {s['steps']} "
+                 f"steps; errors relative to the static tip deflection {s['deflection']:.4g} m")
+    rec = result["recommended"]
+    lines.append(f"cheapest stable rung within {result['tolerance']:g} at every checked time: "
+                 f"{rec if rec else 'none'}")
+    lines += [f"note: {n}" for n in result["notes"]]
+    return "\n".join(lines)
+
+
+def write_json(result, path):
+    """Write the trade result to path as JSON, atomically."""
+    with atomic_path(path, ".json") as tmp, open(tmp, "w") as f:
+        json.dump(result, f, indent=1)
