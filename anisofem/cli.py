@@ -1,8 +1,10 @@
-"""Command line: `python -m anisofem {mesh,solve,bench}`.
+"""Command line: `python -m anisofem {mesh,solve,trade,bench}`.
 
   python -m anisofem mesh box --cells 10 2 2 -o beam.msh
   python -m anisofem solve beam.msh --fixed x-min --gravity 0 0 -9.81 --fiber 1 0 0 \\
       --kappa 1e5 -o beam.vtu
+  python -m anisofem trade beam.msh --fiber 0.766 0 0.643 --kappa 1e5 --steps 100 \\
+      --json trade.json --png trade.png
   python -m anisofem bench --json bench_anisofem.json
 """
 import argparse
@@ -10,7 +12,7 @@ import sys
 
 import numpy as np
 
-from . import bench, meshgen
+from . import bench, meshgen, methods, trade
 from .io import read_mesh, write_mesh
 from .material import Material
 from .metrics import end_vertices, tip_displacement
@@ -33,21 +35,16 @@ def _fixed(mesh, spec):
         raise SystemExit(f"--fixed: expected AXIS-SIDE like x-min or z-max, got {spec!r}")
 
 
-def _parser():
-    p = argparse.ArgumentParser(prog="python -m anisofem", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = p.add_subparsers(dest="command", required=True)
-    m = sub.add_parser("mesh", help="generate a mesh of one of the paper's shapes")
-    m.add_argument("shape", choices=sorted(_SHAPES))
-    m.add_argument("--size", type=float, nargs=3, default=(0.1, 0.02, 0.02),
+def _shape_arguments(p):
+    p.add_argument("--size", type=float, nargs=3, default=(0.1, 0.02, 0.02),
                    help="box: length width height; cylinder: length diameter (m)")
-    m.add_argument("--cells", type=int, nargs="+", default=(10, 2, 2),
+    p.add_argument("--cells", type=int, nargs="+", default=(10, 2, 2),
                    help="box: nx ny nz; cylinder: along section")
-    m.add_argument("--rings", type=int, default=1, help="cylinder: O-grid rings")
-    m.add_argument("-o", "--output", required=True)
-    s = sub.add_parser("solve", help="static equilibrium or a backward-Euler rollout")
-    s.add_argument("mesh", help="a mesh file meshio reads (.msh, .vtu, .xdmf, ...)")
-    s.add_argument("-o", "--output", required=True, help="result file (.vtu, .xdmf, .msh)")
+    p.add_argument("--rings", type=int, default=1, help="cylinder: O-grid rings")
+
+
+def _scene_arguments(s):
+    """The flags that make a Scene of a mesh (solve and trade)."""
     s.add_argument("--fixed", default="x-min", help="end held fixed: AXIS-SIDE (x-min)")
     s.add_argument("--gravity", type=float, nargs=3, default=(0.0, 0.0, -9.81),
                    metavar=("GX", "GY", "GZ"), help="m/s^2")
@@ -57,10 +54,49 @@ def _parser():
     s.add_argument("--fiber", type=float, nargs=3, default=(1.0, 0.0, 0.0),
                    help="unit fiber direction")
     s.add_argument("--kappa", type=float, default=0.0, help="fiber stiffness, Pa")
+
+
+def _scene(args, mesh):
+    material = Material(args.young, args.poisson, args.density,
+                        np.asarray(args.fiber) / np.linalg.norm(args.fiber), args.kappa)
+    return Scene(mesh, material, fixed=_fixed(mesh, args.fixed), gravity=args.gravity)
+
+
+def _parser():
+    p = argparse.ArgumentParser(prog="python -m anisofem", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="command", required=True)
+    m = sub.add_parser("mesh", help="generate a mesh of one of the paper's shapes")
+    m.add_argument("shape", choices=sorted(_SHAPES))
+    _shape_arguments(m)
+    m.add_argument("-o", "--output", required=True)
+    s = sub.add_parser("solve", help="static equilibrium or a backward-Euler rollout")
+    s.add_argument("mesh", help="a mesh file meshio reads (.msh, .vtu, .xdmf, ...)")
+    s.add_argument("-o", "--output", required=True, help="result file (.vtu, .xdmf, .msh)")
+    _scene_arguments(s)
     s.add_argument("--steps", type=int, default=0,
                    help="backward-Euler steps instead of statics (writes the last state)")
     s.add_argument("--dt", type=float, default=0.02, help="s")
+    s.add_argument("--method", default="newton", choices=list(methods.METHODS),
+                   help="how each solve is done (see anisofem.methods)")
+    s.add_argument("--iterations", type=int, default=None,
+                   help="a fixed budget of iterations per solve instead of a tolerance")
     s.add_argument("--rtol", type=float, default=1e-8)
+    t = sub.add_parser("trade", help="the speed/accuracy trade of every solver rung on a scene "
+                                     "(table, JSON, Pareto plot)")
+    t.add_argument("scene", help="a mesh file meshio reads, or a shape: "
+                                 f"{', '.join(sorted(_SHAPES))}")
+    _shape_arguments(t)
+    _scene_arguments(t)
+    t.add_argument("--steps", type=int, default=100, help="backward-Euler steps from rest")
+    t.add_argument("--dt", type=float, default=0.02, help="s")
+    t.add_argument("--tolerance", type=float, default=0.01,
+                   help="name the cheapest rung whose tip error stays within this fraction of "
+                        "the static deflection")
+    t.add_argument("--no-surrogates", action="store_true",
+                   help="only the FEM rungs (skip the shipped networks)")
+    t.add_argument("--json", help="write the result here")
+    t.add_argument("--png", help="write the Pareto plot here")
     b = sub.add_parser("bench", help="speed of the kernels and solvers (table + JSON)")
     b.add_argument("--sizes", nargs="+", default=list(bench.SIZES), choices=list(bench.SIZES))
     b.add_argument("--json", default="bench_anisofem.json")
@@ -75,16 +111,14 @@ def main(argv=None):
         print(f"{mesh} -> {args.output}")
     elif args.command == "solve":
         mesh = read_mesh(args.mesh)
-        scene = Scene(mesh, Material(args.young, args.poisson, args.density,
-                                     np.asarray(args.fiber) / np.linalg.norm(args.fiber),
-                                     args.kappa),
-                      fixed=_fixed(mesh, args.fixed), gravity=args.gravity)
+        scene = _scene(args, mesh)
+        how = {"method": args.method, "rtol": args.rtol, "iterations": args.iterations}
         if args.steps:
-            roll = simulate(scene, args.steps, args.dt, rtol=args.rtol)
-            x, ok = roll.positions[-1], roll.converged
-            print(f"{len(roll.positions) - 1} steps, converged: {ok}")
+            roll = simulate(scene, args.steps, args.dt, **how)
+            x, ok = roll.positions[-1], roll.completed
+            print(f"{len(roll.positions) - 1} steps, converged: {roll.converged}")
         else:
-            res = solve(scene, rtol=args.rtol)
+            res = solve(scene, **how)
             x, ok = res.x, res.converged
             print(f"{res.iterations} Newton iterations, converged: {ok}, relative residual "
                   f"{res.residuals[-1]:.2e}")
@@ -93,8 +127,28 @@ def main(argv=None):
         write_mesh(args.output, mesh, x, scene)
         print(f"-> {args.output}")
         return 0 if ok else 1
+    elif args.command == "trade":
+        return _trade(args)
     else:
         bench.run(tuple(args.sizes), args.json)
+    return 0
+
+
+def _trade(args):
+    """python -m anisofem trade: print the table, write the JSON and the plot."""
+    if args.scene in _SHAPES:
+        mesh, name = _SHAPES[args.scene](args), args.scene
+    else:
+        mesh, name = read_mesh(args.scene), args.scene
+    result = trade.trade(_scene(args, mesh), args.steps, args.dt, tolerance=args.tolerance,
+                         surrogates=not args.no_surrogates, name=name)
+    print(trade.trade_table(result))
+    if args.json:
+        trade.write_json(result, args.json)
+        print(f"-> {args.json}")
+    if args.png:
+        trade.plot(result, args.png)
+        print(f"-> {args.png}")
     return 0
 
 

@@ -90,11 +90,6 @@ class Method:
         """True when the method spends a fixed number of iterations per solve."""
         return self.iterations is not None
 
-    @property
-    def limit(self):
-        """Most iterations one solve may take."""
-        return self.iterations if self.budget else self.max_iter
-
     def start(self, potential):
         """Prepare to minimize potential (an anisofem.potential.Potential)."""
         self.potential = potential

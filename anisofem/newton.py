@@ -73,16 +73,20 @@ class NewtonResult:
                 f"message={self.message!r})")
 
 
-def minimize(potential, x0, method="newton", *, warn=True, **options):
+def minimize(potential, x0, method="newton", *, warn=True, accept=None, **options):
     """Minimize potential (an anisofem.potential.Potential) from x0 (n, 3), fixed components
     already at their prescribed positions, by `method`: a name of anisofem.methods.METHODS with
     its options, or a Method instance (which keeps its factorizations across calls). Returns a
-    NewtonResult; warns (ConvergenceWarning) when it failed."""
+    NewtonResult; warns (ConvergenceWarning) when it failed.
+
+    accept(x, G(x)) -> bool: with an iteration budget, the solve stops at the budget only at an
+    iterate accept approves, and otherwise goes on (to the tolerance, or max_iter iterations).
+    """
     method = methods.make(method, **options)
     t0 = time.perf_counter()
     method.start(potential)
     with method.threads():
-        x, converged, it, res, energy, message = _iterate(potential, x0, method)
+        x, converged, it, res, energy, message = _iterate(potential, x0, method, accept)
     result = NewtonResult(x=x, converged=converged, iterations=it, residuals=res, energy=energy,
                           method=method.name, message=message,
                           seconds=time.perf_counter() - t0, **method.counts)
@@ -92,7 +96,7 @@ def minimize(potential, x0, method="newton", *, warn=True, **options):
     return result
 
 
-def _iterate(potential, x0, method):
+def _iterate(potential, x0, method, accept):
     """The loop of minimize: (x, converged, iterations, residuals, energy, message)."""
     scene = potential.scene
     free = scene.free_dofs
@@ -110,9 +114,11 @@ def _iterate(potential, x0, method):
     while True:
         if gnorm <= tol:
             return x, True, it, res, energy, "converged"
-        if it >= method.limit:
-            return x, False, it, res, energy, (BUDGET_SPENT if method.budget
-                                               else "max_iter reached")
+        if it >= method.max_iter:
+            return x, False, it, res, energy, "max_iter reached"
+        if method.budget and it >= method.iterations and (accept is None or
+                                                          accept(x, energy)):
+            return x, False, it, res, energy, BUDGET_SPENT
         it += 1
         step = None
         for p in method.directions(x, g, res[-1]):

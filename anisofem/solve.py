@@ -63,8 +63,10 @@ def step(scene, x, v, dt, a_guess=None, method="newton", **options):
     y = x + dt v + dt^2 a_guess (a_guess: (n, 3) expected acceleration in m/s^2, default 0;
     simulate passes the previous step's when the method iterates to its tolerance), by
     `method` with `options` (see solve and anisofem.methods; pass a Method instance to keep
-    its factorizations from one call to the next). Returns StepResult with
-    v_new = (x_new - x) / dt. Fixed components end at their prescribed positions.
+    its factorizations from one call to the next). A step with an iteration budget that would
+    end with more mechanical energy than it started with iterates on until it does not (or
+    converges). Returns StepResult with v_new = (x_new - x) / dt. Fixed components end at
+    their prescribed positions.
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
@@ -76,8 +78,30 @@ def step(scene, x, v, dt, a_guess=None, method="newton", **options):
     x_hat = x + dt * v
     start = x_hat if a_guess is None else x_hat + dt ** 2 * check_positions(scene, a_guess,
                                                                            "a_guess")
-    result = minimize(Potential(scene, x_hat, dt), scene.with_fixed(start), method, **options)
+    potential = Potential(scene, x_hat, dt)
+    method = methods.make(method, **options)
+    accept = _no_energy_gain(potential, x, v) if method.budget else None
+    result = minimize(potential, scene.with_fixed(start), method, accept=accept)
     return StepResult(result.x, (result.x - x) / dt, result)
+
+
+def _no_energy_gain(potential, x, v):
+    """accept(y, G(y)) for a budgeted step from x, v: whether the step to y ends with no more
+    mechanical energy H = 1/2 v^T M v + elastic - f_ext . x than it started with (up to
+    round-off). The exact backward-Euler step never gains energy where the elastic energy is
+    convex; a step cut short can, and a budget must not buy a blow-up."""
+    mass = potential.mass_over_dt2[:, None]  # kg / s^2: |y - x|^2_M / dt^2 = |v|^2_M
+
+    def half_norm(d):
+        return 0.5 * float((mass * d * d).sum())
+
+    x_hat = potential.x_hat
+    h0 = potential.energy(x)  # = elastic - f_ext . x + 1/2 v^T M v at the start
+    slack = 1e-12 * (abs(h0) + abs(float((potential.scene.external_force * x).sum())))
+
+    def accept(y, g):
+        return g - half_norm(y - x_hat) + half_norm(y - x) <= h0 + slack
+    return accept
 
 
 @dataclass
@@ -100,9 +124,9 @@ class Stepper:
     """Backward-Euler steps of length dt (s) of one scene by one method, carrying what the
     method keeps from step to step (factorizations, curvature pairs) and the warm start.
 
-    stepper(x, v) -> StepResult. A method that iterates to its tolerance starts each step from
-    the previous step's acceleration, one with a fixed iteration budget from the inertial
-    predictor (see anisofem.methods).
+    stepper(x, v, a_guess=None) -> StepResult. Without a_guess (m/s^2, (n, 3)), a method
+    that iterates to its tolerance starts each step from the previous step's acceleration, one
+    with a fixed iteration budget from the inertial predictor (see anisofem.methods).
     """
 
     def __init__(self, scene, dt, method="newton", **options):
@@ -110,8 +134,9 @@ class Stepper:
         self.method = methods.make(method, **options)
         self._a = None
 
-    def __call__(self, x, v):
-        res = step(self.scene, x, v, self.dt, self._a, self.method)
+    def __call__(self, x, v, a_guess=None):
+        res = step(self.scene, x, v, self.dt, self._a if a_guess is None else a_guess,
+                   self.method)
         if self.method.warm_start == "previous" and not res.newton.failed:
             self._a = (res.v - v) / self.dt
         return res

@@ -24,6 +24,7 @@ the scene out from rest in the same process; what is compared:
 """
 import json
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -67,7 +68,8 @@ def fem_rung(name, method="newton", dt_factor=1, **options):
         def advance(x, v):
             res = stepper(x, v)
             n = res.newton
-            return res.x, res.v, {"failed": n.failed, "iterations": n.iterations,
+            return res.x, res.v, {"failed": n.failed, "message": n.message,
+                                  "iterations": n.iterations,
                                   "factorizations": n.factorizations,
                                   "linear_iterations": n.linear_iterations}
         return advance
@@ -76,16 +78,18 @@ def fem_rung(name, method="newton", dt_factor=1, **options):
 
 
 def fem_rungs():
-    """The anisofem ladder, exact first."""
+    """The anisofem ladder, exact first: "xK" is a budget of K iterations per step, "rtol R"
+    iterates to the relative tolerance R (exact: 1e-8), "dt xK" steps K times longer."""
     return [fem_rung("exact"),
             fem_rung("newton x1", iterations=1),
             fem_rung("newton x2", iterations=2),
-            fem_rung("reuse", "reuse"),
-            fem_rung("reuse x2", "reuse", iterations=2),
+            fem_rung("reuse rtol 1e-3", "reuse", rtol=1e-3),
+            fem_rung("reuse x3", "reuse", iterations=3),
+            fem_rung("lbfgs rtol 1e-3", "lbfgs", rtol=1e-3),
             fem_rung("lbfgs x5", "lbfgs", iterations=5),
-            fem_rung("lbfgs x10", "lbfgs", iterations=10),
-            fem_rung("cg", "cg"),
-            fem_rung("cg x2", "cg", iterations=2),
+            fem_rung("cg jacobi rtol 1e-3", "cg", rtol=1e-3),
+            fem_rung("cg factor x2", "cg", preconditioner="factor", forcing=0.01,
+                     iterations=2),
             fem_rung("exact dt x2", dt_factor=2),
             fem_rung("exact dt x5", dt_factor=5)]
 
@@ -100,17 +104,18 @@ def checked_steps(steps, multiple):
 
 
 def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, surrogates=True,
-          progress=True):
+          progress=True, name=""):
     """Run every rung on scene and compare it with the exact rollout.
 
     scene: an anisofem.Scene (held enough for a static solve: its static deflection is the
     error scale). steps: steps of dt (s) from rest. rungs: Rungs (default fem_rungs(), plus
     the surrogate's rungs from anisognn when surrogates and it is installed). tolerance:
-    recommend the cheapest stable rung whose errors are all within it. progress: a line on
-    stderr per rung.
+    recommend the cheapest stable rung whose errors are all within it. progress: report each
+    rung's progress on stderr. name: what the scene is called in tables and plots.
 
     Returns a dict: {"scene": {...}, "times": [s], "rungs": [{"name", "kind", "ms_per_step",
-    "errors", "max_error", "stable", ...}], "recommended": name or None, "notes": [...]}.
+    "errors", "max_error", "stable", "on_front", ...}], "recommended": name or None,
+    "notes": [...]} (see the module docstring for the quantities).
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
@@ -149,13 +154,26 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, surrogates=True
     for rung, run in zip(rungs, runs):
         rows.append(_row(rung, run, ref, check, tip, deflection, size.max(), static_energy,
                          scene, dt))
+    mark_front(rows)
     good = [r for r in rows if r["stable"] and r["max_error"] <= tolerance]
     recommended = min(good, key=lambda r: r["ms_per_step"])["name"] if good else None
-    return {"scene": {"tets": scene.mesh.n_tets, "vertices": scene.mesh.n_vertices,
+    return {"scene": {"name": name, "tets": scene.mesh.n_tets, "vertices": scene.mesh.n_vertices,
                       "unknowns": scene.n_free, "dt": dt, "steps": steps,
                       "deflection": deflection, "tip_vertices": tip.size},
             "times": [k * dt for k in check], "tolerance": tolerance, "rungs": rows,
             "recommended": recommended, "notes": notes}
+
+
+def mark_front(rows):
+    """Set each row's "on_front": stable, and no other stable rung is at least as fast and at
+    least as accurate at every checked time (and better in one of these)."""
+    stable = [r for r in rows if r["stable"]]
+    for r in rows:
+        r["on_front"] = r["stable"] and not any(
+            o is not r and o["ms_per_step"] <= r["ms_per_step"]
+            and all(a <= b for a, b in zip(o["errors"], r["errors"]))
+            and (o["ms_per_step"] < r["ms_per_step"] or o["errors"] != r["errors"])
+            for o in stable)
 
 
 def _surrogate_rungs(scene, dt, notes):
@@ -172,6 +190,7 @@ def _roll(rung, scene, dt, steps, label):
     (dict keyed by scene step), per-step seconds, infos, whether it completed."""
     h = dt * rung.dt_factor
     n_own = steps // rung.dt_factor
+    live = sys.stderr.isatty()
     advance = rung.make(scene, h)
     x = scene.initial_positions()
     v = np.zeros_like(x)
@@ -191,10 +210,12 @@ def _roll(rung, scene, dt, steps, label):
             completed = False
             break
         states[(k + 1) * rung.dt_factor] = (x, v)
-        if label is not None and (k + 1 == n_own or (k + 1) % max(1, n_own // 10) == 0):
+        if label is not None and live and (k + 1) % max(1, n_own // 20) == 0:
             print(f"\r{label}: step {k + 1}/{n_own}", end="", file=sys.stderr, flush=True)
     if label is not None:
-        print(f"\r{label}: {sum(seconds):.1f} s" + " " * 20, file=sys.stderr, flush=True)
+        end = "" if completed else (f", stopped at step {len(seconds)}: "
+                                    f"{infos[-1].get('message', 'failed')}")
+        print(f"\r{label}: {sum(seconds):.1f} s{end}" + " " * 20, file=sys.stderr, flush=True)
     return {"positions": states, "seconds": seconds, "infos": infos, "completed": completed}
 
 
@@ -260,3 +281,73 @@ def write_json(result, path):
     """Write the trade result to path as JSON, atomically."""
     with atomic_path(path, ".json") as tmp, open(tmp, "w") as f:
         json.dump(result, f, indent=1)
+
+
+def plot(result, path):
+    """Save the Pareto plot of a trade result to path (PNG): ms/step against the largest tip
+    error over the checked times, log-log, one marker per rung, the front joined."""
+    try:
+        import matplotlib
+    except ImportError:
+        raise ImportError("png: the trade plot needs matplotlib (pip install matplotlib)") from None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = result["rungs"]
+    finite = [r["max_error"] for r in rows if 0 < r["max_error"] < math.inf]
+    floor = min(finite) / 10 if finite else 1e-6
+    ceiling = max(finite) * 10 if finite else 1.0
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    ax.axhline(result["tolerance"], color="0.6", lw=0.8, ls="--")
+    ax.text(min(r["ms_per_step"] for r in rows), result["tolerance"] * 1.1,
+            f"tolerance {result['tolerance']:g}", color="0.4", fontsize=8)
+    def y_of(r):
+        return min(max(r["max_error"], floor), ceiling)
+
+    # the front in this plot's two numbers: stable rungs no other is faster and more exact than
+    front, best = [], math.inf
+    for r in sorted((r for r in rows if r["stable"]), key=lambda r: (r["ms_per_step"],
+                                                                     r["max_error"])):
+        if r["max_error"] < best:
+            front.append(r)
+            best = r["max_error"]
+    xs = [r["ms_per_step"] for r in front]
+    ys = [y_of(r) for r in front]
+    ax.step(xs, ys, where="post", color="tab:green", lw=6, alpha=0.25,
+            solid_capstyle="round", label="Pareto front")
+    styles = {"fem": ("o", "tab:blue", "anisofem"), "surrogate": ("s", "tab:orange", "surrogate")}
+    shown, placed = set(), []
+    for r in sorted(rows, key=y_of):
+        marker, color, label = styles[r["kind"]]
+        if not r["stable"]:
+            marker, color, label = "x", "tab:red", "unstable or failed"
+        x, y = r["ms_per_step"], y_of(r)
+        ax.scatter(x, y, marker=marker, color=color, s=50, zorder=3,
+                   label=None if label in shown else label)
+        shown.add(label)
+        # nudge a label up while it would sit on one placed nearby (log coordinates)
+        lx, ly = math.log10(x), math.log10(y)
+        while any(abs(lx - px) < 0.35 and abs(ly - py) < 0.09 for px, py in placed):
+            ly += 0.09
+        placed.append((lx, ly))
+        text = r["name"] + (" (reference)" if r["name"] == "exact" else "")
+        ax.annotate(text, (x, y), xytext=(x * 1.06, 10 ** ly * 1.08), fontsize=7.5,
+                    arrowprops={"arrowstyle": "-", "color": "0.7", "lw": 0.5}
+                    if ly - math.log10(y) > 0.05 else None)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ms = [r["ms_per_step"] for r in rows]
+    ax.set_xlim(min(ms) / 1.5, max(ms) * 4)
+    ax.set_ylim(floor / 2, ceiling * 2)
+    ax.set_xlabel("ms per step of dt (this machine, one process)")
+    times = ", ".join(f"{t:g}" for t in result["times"])
+    ax.set_ylabel(f"largest tip error at t = {times} s\n(fraction of the static deflection)")
+    sc = result["scene"]
+    ax.set_title(f"{os.path.basename(sc['name']) or 'scene'}: {sc['tets']:,} tets, dt = {sc['dt']:g} s, "
+                 f"{sc['steps']} steps", fontsize=10)
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left")
+    fig.tight_layout()
+    with atomic_path(path, ".png") as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)

@@ -1,0 +1,129 @@
+"""The surrogate's rungs of the speed/accuracy ladder (anisofem.trade): the shipped networks
+alone, with their Galerkin passes, exported to ONNX, and as the warm start of one Newton
+iteration."""
+import os
+
+import numpy as np
+import torch
+
+from anisofem import Material, Scene
+from anisofem.solve import Stepper
+from anisofem.trade import Rung
+
+from .graph import from_scene
+from .model import with_galerkin
+from .sampler import DENSITY, POISSON, YOUNG
+from .shipped import NAMES, pretrained
+
+#: The deployed files `python -m export` writes for the shipped models.
+ONNX_FOLDER = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                           "export", "models")
+
+
+def _network_step(model, scene):
+    """advance(x, v) for the trained model's step on scene (float32 network, float64 state);
+    the model's own acceleration is also returned in info["acceleration"]."""
+    param = next(model.parameters())
+    graph = from_scene(scene).to(param.device, param.dtype)
+    f_ext = torch.tensor(scene.external_force, dtype=param.dtype, device=param.device)
+    held, dt = scene.fixed_mask, model.config.dt
+
+    def advance(x, v):
+        with torch.no_grad():
+            a = model(torch.as_tensor(x, dtype=param.dtype, device=param.device),
+                      torch.as_tensor(v, dtype=param.dtype, device=param.device), f_ext, graph)
+        a = a.to("cpu", torch.float64).numpy()
+        x_next = x + dt * v + dt * dt * a
+        x_next[held] = scene.fixed_positions[held]
+        ok = bool(np.isfinite(x_next).all())
+        return x_next, (x_next - x) / dt, {"failed": not ok, "acceleration": a}
+    return advance
+
+
+def network_rung(name, model):
+    """The model stepping alone (its Galerkin passes, if any, included)."""
+    return Rung(name, "surrogate", lambda scene, dt: _network_step(model, scene))
+
+
+def warm_start_rung(name, model, iterations=1):
+    """The model's acceleration as the start of `iterations` Newton iterations."""
+    def make(scene, dt):
+        predict = _network_step(model, scene)
+        stepper = Stepper(scene, dt, "newton", iterations=iterations)
+
+        def advance(x, v):
+            guess = predict(x, v)[2]["acceleration"]
+            res = stepper(x, v, guess)
+            n = res.newton
+            return res.x, res.v, {"failed": n.failed, "iterations": n.iterations,
+                                  "factorizations": n.factorizations}
+        return advance
+    return Rung(name, "surrogate", make)
+
+
+def onnx_rung(name, path):
+    """The exported model stepped by export/runtime.py (numpy + onnxruntime only)."""
+    from export.runtime import OnnxSimulator
+
+    def make(scene, dt):
+        el = scene.elements
+        sim = OnnxSimulator(path, scene.mesh.vertices, scene.mesh.tets, fixed=scene.fixed_mask,
+                            density=scene.material.per_element(scene.mesh.n_tets)["density"],
+                            fiber_direction=el.fiber, fiber_stiffness=el.kappa)
+        f = scene.external_force
+
+        def advance(x, v):
+            try:
+                x, v = sim.step(x, v, f)
+            except FloatingPointError:
+                return x, v, {"failed": True}
+            return x.astype(np.float64), v.astype(np.float64), {"failed": False}
+        return advance
+    return Rung(name, "surrogate", make)
+
+
+def _trained_material(scene):
+    """True when every tet has the material the shipped models were trained on."""
+    p = scene.material.per_element(scene.mesh.n_tets)
+    trained = Material(YOUNG, POISSON, DENSITY).per_element(1)
+    return all(np.allclose(p[k], trained[k][0]) for k in ("mu", "lam", "density"))
+
+
+def surrogate_rungs(scene, dt, notes):
+    """The shipped models' rungs for scene at dt (s); what cannot run is said in notes."""
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
+    try:
+        models = {name: pretrained(name) for name in NAMES}
+    except FileNotFoundError as err:
+        notes.append(f"surrogate rungs skipped: {err}")
+        return []
+    trained_dt = models["directional"].config.dt
+    if not np.isclose(dt, trained_dt, rtol=1e-9, atol=0):
+        notes.append(f"surrogate rungs skipped: the shipped models step dt = {trained_dt} s, "
+                     f"the trade runs dt = {dt} s")
+        return []
+    if not _trained_material(scene):
+        notes.append("the shipped models were trained on E = 100 kPa, nu = 0.48, 1000 kg/m^3; "
+                     "this scene's material differs (their rungs show what that costs)")
+    directional = models["directional"]
+    rungs = [network_rung("directional, no pass", with_galerkin(directional, False)),
+             network_rung("directional, 1 pass", with_galerkin(directional, True, 1)),
+             network_rung("directional (shipped)", directional),
+             network_rung("meshgraphnets (shipped)", models["meshgraphnets"]),
+             warm_start_rung("directional + newton x1", directional)]
+    path = os.path.join(ONNX_FOLDER, "directional.onnx")
+    if not os.path.isfile(path):
+        notes.append(f"ONNX rung skipped: {path} is missing")
+    elif not _trained_material(scene) or not np.array_equal(scene.fixed_positions,
+                                                            scene.mesh.vertices):
+        notes.append("ONNX rung skipped: export/runtime.py steps the trained material with "
+                     "held vertices at rest, and this scene differs")
+    else:
+        try:
+            import onnxruntime  # noqa: F401
+        except ImportError:
+            notes.append("ONNX rung skipped: onnxruntime is not installed")
+        else:
+            rungs.append(onnx_rung("directional.onnx (shipped)", path))
+    return rungs

@@ -1,0 +1,156 @@
+"""The solver ladder: every method reaches Newton's answer at its tolerance, budgets behave as
+budgets, kept factorizations are kept, and every rung is stable or says it failed at the
+extremes."""
+import warnings
+
+import numpy as np
+import pytest
+
+import anisofem as af
+from anisofem import methods
+from anisofem.potential import Potential
+from anisofem.trade import fem_rungs
+
+TO_TOLERANCE = [("newton", {}), ("reuse", {}), ("lbfgs", {}), ("cg", {}),
+                ("cg", {"preconditioner": "factor"})]
+
+
+def cantilever(mesh, kappa=1e5, nu=0.48):
+    d = np.array([np.cos(np.radians(40)), 0.0, np.sin(np.radians(40))])
+    return af.Scene(mesh, af.Material(1e5, nu, 1000.0, d, kappa),
+                    fixed=af.metrics.end_vertices(mesh, 0, "min"), gravity=(0, 0, -9.81))
+
+
+@pytest.fixture(scope="module")
+def scene(beam):
+    return cantilever(beam)
+
+
+@pytest.fixture(scope="module")
+def moving(scene):
+    """A bent, moving state of the cantilever: (x, v) after 5 exact steps."""
+    roll = af.simulate(scene, 5)
+    return roll.positions[-1], roll.velocities[-1]
+
+
+@pytest.mark.parametrize("method, options", TO_TOLERANCE)
+def test_every_method_reaches_the_static_answer(scene, method, options):
+    ref = af.solve(scene, rtol=1e-10)
+    res = af.solve(scene, method=method, rtol=1e-10, **options)
+    print(method, options, res)
+    assert res.converged and res.method == method
+    assert np.abs(res.x - ref.x).max() < 1e-8 * np.abs(ref.x - scene.mesh.vertices).max()
+
+
+@pytest.mark.parametrize("method, options", TO_TOLERANCE)
+def test_every_method_takes_newtons_step(scene, moving, method, options):
+    x, v = moving
+    ref = af.step(scene, x, v, 0.02, rtol=1e-10)
+    res = af.step(scene, x, v, 0.02, method=method, rtol=1e-10, **options)
+    assert res.converged
+    assert np.abs(res.x - ref.x).max() < 1e-7 * np.abs(ref.x - x).max()
+
+
+def test_one_newton_iteration_from_the_predictor_is_linearly_implicit_euler(scene, moving):
+    """x = x_hat + p with (M / dt^2 + K(x_hat)) p = -grad G(x_hat): one full Newton step."""
+    x, v = moving
+    dt = 0.02
+    x_hat = x + dt * v
+    res = af.step(scene, x, v, dt, iterations=1)
+    assert res.newton.iterations == 1 and not res.newton.failed
+    free = scene.free_dofs
+    H = af.hessian(scene, x_hat, x_hat, dt).toarray()[np.ix_(free, free)]
+    g = af.gradient(scene, x_hat, x_hat, dt).ravel()[free]
+    expected = x_hat.copy()
+    expected.ravel()[free] -= np.linalg.solve(H, g)
+    assert np.abs(res.x - expected).max() < 1e-10 * np.abs(expected - x).max()
+
+
+@pytest.mark.parametrize("method", list(methods.METHODS))
+def test_a_budget_is_spent_not_failed_and_rollouts_run_through_it(scene, method):
+    """One iteration per step, more only where one would gain energy: the mechanical energy
+    never grows, and the rollout runs through steps that stop short of the tolerance."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", af.ConvergenceWarning)  # a budget does not warn
+        roll = af.simulate(scene, 10, method=method, iterations=1)
+    assert roll.completed and not roll.converged
+    assert len(roll.steps) == 10
+    its = [s.newton.iterations for s in roll.steps]
+    print(method, "iterations per step", its)
+    assert not any(s.newton.failed for s in roll.steps)
+    assert min(its) == 1 and sum(i == 1 for i in its) >= 5
+    assert any(s.newton.message == "iteration budget spent" for s in roll.steps)
+    h = [_energy(scene, x, v) for x, v in zip(roll.positions, roll.velocities)]
+    assert all(b <= a + 1e-12 * abs(a) for a, b in zip(h, h[1:]))
+
+
+def test_warm_start_follows_the_budget():
+    assert methods.make("newton").warm_start == "previous"
+    assert methods.make("newton", iterations=2).warm_start == "inertial"
+    assert methods.make("lbfgs", iterations=2, warm_start="previous").warm_start == "previous"
+
+
+@pytest.mark.parametrize("method, options", [("reuse", {}), ("lbfgs", {}),
+                                             ("cg", {"preconditioner": "factor"})])
+def test_factorizations_are_kept_across_steps(scene, method, options):
+    roll = af.simulate(scene, 30, method=method, rtol=1e-6, **options)
+    exact = af.simulate(scene, 30, rtol=1e-6)
+    kept = sum(s.newton.factorizations for s in roll.steps)
+    fresh = sum(s.newton.factorizations for s in exact.steps)
+    print(method, "factorizations", kept, "newton's", fresh)
+    assert roll.converged and kept < fresh / 2
+
+
+def test_cg_with_the_jacobi_preconditioner_factors_nothing(scene):
+    res = af.solve(scene, method="cg", rtol=1e-8)
+    assert res.converged and res.factorizations == 0 and res.linear_iterations > 0
+
+
+def test_options_are_checked_by_name():
+    with pytest.raises(TypeError, match="bogus: not an option of method 'newton'"):
+        methods.make("newton", bogus=3)
+    with pytest.raises(ValueError, match="method: expected one of"):
+        methods.make("magic")
+    with pytest.raises(ValueError, match="iterations"):
+        methods.make("lbfgs", iterations=0)
+    with pytest.raises(ValueError, match="preconditioner"):
+        methods.make("cg", preconditioner="ilu")
+    with pytest.raises(ValueError, match="warm_start"):
+        methods.make("reuse", warm_start="random")
+    with pytest.raises(TypeError, match="refactor: not an option of method 'newton'"):
+        af.solve(af.box_beam(cells=(2, 1, 1)), refactor=0.5)
+
+
+def _energy(scene, x, v):
+    return Potential(scene).energy(x) + 0.5 * float((scene.masses[:, None] * v * v).sum())
+
+
+EXTREMES = {
+    "nu 0.499": (lambda b: cantilever(b, nu=0.499), 0.02),
+    "kappa 100 E": (lambda b: cantilever(b, kappa=1e7), 0.02),
+    "dt 1e-4": (lambda b: cantilever(b), 1e-4),
+    "dt 0.1": (lambda b: cantilever(b), 0.1),
+    "flat elements": (lambda b: cantilever(af.box_beam((0.1, 0.02, 0.0005), (10, 2, 1))), 0.02),
+}
+
+
+@pytest.mark.parametrize("extreme", list(EXTREMES))
+@pytest.mark.parametrize("rung", fem_rungs(), ids=lambda r: r.name)
+def test_every_rung_is_stable_or_says_it_failed_at_the_extremes(beam, extreme, rung):
+    make, dt = EXTREMES[extreme]
+    scene = make(beam)
+    advance = rung.make(scene, dt * rung.dt_factor)
+    x = scene.initial_positions()
+    v = np.zeros_like(x)
+    h0 = _energy(scene, x, v)
+    scale = abs(Potential(scene).energy(af.solve(scene).x))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", af.ConvergenceWarning)
+        for k in range(8):
+            x, v, info = advance(x, v)
+            assert np.isfinite(x).all() and np.isfinite(v).all()
+            if info["failed"]:
+                assert info["message"]  # reported, with the reason
+                break
+            # backward Euler dissipates: a gain in energy is a blow-up in the making
+            assert _energy(scene, x, v) <= h0 + 1e-3 * scale, f"energy grew at step {k + 1}"
