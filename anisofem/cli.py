@@ -104,7 +104,8 @@ def _parser():
 
 
 def main(argv=None):
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
     if args.command == "mesh":
         mesh = _SHAPES[args.shape](args)
         write_mesh(args.output, mesh)
@@ -128,20 +129,21 @@ def main(argv=None):
         print(f"-> {args.output}")
         return 0 if ok else 1
     elif args.command == "trade":
-        return _trade(args)
+        return _trade(args, parser)
     else:
         bench.run(tuple(args.sizes), args.json)
     return 0
 
 
-def _trade(args):
+def _trade(args, parser):
     """python -m anisofem trade: print the table, write the JSON and the plot."""
-    if args.scene in _SHAPES:
-        mesh, name = _SHAPES[args.scene](args), args.scene
-    else:
-        mesh, name = read_mesh(args.scene), args.scene
-    result = trade.trade(_scene(args, mesh), args.steps, args.dt, tolerance=args.tolerance,
-                         surrogates=not args.no_surrogates, name=name)
+    mesh = _SHAPES[args.scene](args) if args.scene in _SHAPES else read_mesh(args.scene)
+    try:
+        result = trade.trade(_scene(args, mesh), args.steps, args.dt,
+                             tolerance=args.tolerance, surrogates=not args.no_surrogates,
+                             name=args.scene)
+    except (ValueError, TypeError) as err:
+        parser.error(str(err))
     print(trade.trade_table(result))
     if args.json:
         trade.write_json(result, args.json)

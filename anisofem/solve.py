@@ -23,14 +23,14 @@ def default_scene(mesh):
     return Scene(mesh, Material.paper(), fixed=fixed, gravity=GRAVITY)
 
 
-def solve(scene, x0=None, method="newton", **options):
+def solve(scene, x0=None, method="newton", warn=True, **options):
     """Static equilibrium of a Scene (or of a TetMesh with default_scene's defaults).
 
     x0: (n, 3) start, m (default: rest positions with fixed vertices at their prescribed
     positions). method: "newton" (default), "reuse", "lbfgs", "cg" or an
     anisofem.methods.Method; options: the method's (rtol, atol, max_iter, iterations,
-    projection, linear_solver, ...; see anisofem.methods). Returns a NewtonResult; .x is the
-    (n, 3) equilibrium. Raises ValueError if the scene holds too little to have a unique
+    projection, linear_solver, ...; see anisofem.methods). warn: a ConvergenceWarning when the
+    solve fails. Returns a NewtonResult; .x is the (n, 3) equilibrium. Raises ValueError if the scene holds too little to have a unique
     equilibrium.
     """
     if isinstance(scene, TetMesh):
@@ -41,7 +41,7 @@ def solve(scene, x0=None, method="newton", **options):
     scene.check_static()
     x0 = scene.initial_positions() if x0 is None else scene.with_fixed(check_positions(
         scene, x0, "x0"))
-    return minimize(Potential(scene), x0, method, **options)
+    return minimize(Potential(scene), x0, method, warn=warn, **options)
 
 
 @dataclass
@@ -56,7 +56,7 @@ class StepResult:
         return self.newton.converged
 
 
-def step(scene, x, v, dt, a_guess=None, method="newton", **options):
+def step(scene, x, v, dt, a_guess=None, method="newton", warn=True, **options):
     """One backward-Euler step of length dt (s) from positions x and velocities v (n, 3).
 
     Minimizes G(y) = 1/(2 dt^2) |y - x - dt v|_M^2 + elastic(y) - f_ext . y, starting from
@@ -81,7 +81,7 @@ def step(scene, x, v, dt, a_guess=None, method="newton", **options):
     potential = Potential(scene, x_hat, dt)
     method = methods.make(method, **options)
     accept = _no_energy_gain(potential, x, v) if method.budget else None
-    result = minimize(potential, scene.with_fixed(start), method, accept=accept)
+    result = minimize(potential, scene.with_fixed(start), method, warn=warn, accept=accept)
     return StepResult(result.x, (result.x - x) / dt, result)
 
 
@@ -129,21 +129,21 @@ class Stepper:
     with a fixed iteration budget from the inertial predictor (see anisofem.methods).
     """
 
-    def __init__(self, scene, dt, method="newton", **options):
-        self.scene, self.dt = scene, dt
+    def __init__(self, scene, dt, method="newton", warn=True, **options):
+        self.scene, self.dt, self.warn = scene, dt, warn
         self.method = methods.make(method, **options)
         self._a = None
 
     def __call__(self, x, v, a_guess=None):
         res = step(self.scene, x, v, self.dt, self._a if a_guess is None else a_guess,
-                   self.method)
+                   self.method, self.warn)
         if self.method.warm_start == "previous" and not res.newton.failed:
             self._a = (res.v - v) / self.dt
         return res
 
 
 def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, method="newton",
-             **options):
+             warn=True, **options):
     """Roll out `steps` backward-Euler steps from x0 (default rest), v0 (default 0).
 
     method, options: how each step is solved (see step); one Method serves the whole rollout
@@ -158,7 +158,7 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, method="new
     x = scene.with_fixed(scene.initial_positions() if x0 is None
                     else check_positions(scene, x0, "x0"))
     v = np.zeros_like(x) if v0 is None else check_positions(scene, v0, "v0")
-    stepper = Stepper(scene, dt, method, **options)
+    stepper = Stepper(scene, dt, method, warn, **options)
     xs, vs, results = [x], [v], []
     for k in range(steps):
         res = stepper(x, v)

@@ -1,0 +1,96 @@
+"""The speed/accuracy trade: anisofem.trade and `python -m anisofem trade`."""
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import anisofem as af
+from anisofem import trade
+
+
+@pytest.fixture(scope="module")
+def result(beam):
+    d = np.array([np.cos(np.radians(40)), 0.0, np.sin(np.radians(40))])
+    scene = af.Scene(beam, af.Material(1e5, 0.48, 1000.0, d, 1e5),
+                     fixed=af.metrics.end_vertices(beam, 0, "min"), gravity=(0, 0, -9.81))
+    return trade.trade(scene, steps=20, surrogates=False, progress=False)
+
+
+def test_exact_is_the_reference_and_capped_rungs_are_not(result):
+    rows = {r["name"]: r for r in result["rungs"]}
+    assert result["times"] == pytest.approx([0.2, 0.4])
+    assert rows["exact"]["errors"] == [0.0, 0.0] and rows["exact"]["stable"]
+    assert min(rows["newton x1"]["errors"]) > 1e-6
+    assert rows["exact dt x5"]["dt"] == pytest.approx(0.1)
+    for r in result["rungs"]:
+        assert r["kind"] == "fem" and len(r["errors"]) == 2
+        assert r["max_error"] == max(r["errors"]) and math.isfinite(r["ms_per_step"])
+        assert r["min_volume_ratio"] > 0.5 and r["stable"]
+    # the recommendation is the cheapest stable rung within the tolerance
+    within = [r for r in result["rungs"] if r["stable"] and r["max_error"] <= 0.01]
+    assert result["recommended"] == min(within, key=lambda r: r["ms_per_step"])["name"]
+
+
+def test_the_front_holds_the_rungs_no_other_beats_at_every_time():
+    rows = [{"name": "a", "ms_per_step": 1.0, "errors": [0.1, 0.1], "stable": True},
+            {"name": "b", "ms_per_step": 2.0, "errors": [0.2, 0.05], "stable": True},
+            {"name": "c", "ms_per_step": 3.0, "errors": [0.2, 0.1], "stable": True},
+            {"name": "d", "ms_per_step": 0.5, "errors": [0.0, 0.0], "stable": False}]
+    trade.mark_front(rows)
+    assert [r["on_front"] for r in rows] == [True, True, False, False]
+
+
+def test_rungs_must_start_with_exact_and_land_on_the_checked_times(beam):
+    scene = af.default_scene(beam)
+    with pytest.raises(ValueError, match="rungs: the first rung must be the exact one"):
+        trade.trade(scene, rungs=[trade.fem_rung("newton x1", iterations=1)])
+    with pytest.raises(ValueError, match="steps: must be a multiple of 10"):
+        trade.trade(scene, steps=15)
+    with pytest.raises(TypeError, match="bogus: not an option"):
+        trade.fem_rung("x", bogus=1)
+
+
+def run(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "anisofem", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_trade_command_on_a_mesh_file_with_the_surrogates(tmp_path):
+    assert run("mesh", "box", "-o", "beam.msh", cwd=tmp_path).returncode == 0
+    r = run("trade", "beam.msh", "--fixed", "x-min", "--gravity", "0", "0", "-9.81",
+            "--fiber", "0.766", "0", "0.643", "--kappa", "1e5", "--steps", "20",
+            "--json", "t.json", "--png", "t.png", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    print(r.stdout)
+    out = json.loads((tmp_path / "t.json").read_text())
+    assert out["scene"]["tets"] == 200 and out["scene"]["dt"] == 0.02
+    assert out["scene"]["steps"] == 20
+    rows = {row["name"]: row for row in out["rungs"]}
+    assert rows["exact"]["errors"] == [0.0, 0.0]
+    assert rows["newton x1"]["max_error"] > 0
+    surrogates = [row for row in out["rungs"] if row["kind"] == "surrogate"]
+    assert {"directional (shipped)", "directional + newton x1"} <= {s["name"] for s in surrogates}
+    assert all(np.isfinite(s["errors"]).all() for s in surrogates)
+    assert out["recommended"] in rows
+    assert (tmp_path / "t.png").stat().st_size > 20_000
+    assert "cheapest stable rung within 0.01" in r.stdout
+
+
+@pytest.mark.parametrize("shape, flags", [("cylinder", ["--cells", "6", "1"]),
+                                          ("t", ["--fixed", "z-min"])])
+def test_trade_command_on_generated_shapes(tmp_path, shape, flags):
+    r = run("trade", shape, *flags, "--steps", "10", "--no-surrogates", "--json", "t.json",
+            cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    out = json.loads((tmp_path / "t.json").read_text())
+    assert out["rungs"][0]["name"] == "exact" and out["rungs"][0]["max_error"] == 0
+    assert all(row["stable"] for row in out["rungs"])
+
+
+def test_trade_command_errors_are_one_line(tmp_path):
+    r = run("trade", "box", "--steps", "15", cwd=tmp_path)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "steps: must be a multiple of 10" in r.stderr
