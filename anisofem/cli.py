@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 
-from . import bench, meshgen, methods, trade
+from . import bench, ladder, meshgen, methods
 from .io import read_mesh, write_mesh
 from .material import Material
 from .metrics import end_vertices, tip_displacement
@@ -117,7 +117,9 @@ def main(argv=None):
         if args.steps:
             roll = simulate(scene, args.steps, args.dt, **how)
             x, ok = roll.positions[-1], roll.completed
-            print(f"{len(roll.positions) - 1} steps, converged: {roll.converged}")
+            budget = (f" (a budget of {args.iterations} iterations per step)"
+                      if args.iterations else "")
+            print(f"{len(roll.positions) - 1} steps, converged: {roll.converged}{budget}")
         else:
             res = solve(scene, **how)
             x, ok = res.x, res.converged
@@ -139,17 +141,17 @@ def _trade(args, parser):
     """python -m anisofem trade: print the table, write the JSON and the plot."""
     mesh = _SHAPES[args.scene](args) if args.scene in _SHAPES else read_mesh(args.scene)
     try:
-        result = trade.trade(_scene(args, mesh), args.steps, args.dt,
+        result = ladder.trade(_scene(args, mesh), args.steps, args.dt,
                              tolerance=args.tolerance, surrogates=not args.no_surrogates,
                              name=args.scene)
     except (ValueError, TypeError) as err:
         parser.error(str(err))
-    print(trade.trade_table(result))
+    print(ladder.trade_table(result))
     if args.json:
-        trade.write_json(result, args.json)
+        ladder.write_json(result, args.json)
         print(f"-> {args.json}")
     if args.png:
-        trade.plot(result, args.png)
+        ladder.plot(result, args.png)
         print(f"-> {args.png}")
     return 0
 

@@ -30,8 +30,8 @@ def solve(scene, x0=None, method="newton", warn=True, **options):
     positions). method: "newton" (default), "reuse", "lbfgs", "cg" or an
     anisofem.methods.Method; options: the method's (rtol, atol, max_iter, iterations,
     projection, linear_solver, ...; see anisofem.methods). warn: a ConvergenceWarning when the
-    solve fails. Returns a NewtonResult; .x is the (n, 3) equilibrium. Raises ValueError if the scene holds too little to have a unique
-    equilibrium.
+    solve fails. Returns a NewtonResult; .x is the (n, 3) equilibrium. Raises ValueError if
+    the scene holds too little to have a unique equilibrium.
     """
     if isinstance(scene, TetMesh):
         scene = default_scene(scene)

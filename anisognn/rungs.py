@@ -8,7 +8,7 @@ import torch
 
 from anisofem import Material, Scene
 from anisofem.solve import Stepper
-from anisofem.trade import Rung
+from anisofem.ladder import Rung
 
 from .graph import from_scene
 from .model import with_galerkin

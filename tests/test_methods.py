@@ -9,7 +9,7 @@ import pytest
 import anisofem as af
 from anisofem import methods
 from anisofem.potential import Potential
-from anisofem.trade import fem_rungs
+from anisofem.ladder import fem_rungs
 
 TO_TOLERANCE = [("newton", {}), ("reuse", {}), ("lbfgs", {}), ("cg", {}),
                 ("cg", {"preconditioner": "factor"})]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem import trade
+from anisofem import ladder
 
 
 @pytest.fixture(scope="module")
@@ -16,7 +16,7 @@ def result(beam):
     d = np.array([np.cos(np.radians(40)), 0.0, np.sin(np.radians(40))])
     scene = af.Scene(beam, af.Material(1e5, 0.48, 1000.0, d, 1e5),
                      fixed=af.metrics.end_vertices(beam, 0, "min"), gravity=(0, 0, -9.81))
-    return trade.trade(scene, steps=20, surrogates=False, progress=False)
+    return ladder.trade(scene, steps=20, surrogates=False, progress=False)
 
 
 def test_exact_is_the_reference_and_capped_rungs_are_not(result):
@@ -39,18 +39,18 @@ def test_the_front_holds_the_rungs_no_other_beats_at_every_time():
             {"name": "b", "ms_per_step": 2.0, "errors": [0.2, 0.05], "stable": True},
             {"name": "c", "ms_per_step": 3.0, "errors": [0.2, 0.1], "stable": True},
             {"name": "d", "ms_per_step": 0.5, "errors": [0.0, 0.0], "stable": False}]
-    trade.mark_front(rows)
+    ladder.mark_front(rows)
     assert [r["on_front"] for r in rows] == [True, True, False, False]
 
 
 def test_rungs_must_start_with_exact_and_land_on_the_checked_times(beam):
     scene = af.default_scene(beam)
     with pytest.raises(ValueError, match="rungs: the first rung must be the exact one"):
-        trade.trade(scene, rungs=[trade.fem_rung("newton x1", iterations=1)])
+        ladder.trade(scene, rungs=[ladder.fem_rung("newton x1", iterations=1)])
     with pytest.raises(ValueError, match="steps: must be a multiple of 10"):
-        trade.trade(scene, steps=15)
+        ladder.trade(scene, steps=15)
     with pytest.raises(TypeError, match="bogus: not an option"):
-        trade.fem_rung("x", bogus=1)
+        ladder.fem_rung("x", bogus=1)
 
 
 def run(*args, cwd):

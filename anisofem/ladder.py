@@ -1,5 +1,5 @@
-"""The speed/accuracy trade on a user's own scene: every rung of the ladder against the exact
-rollout.
+"""The speed/accuracy ladder measured on a user's own scene: every rung against the exact
+rollout (`anisofem.trade`, `python -m anisofem trade`).
 
     table = anisofem.trade(scene, steps=100, dt=0.02)
     print(anisofem.trade_table(table))
@@ -257,14 +257,14 @@ def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt
 def trade_table(result):
     """The trade result as a text table."""
     times = "/".join(f"{t:g}" for t in result["times"])
-    head = (f"{'rung':<22} {'ms/step':>8} {'x exact':>8} {'tip error at t = ' + times + ' s':<36}"
+    head = (f"{'rung':<27} {'ms/step':>8} {'x exact':>8} {'tip error at t = ' + times + ' s':<36}"
             f" {'its':>5} {'drift':>8} {'min J':>6} stable")
     exact = result["rungs"][0]["ms_per_step"]
     lines = [head, "-" * len(head)]
     for r in result["rungs"]:
         errs = " / ".join(f"{e:.2g}" for e in r["errors"])
         its = r.get("iterations_per_step")
-        lines.append(f"{r['name']:<22} {r['ms_per_step']:8.3g} {exact / r['ms_per_step']:8.2f} "
+        lines.append(f"{r['name']:<27} {r['ms_per_step']:8.3g} {exact / r['ms_per_step']:8.2f} "
                      f"{errs:<36} {'' if its is None else f'{its:.1f}':>5} "
                      f"{r['energy_drift']:8.1e} {r['min_volume_ratio']:6.2f} {r['stable']}")
     s = result["scene"]
@@ -292,6 +292,7 @@ def plot(result, path):
         raise ImportError("png: the trade plot needs matplotlib (pip install matplotlib)") from None
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     rows = result["rungs"]
     finite = [r["max_error"] for r in rows if 0 < r["max_error"] < math.inf]
@@ -299,8 +300,6 @@ def plot(result, path):
     ceiling = max(finite) * 10 if finite else 1.0
     fig, ax = plt.subplots(figsize=(8, 5.5))
     ax.axhline(result["tolerance"], color="0.6", lw=0.8, ls="--")
-    ax.text(min(r["ms_per_step"] for r in rows), result["tolerance"] * 1.1,
-            f"tolerance {result['tolerance']:g}", color="0.4", fontsize=8)
     def y_of(r):
         return min(max(r["max_error"], floor), ceiling)
 
@@ -316,6 +315,22 @@ def plot(result, path):
     ax.step(xs, ys, where="post", color="tab:green", lw=6, alpha=0.25,
             solid_capstyle="round", label="Pareto front")
     styles = {"fem": ("o", "tab:blue", "anisofem"), "surrogate": ("s", "tab:orange", "surrogate")}
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ms = [r["ms_per_step"] for r in rows]
+    xlim = (min(ms) / 1.5, max(ms) * 4)
+    ylim = (floor / 2, ceiling * 2)
+    ax.set_xlim(*xlim)
+    ax.set_ylim(*ylim)
+    ax.xaxis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1, 2, 5)))
+    ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.text(xlim[1] / 1.1, result["tolerance"] * 1.1, f"tolerance {result['tolerance']:g}",
+            color="0.4", fontsize=8, ha="right")
+    # label size in decades: about 5.5 and 11 pixels per character width and line height
+    box = ax.get_window_extent()
+    char_w = 5.5 * math.log10(xlim[1] / xlim[0]) / box.width
+    line_h = 11.0 * math.log10(ylim[1] / ylim[0]) / box.height
     shown, placed = set(), []
     for r in sorted(rows, key=y_of):
         marker, color, label = styles[r["kind"]]
@@ -325,26 +340,22 @@ def plot(result, path):
         ax.scatter(x, y, marker=marker, color=color, s=50, zorder=3,
                    label=None if label in shown else label)
         shown.add(label)
-        # nudge a label up while it would sit on one placed nearby (log coordinates)
-        lx, ly = math.log10(x), math.log10(y)
-        while any(abs(lx - px) < 0.35 and abs(ly - py) < 0.09 for px, py in placed):
-            ly += 0.09
-        placed.append((lx, ly))
         text = r["name"] + (" (reference)" if r["name"] == "exact" else "")
-        ax.annotate(text, (x, y), xytext=(x * 1.06, 10 ** ly * 1.08), fontsize=7.5,
-                    arrowprops={"arrowstyle": "-", "color": "0.7", "lw": 0.5}
-                    if ly - math.log10(y) > 0.05 else None)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ms = [r["ms_per_step"] for r in rows]
-    ax.set_xlim(min(ms) / 1.5, max(ms) * 4)
-    ax.set_ylim(floor / 2, ceiling * 2)
+        # move a label up while it would overlap one already placed
+        lx, ly, w = math.log10(x) + 0.02, math.log10(y) + 0.3 * line_h, len(text) * char_w
+        while any(lx < px + pw and px < lx + w and abs(ly - py) < line_h
+                  for px, py, pw in placed):
+            ly += 0.5 * line_h
+        placed.append((lx, ly, w))
+        moved = ly - math.log10(y) > 0.8 * line_h
+        ax.annotate(text, (x, y), xytext=(10 ** lx, 10 ** ly), fontsize=7.5, va="bottom",
+                    arrowprops={"arrowstyle": "-", "color": "0.7", "lw": 0.5} if moved else None)
     ax.set_xlabel("ms per step of dt (this machine, one process)")
     times = ", ".join(f"{t:g}" for t in result["times"])
     ax.set_ylabel(f"largest tip error at t = {times} s\n(fraction of the static deflection)")
     sc = result["scene"]
-    ax.set_title(f"{os.path.basename(sc['name']) or 'scene'}: {sc['tets']:,} tets, dt = {sc['dt']:g} s, "
-                 f"{sc['steps']} steps", fontsize=10)
+    ax.set_title(f"{os.path.basename(sc['name']) or 'scene'}: {sc['tets']:,} tets, "
+                 f"dt = {sc['dt']:g} s, {sc['steps']} steps", fontsize=10)
     ax.grid(True, which="major", alpha=0.3)
     ax.legend(fontsize=8, loc="lower left")
     fig.tight_layout()
