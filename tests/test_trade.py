@@ -94,3 +94,23 @@ def test_trade_command_errors_are_one_line(tmp_path):
     r = run("trade", "box", "--steps", "15", cwd=tmp_path)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "steps: must be a multiple of 10" in r.stderr
+
+
+@pytest.mark.parametrize("material", [af.Material(1e5, 0.499, 1000.0, (1, 0, 0), 1e5),
+                                      af.Material(1e5, 0.48, 1000.0, (1, 0, 0), 1e7)],
+                         ids=["nu 0.499", "kappa 100 E"])
+def test_surrogate_rungs_at_the_extremes_report_instead_of_returning_nan(beam, material):
+    """Where the networks fail, the table says so (unstable, or inf once a state is not
+    finite), never NaN."""
+    scene = af.Scene(beam, material, fixed=af.metrics.end_vertices(beam, 0, "min"),
+                     gravity=(0, 0, -9.81))
+    notes = []
+    from anisognn.rungs import surrogate_rungs
+    rungs = [ladder.fem_rung("exact")] + surrogate_rungs(scene, 0.02, notes)
+    out = ladder.trade(scene, steps=10, rungs=rungs, progress=False)
+    assert len(out["rungs"]) >= 6 and out["rungs"][0]["stable"]
+    print([(r["name"], r["max_error"], r["stable"]) for r in out["rungs"]], notes)
+    for r in out["rungs"]:
+        assert not any(math.isnan(e) for e in r["errors"] + [r["energy_drift"]])
+        assert r["stable"] or r["energy_drift"] > ladder.ENERGY_GAIN_MAX or \
+            r["steps_taken"] < 10 or math.isinf(r["max_error"])
