@@ -3,6 +3,15 @@ import pytest
 
 import anisofem as af
 
+try:
+    import torch
+except ImportError:
+    torch = None
+else:
+    # torch's OpenMP threads spin-wait: next to any other load they slow these small models'
+    # steps many times over, and one thread is as fast on them when the machine is idle
+    torch.set_num_threads(1)
+
 
 @pytest.fixture(scope="session")
 def beam():
