@@ -1,5 +1,5 @@
 # `make demo` and `make test` each build .venv from nothing on a fresh machine, then run.
-# Torch is pinned to a CPU build that installs from local disk here; override with
+# Torch is pinned to a version whose CPU build installs quickly; for a CUDA build:
 #   make test TORCH_SPEC="torch==2.13.0 --index-url https://download.pytorch.org/whl/cu128"
 PYTHON ?= python3
 VENV ?= .venv

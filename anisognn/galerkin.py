@@ -25,7 +25,7 @@ rollout rests only at anisofem's equilibrium; and, with v in the span, the resid
 step's equation is orthogonal to the displacement over the step, so for a linear material the
 energy 1/2 v^T M v + E - f_ext . x cannot grow, as under backward Euler (which dissipates
 more: it solves in every direction). What the network adds is a direction the other three do
-not contain, which decides how fast a rollout converges (README, "What we learned").
+not contain, which decides how fast a rollout converges (docs/experiments.md).
 """
 import torch
 

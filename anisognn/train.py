@@ -95,8 +95,8 @@ class TrainConfig:
             if not getattr(self, name) >= 0:
                 raise ValueError(f"[train] {name}: must be >= 0, got {getattr(self, name)}")
         if self.normalize_floor > 0 and not self.normalize:
-            raise ValueError(f"[train] normalize_floor: {self.normalize_floor} floors the "
-                             "normalizer of normalize = true, which is off")
+            raise ValueError(f"[train] normalize_floor: {self.normalize_floor} bounds the "
+                             "normalizer of normalize = true from below, which is off")
         if not 0 <= self.rollout_probability <= 1:
             raise ValueError("[train] rollout_probability: must be in [0, 1], got "
                              f"{self.rollout_probability}")

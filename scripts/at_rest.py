@@ -1,4 +1,4 @@
-"""Diagnostics of how a model treats still, deformed states (README "What we learned").
+"""Diagnostics of how a model treats still, deformed states (docs/experiments.md).
 
     python scripts/at_rest.py taken MODEL...   share of anisofem's step a model takes from 40
                                                noise-free at-rest training samples

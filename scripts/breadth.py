@@ -1,5 +1,5 @@
 """How the breadth of the training distribution decides whether a model learns how the fiber
-direction changes bending (README "What we learned").
+direction changes bending (docs/experiments.md).
 
     python scripts/breadth.py deflections      FEM tip deflection of the evaluation box beam
                                                under gravity (kappa = E) with the fiber along

@@ -1,4 +1,4 @@
-"""How far anisofem's one-step response reaches, in mesh hops (README "What we learned").
+"""How far anisofem's one-step response reaches, in mesh hops (docs/experiments.md).
 
     python scripts/reach.py [--steps 6 12]
 

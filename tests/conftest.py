@@ -1,3 +1,5 @@
+import os
+
 import numpy as np
 import pytest
 
@@ -9,8 +11,10 @@ except ImportError:
     torch = None
 else:
     # torch's OpenMP threads spin-wait: next to any other load they slow these small models'
-    # steps many times over, and one thread is as fast on them when the machine is idle
+    # steps many times over, and one thread is as fast on them when the machine is idle. The
+    # processes tests start get one thread too, so that they train what this one trains.
     torch.set_num_threads(1)
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 
 @pytest.fixture(scope="session")

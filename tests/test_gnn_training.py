@@ -215,7 +215,7 @@ def test_config_errors_name_the_problem(tmp_path):
         train.make_config({"train": {"rollout_steps": 0}})
     with pytest.raises(ValueError, match="at least one must be > 0"):
         train.make_config({"train": {"energy_weight": 0.0}})
-    with pytest.raises(ValueError, match=r"normalize_floor: 0.1 floors .* normalize = true"):
+    with pytest.raises(ValueError, match=r"normalize_floor: 0.1 bounds .* normalize = true"):
         train.make_config({"train": {"normalize_floor": 0.1}})
     with pytest.raises(ValueError,
                        match=r"\[sampler\] equilibrium_probability: must be in \[0, 1\]"):

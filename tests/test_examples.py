@@ -1,0 +1,20 @@
+"""Every example runs as a user would run it and draws its picture."""
+import os
+import subprocess
+import sys
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@pytest.mark.parametrize("script, picture, says", [
+    ("cantilever.py", "cantilever.png", "fibers along the beam :  4 Newton iterations, "
+                                        "converged True"),
+    ("onnx_cantilever.py", "onnx_cantilever.png", "wrote out/onnx_cantilever.png")])
+def test_example_runs_and_draws(tmp_path, script, picture, says):
+    r = subprocess.run([sys.executable, os.path.join(ROOT, "examples", script)], cwd=tmp_path,
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert says in r.stdout
+    assert (tmp_path / "out" / picture).stat().st_size > 30_000
