@@ -45,9 +45,13 @@ def write_mesh(path, mesh, x=None, scene=None):
         cells["energy_density"] = [energy / mesh.rest_volumes]
         cells["fiber_direction"] = [scene.elements.fiber]
         cells["fiber_stiffness"] = [scene.elements.kappa]
+    ext = os.path.splitext(path)[1]
+    if ext == ".msh":
+        # Gmsh's own tags (all tets in entity 1); without them meshio warns that it made them up
+        ones = np.ones(mesh.n_tets, dtype=np.int32)
+        cells.update({"gmsh:physical": [ones], "gmsh:geometrical": [ones]})
     out = meshio.Mesh(mesh.vertices, [("tetra", np.asarray(mesh.tets))], point_data=points,
                       cell_data=cells)
-    ext = os.path.splitext(path)[1]
     # XDMF keeps its arrays inline (one file to move around); .msh is binary Gmsh 2.2 (meshio
     # cannot read back the fields of its ASCII .msh output with numpy 2)
     kwargs = {".xdmf": {"data_format": "XML"},

@@ -31,6 +31,7 @@ static equilibrium. Metrics per scene (units as named):
 """
 import math
 import os
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -181,17 +182,23 @@ def score(scene, positions, x_fem):
             "energy_gap_ratio": gap / (anisofem.energy(scene, scene.initial_positions()) - g_fem)}
 
 
-def evaluate(simulators, steps=STEPS, suite=None):
+def evaluate(simulators, steps=STEPS, suite=None, progress=False):
     """{simulator name: [metrics dict per case]} for simulators {name: (scene, steps, x0) ->
-    positions}; suite defaults to cases(). Also returns the cases."""
+    positions}; suite defaults to cases(). Also returns the cases. progress: a line on stderr
+    per simulator and case."""
     suite = cases() if suite is None else suite
     fem = [anisofem.solve(c.scene).x for c in suite]
-    results = {name: [{"group": c.group, "case": c.label,
-                        **score(c.scene, _rollout(run, c.scene, steps), x),
-                        **rest_acceleration(run, c.scene, x),
-                        **rest_stiffness(run, c.scene, x)}
-                      for c, x in zip(suite, fem)]
-               for name, run in simulators.items()}
+    results = {name: [] for name in simulators}
+    total, done = len(simulators) * len(suite), 0
+    for name, run in simulators.items():
+        for c, x in zip(suite, fem):
+            if progress:
+                done += 1
+                print(f"[{done}/{total}] {name}: {c.label}", file=sys.stderr, flush=True)
+            results[name].append({"group": c.group, "case": c.label,
+                                  **score(c.scene, _rollout(run, c.scene, steps), x),
+                                  **rest_acceleration(run, c.scene, x),
+                                  **rest_stiffness(run, c.scene, x)})
     return results, suite
 
 
@@ -289,13 +296,13 @@ def _pick(rows, suite, group, key):
     return [r.get(key, math.inf) for r, c in zip(rows, suite) if c.group == group]
 
 
-def run(models, steps=STEPS, out="evaluation.json", echo=print):
+def run(models, steps=STEPS, out="evaluation.json", echo=print, progress=True):
     """Evaluate models {name: GraphNet} beside anisofem's own rollout ("fem"), print the
     tables (the first model over the second in the ratio columns) and write the JSON
-    atomically. Returns the JSON dict."""
+    atomically; progress: a line on stderr per simulator and case. Returns the JSON dict."""
     simulators = {name: model_rollout(m) for name, m in models.items()}
     simulators["fem"] = fem_rollout
-    results, suite = evaluate(simulators, steps)
+    results, suite = evaluate(simulators, steps, progress=progress)
     ratio = tuple(models)[:2] if len(models) >= 2 else None
     echo(format_tables(results, suite, ratio))
     report = {"steps": steps, "dt": DT, "results": results,

@@ -32,6 +32,8 @@ def main(argv=None):
         net = stepping(shipped.model(args.model), args)
     except (ValueError, FileNotFoundError) as err:
         sys.exit(f"error: {err}")
+    print(f"exporting {args.model} to {args.output} (tracing and checking take about a "
+          f"minute)", file=sys.stderr, flush=True)
     to_onnx.export(net, args.output)
     c = net.config
     print(f"wrote {args.output}: {c.aggregation} aggregation, {c.latent} wide, {c.steps} steps, "
