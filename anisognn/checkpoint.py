@@ -45,8 +45,8 @@ def read(path, map_location="cpu"):
 def model_from(payload):
     """A GraphNet with the checkpoint's config and weights."""
     try:
-        config = ModelConfig(**payload["config"])
-    except TypeError as err:
+        config = ModelConfig.from_dict(payload["config"])
+    except (TypeError, ValueError) as err:
         raise ValueError(f"checkpoint: bad model config: {err}") from None
     model = GraphNet(config)
     try:

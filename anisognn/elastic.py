@@ -6,8 +6,7 @@ same potential as anisofem,
 
 with the force on corner a of a tet -V P grad N_a, gathered onto the vertices through the
 graph's corner table (Gather and a sum, no scatter: it exports to ONNX like the aggregation).
-Read by models with ModelConfig.elastic_force (an input) and ModelConfig.galerkin (the step's
-projection, anisognn.galerkin).
+Read by models with ModelConfig.galerkin (the step's projection, anisognn.galerkin).
 
 Layout: per-tet values keep the tets on the last axis (k matrices: (k, 3, 3, m); corner
 vectors: (4, k, 3, m)), so that a 3 x 3 product is a broadcast multiply and a sum over long

@@ -22,23 +22,10 @@ every mode alike. Alone it neglects the stiff modes, whose small errors then cos
 the sum with newton_weight = beta weighs mode k by lambda_k + beta; energy_weight = 0 leaves the
 Newton term alone, a regression onto a target that anisofem recomputes from every prediction.
 
-rest_weight adds rest_weight 1/2 |W s|^2_{K_r^-1} (s = H^-1 dG/dx, W = M/dt^2, K_r = K + W/100 the
-projected Hessian of the potential at a 10x time step), gradient rest_weight W K_r^-1 W s. Why:
-a rollout comes to rest at the network's fixed point, and a step error s there moves the fixed
-point by about u = K^-1 H s; its energy u^T K u = s^T (H + W + W K^-1 W) s is the energy term,
-the Newton term and this one. It weighs mode k by 1/lambda_k (capped at 100), about 30 for the
-bending of the evaluation's cantilevers: a 5% error in the force at the tip there moves the
-resting tip by 60% of its deflection. Same minimizer again.
-
 normalize = True divides each scene's terms by its optimal decrease D = 1/2 g0^T H0^-1 g0 from
 the zero-acceleration start x_hat (held components at their prescribed positions), the
 decrease one Newton step promises there: every sample then weighs alike, whatever its load
-(without it a batch's gradient is the few heavily loaded samples'). normalize_floor = c > 0
-divides by max(D, c L) instead, L = 1/2 f^T H0^-1 f the decrease that the scene's full external
-load f promises from the same start: a sample near its equilibrium has D -> 0 (only its noise
-and the load-factor offset remain), and a loss divided by that near-zero D punishes any motion
-there so hard that the network learns to predict no acceleration at every still, deformed state,
-whatever its load (measured: a flat tip acceleration from 0.5 to 1.5 times the FEM's deflection).
+(without it a batch's gradient is the few heavily loaded samples').
 """
 import numpy as np
 import torch
@@ -59,10 +46,9 @@ class BatchPotential:
         self.weights = np.ones(len(sizes)) if weights is None else np.asarray(weights, float)
 
     @classmethod
-    def backward_euler(cls, scenes, x, v, dt, weights=None, normalize=False, normalize_floor=0.0):
+    def backward_euler(cls, scenes, x, v, dt, weights=None, normalize=False):
         """Potentials of one backward-Euler step from stacked x, v (N, 3) numpy float64;
-        normalize: divide each weight by the scene's optimal decrease, floored at normalize_floor
-        times its load decrease (module docstring)."""
+        normalize: divide each weight by the scene's optimal decrease (module docstring)."""
         pots, start = [], 0
         for scene in scenes:
             n = scene.mesh.n_vertices
@@ -70,101 +56,76 @@ class BatchPotential:
             start += n
         weights = np.ones(len(pots)) if weights is None else np.asarray(weights, float)
         if normalize:
-            weights = weights / np.array([optimal_decrease(p, normalize_floor) for p in pots])
+            weights = weights / np.array([optimal_decrease(p) for p in pots])
         return cls(pots, weights)
 
-    def energy_gradient(self, x, newton_weight=0.0, energy_weight=1.0, rest_weight=0.0):
+    def energy_gradient(self, x, newton_weight=0.0, energy_weight=1.0):
         """(loss in J, its gradient (N, 3) in N) at stacked positions x (N, 3) float64: the sum
-        over scenes of w_i (energy_weight G_i + newton_weight 1/2 |s_i|^2_{W_i} + rest_weight
-        1/2 |W_i s_i|^2_{K_r^-1}) with s_i = H_i^-1 dG_i/dx (module docstring), the gradient with
-        the Newton terms W_i s_i and W_i K_r^-1 W_i s_i on free components."""
+        over scenes of w_i (energy_weight G_i + newton_weight 1/2 |s_i|^2_{W_i}) with
+        s_i = H_i^-1 dG_i/dx (module docstring), the gradient with the Newton term W_i s_i on
+        free components."""
         total, grad = 0.0, np.empty_like(x)
         for w, pot, lo, hi in zip(self.weights, self.potentials, self.offsets[:-1],
                                   self.offsets[1:]):
-            if newton_weight == 0 and rest_weight == 0:
+            if newton_weight == 0:
                 e, g = pot.energy_gradient(x[lo:hi])
                 e, g = energy_weight * e, energy_weight * g
             else:
-                e, g = _with_newton_term(pot, x[lo:hi], newton_weight, energy_weight,
-                                         rest_weight)
+                e, g = _with_newton_term(pot, x[lo:hi], newton_weight, energy_weight)
             total += w * e
             grad[lo:hi] = w * g
         return total, grad
 
 
-def _newton_step(pot, x, rhs=None):
+def _newton_step(pot, x):
     """(G in J, dG/dx (n, 3) in N, free DOF indices, H^-1 dG/dx on them in m) of one scene's
-    Potential at x (n, 3); H is the projected Hessian over the free components. rhs: a function
-    of (free DOF indices (k,), dG/dx on them (k,)) giving the right-hand side(s) (k,) or (k, r)
-    to solve in place of dG/dx."""
+    Potential at x (n, 3); H is the projected Hessian over the free components."""
     solver = linsolve.make("auto", pot.scene.n_free)
     layout = pot.scene.layout(solver.layout)
     with solver.threads():
         e, g, data = pot.hessian_data(x, layout, project=True)
-        b = g.reshape(-1)[layout.dofs]
-        step = solver.factor(layout, data)(b if rhs is None else rhs(layout.dofs, b))
+        step = solver.factor(layout, data)(g.reshape(-1)[layout.dofs])
     return e, g, layout.dofs, step
 
 
-#: the rest term's Hessian is the potential's at this multiple of the time step
-REST_DT_FACTOR = 10.0
-
-
-def optimal_decrease(pot, floor=0.0):
+def optimal_decrease(pot):
     """1/2 g0^T H0^-1 g0 in J at the zero-acceleration start of a backward-Euler Potential
-    (x_hat with the held components at their prescribed positions), floored at floor times
-    1/2 f^T H0^-1 f (f the external force on the free components) and at 1e-15 J."""
-    f = pot.scene.external_force.reshape(-1)
-    with_load = (lambda dofs, g: np.stack([g, f[dofs]], axis=1)) if floor > 0 else None
-    _, g, dofs, steps = _newton_step(pot, pot.scene.with_fixed(pot.x_hat), rhs=with_load)
-    steps = steps.reshape(len(dofs), -1)
-    decrease = 0.5 * float(g.reshape(-1)[dofs] @ steps[:, 0])
-    if floor > 0:
-        decrease = max(decrease, floor * 0.5 * float(f[dofs] @ steps[:, 1]))
-    return max(decrease, 1e-15)
+    (x_hat with the held components at their prescribed positions), floored at 1e-15 J."""
+    _, g, dofs, step = _newton_step(pot, pot.scene.with_fixed(pot.x_hat))
+    return max(0.5 * float(g.reshape(-1)[dofs] @ step), 1e-15)
 
 
-def _with_newton_term(pot, x, newton_weight, energy_weight, rest_weight=0.0):
-    """(energy_weight G + newton_weight 1/2 |s|^2_W + rest_weight 1/2 |W s|^2_{K_r^-1} in J,
-    energy_weight dG/dx + newton_weight W s + rest_weight W K_r^-1 W s (n, 3) in N) with s the
-    Newton step at x (n, 3), W = M/dt^2, K_r the Hessian at REST_DT_FACTOR dt."""
+def _with_newton_term(pot, x, newton_weight, energy_weight):
+    """(energy_weight G + newton_weight 1/2 |s|^2_W in J, energy_weight dG/dx + newton_weight
+    W s (n, 3) in N) with s the Newton step at x (n, 3) and W = M/dt^2."""
     e, g, dofs, step = _newton_step(pot, x)
     scaled = pot.mass_per_dof[dofs] * step
     g *= energy_weight
     g.reshape(-1)[dofs] += newton_weight * scaled
-    loss = energy_weight * e + 0.5 * newton_weight * float(step @ scaled)
-    if rest_weight:
-        slow = Potential(pot.scene, pot.x_hat, REST_DT_FACTOR * pot.dt)
-        rest = _newton_step(slow, x, rhs=lambda dofs, g: scaled)[3]
-        g.reshape(-1)[dofs] += rest_weight * pot.mass_per_dof[dofs] * rest
-        loss += 0.5 * rest_weight * float(scaled @ rest)
-    return loss, g
+    return energy_weight * e + 0.5 * newton_weight * float(step @ scaled), g
 
 
 class _PotentialFunction(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, x_next, batch_potential, newton_weight, energy_weight, rest_weight):
+    def forward(ctx, x_next, batch_potential, newton_weight, energy_weight):
         x64 = x_next.detach().to("cpu", torch.float64).numpy()
-        energy, grad = batch_potential.energy_gradient(x64, newton_weight, energy_weight,
-                                                       rest_weight)
+        energy, grad = batch_potential.energy_gradient(x64, newton_weight, energy_weight)
         ctx.save_for_backward(torch.from_numpy(grad).to(x_next.device, x_next.dtype))
         return x_next.new_tensor(energy)
 
     @staticmethod
     def backward(ctx, grad_output):
         (grad,) = ctx.saved_tensors
-        return grad_output * grad, None, None, None, None
+        return grad_output * grad, None, None, None
 
 
-def potential_loss(x_next, batch_potential, newton_weight=0.0, energy_weight=1.0,
-                   rest_weight=0.0):
+def potential_loss(x_next, batch_potential, newton_weight=0.0, energy_weight=1.0):
     """The loss of BatchPotential.energy_gradient at x_next (N, 3) as a scalar tensor (x_next's
     dtype and device), J, with that gradient as its backward (see the module docstring)."""
-    for name, value in (("newton_weight", newton_weight), ("energy_weight", energy_weight),
-                        ("rest_weight", rest_weight)):
+    for name, value in (("newton_weight", newton_weight), ("energy_weight", energy_weight)):
         if not value >= 0:
             raise ValueError(f"{name}: must be >= 0, got {value}")
-    if newton_weight == 0 and energy_weight == 0 and rest_weight == 0:
-        raise ValueError("newton_weight, energy_weight, rest_weight: at least one must be > 0")
+    if newton_weight == 0 and energy_weight == 0:
+        raise ValueError("newton_weight, energy_weight: at least one must be > 0")
     return _PotentialFunction.apply(x_next, batch_potential, float(newton_weight),
-                                    float(energy_weight), float(rest_weight))
+                                    float(energy_weight))

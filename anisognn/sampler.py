@@ -6,9 +6,7 @@ draws exactly the samples an uninterrupted one would.
 Each sample: one of 36 beam geometries (box and cylinder, 60-120 tets, about 1 cm elements,
 held at the x = 0 end) made of the paper's material (E = 100 kPa, nu = 0.48, 1000 kg/m^3) with
 fibers of random direction and stiffness kappa in [0, 10 E] (uniform over the scene, or varying
-element by element, or rotating along the beam; with axis_fiber_probability, not in the paper,
-a uniform fiber lies along a random coordinate axis instead: along the beam or across it, where
-bending is stiffest and softest); a uniform body force of random direction and
+element by element, or rotating along the beam); a uniform body force of random direction and
 magnitude in [0, 10] kN/m^3, an extra force in [0, 15] kN/m^3 on 5% of the elements, and with
 probability 0.1 a +z traction on the free end. The paper gives that traction as 0-100 kN/m^3;
 here it is that force density times the mean edge length h (N/m^2), which puts it on the scale
@@ -22,27 +20,21 @@ measures tip, force and volume errors and a rollout of dynamic states rarely lan
 zero-mean Gaussian noise perturbs the free positions and velocities with standard deviations
 drawn uniformly from [0, noise_position h] and [0, noise_velocity h / s]: the paper's absolute
 1e-3 m and 5e-2 m/s would drown 1 cm elements, so the noise is relative to the element size.
-With noise_modes = k > 0 (not in the paper) the noise keeps those standard deviations but lies
-in the k softest modes of the scene at the sampled state (lowest eigenvectors of
-M^-1/2 K M^-1/2, K the PSD-projected static Hessian over the free DOFs): white noise mostly
-excites the stiff volumetric modes, whose forces then dwarf every other force in the state.
-With white_noise_probability (not in the paper) a sample's noise is white instead of in the
-soft modes: a mixture, whose white-noise samples show the stiff modes a rollout excites.
-With noise_decades = d > 0 (not in the paper) the two standard deviations are drawn
-log-uniformly from [10^-d, 1] times those maxima instead, so that more samples are nearly
-noise-free.
 """
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import eigh
-
 from anisofem import Material, Scene, box_beam, cylinder_beam, simulate, solve
-from anisofem.potential import Potential
 
 YOUNG = 1e5
 POISSON = 0.48
 DENSITY = 1000.0
+
+
+#: Options of earlier versions, with the value under which a run never used them (see
+#: anisognn.model.without_retired).
+RETIRED = {"axis_fiber_probability": 0.0, "noise_modes": 0, "white_noise_probability": 0.0,
+           "noise_decades": 0.0}
 
 
 @dataclass
@@ -54,7 +46,6 @@ class SamplerConfig:
     traction_density: float = 100e3    # N/m^3, times h gives N/m^2
     traction_probability: float = 0.1
     fiber_stiffness: float = 10.0      # in units of E
-    axis_fiber_probability: float = 0.0  # of a uniform fiber along a random coordinate axis
     varying_fiber_probability: float = 0.5
     deformed_probability: float = 0.5
     deform_steps: int = 15
@@ -62,31 +53,22 @@ class SamplerConfig:
     equilibrium_spread: float = 0.5    # load factor in [1 - spread, 1 + spread]
     noise_position: float = 1e-3       # in units of h
     noise_velocity: float = 5e-2       # in units of h per second
-    noise_modes: int = 0               # 0: white noise; k > 0: in the k softest modes
-    white_noise_probability: float = 0.0  # with noise_modes: share of samples with white noise
-    noise_decades: float = 0.0         # 0: noise sizes uniform in [0, max]; d: log-uniform
     dt: float = 0.02
 
     def __post_init__(self):
         for name in ("extra_force_probability", "traction_probability",
-                     "varying_fiber_probability", "axis_fiber_probability", "deformed_probability",
-                     "equilibrium_probability", "white_noise_probability"):
+                     "varying_fiber_probability", "deformed_probability",
+                     "equilibrium_probability"):
             if not 0 <= getattr(self, name) <= 1:
                 raise ValueError(f"[sampler] {name}: must be in [0, 1], got "
                                  f"{getattr(self, name)}")
         for name in ("body_force", "extra_force", "traction_density", "fiber_stiffness",
-                     "equilibrium_spread", "noise_position", "noise_velocity", "noise_decades"):
+                     "equilibrium_spread", "noise_position", "noise_velocity"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"[sampler] {name}: must be >= 0, got {getattr(self, name)}")
         if not (isinstance(self.deform_steps, int) and self.deform_steps >= 1):
             raise ValueError(f"[sampler] deform_steps: must be an integer >= 1, got "
                              f"{self.deform_steps!r}")
-        if not (isinstance(self.noise_modes, int) and self.noise_modes >= 0):
-            raise ValueError(f"[sampler] noise_modes: must be an integer >= 0, got "
-                             f"{self.noise_modes!r}")
-        if self.white_noise_probability and not self.noise_modes:
-            raise ValueError("[sampler] white_noise_probability: mixes white into soft-mode "
-                             "noise, so it needs noise_modes > 0")
         if not self.dt > 0:
             raise ValueError(f"[sampler] dt: must be > 0 s, got {self.dt}")
 
@@ -150,38 +132,16 @@ class Sampler:
             x = self._equilibrium(mesh, material, fixed, loads,
                                   rng.uniform(1 - c.equilibrium_spread, 1 + c.equilibrium_spread))
         free = ~scene.fixed_mask
-        # no draw when white_noise_probability is 0: earlier configs keep their samples
-        soft = c.noise_modes and not (c.white_noise_probability
-                                      and rng.random() < c.white_noise_probability)
-        shapes = _soft_modes(scene, x, c.noise_modes) if soft else None
-        x[free] += self._noise(rng, free.sum(), shapes, c.noise_position * h)
-        v[free] += self._noise(rng, free.sum(), shapes, c.noise_velocity * h)
+        x[free] += _noise(rng, free.sum(), c.noise_position * h)
+        v[free] += _noise(rng, free.sum(), c.noise_velocity * h)
         return Sample(scene, x, v)
-
-    def _noise(self, rng, d, shapes, largest):
-        """(d,) zero-mean noise over the free DOFs, in largest's units: white, or in the span
-        of shapes (d, k) when given, with its standard deviation (rms) drawn up to largest:
-        uniform in [0, largest], or log-uniform in [10^-noise_decades, 1] times largest."""
-        direction = rng.normal(size=d) if shapes is None else shapes @ rng.normal(
-            size=shapes.shape[1])
-        decades = self.config.noise_decades
-        size = rng.uniform(0, largest) if decades == 0 else largest * 10.0 ** rng.uniform(
-            -decades, 0)
-        if shapes is None:
-            return direction * size
-        return direction * (size / np.sqrt(np.mean(direction ** 2)))
 
     def _material(self, rng, mesh):
         c = self.config
         m = mesh.n_tets
         kind = rng.random()
         if kind >= c.varying_fiber_probability:  # one fiber for the whole scene
-            # no draw when axis_fiber_probability is 0: earlier configs keep their samples
-            if c.axis_fiber_probability and rng.random() < c.axis_fiber_probability:
-                direction = np.eye(3)[rng.integers(3)]
-            else:
-                direction = _unit(rng, 1)[0]
-            return Material(YOUNG, POISSON, DENSITY, direction,
+            return Material(YOUNG, POISSON, DENSITY, _unit(rng, 1)[0],
                             rng.uniform(0, c.fiber_stiffness) * YOUNG)
         if kind < c.varying_fiber_probability / 2:  # each element its own fiber
             return Material(YOUNG, POISSON, DENSITY, _unit(rng, m),
@@ -216,18 +176,11 @@ class Sampler:
         return loads
 
 
-def _soft_modes(scene, x, k):
-    """(d, min(k, d)) displacement shapes of the k softest modes at state x (m) over the d free
-    DOFs in scene.fixed_mask's order: eigenvectors of M^-1/2 K M^-1/2 (K the PSD-projected
-    static Hessian, assembled on anisofem's dense layout of the free DOFs) with the lowest
-    eigenvalues, mapped back by M^-1/2."""
-    layout = scene.layout("dense")
-    _, _, data = Potential(scene).hessian_data(x, layout, project=True, want_grad=False)
-    scale = 1.0 / np.sqrt(np.repeat(scene.masses, 3)[layout.dofs])
-    k = min(k, layout.shape[0])
-    _, modes = eigh(layout.matrix(data) * scale[:, None] * scale[None, :],
-                    subset_by_index=[0, k - 1])
-    return modes * scale[:, None]
+def _noise(rng, d, largest):
+    """(d,) white zero-mean noise over the free DOFs, its standard deviation drawn uniformly
+    from [0, largest] (largest's units)."""
+    direction = rng.normal(size=d)
+    return direction * rng.uniform(0, largest)
 
 
 def _unit(rng, k):

@@ -36,7 +36,9 @@ from . import checkpoint
 from .graph import batch as batch_graphs
 from .graph import from_scene
 from .loss import BatchPotential, potential_loss
-from .model import GraphNet, ModelConfig, integrate
+from . import model as model_module
+from . import sampler as sampler_module
+from .model import GraphNet, ModelConfig, integrate, without_retired
 from .sampler import Sample, Sampler, SamplerConfig
 
 #: sample streams of a seed: training uses the seed itself, these offsets the others
@@ -49,14 +51,17 @@ class TrainingDiverged(RuntimeError):
     """The loss or the gradient became NaN or infinite."""
 
 
+#: Options of earlier versions per config section, with the value under which a run never used
+#: them (see anisognn.model.without_retired).
+RETIRED = {"model": model_module.RETIRED, "sampler": sampler_module.RETIRED,
+           "train": {"rest_weight": 0.0, "normalize_floor": 0.0}}
+
+
 @dataclass
 class TrainConfig:
     """Optimization and bookkeeping. energy_weight, newton_weight: weights of the energy and
     of the Newton-preconditioned term of the loss (1, 0: the paper's plain energy loss);
-    rest_weight: of the term that weighs the step's error by how far it moves the rollout's
-    resting state (0: off; see anisognn.loss);
-    normalize: divide each sample's loss by its optimal decrease, floored at normalize_floor
-    times its load decrease (see anisognn.loss; 0: no floor).
+    normalize: divide each sample's loss by its optimal decrease (see anisognn.loss).
     rollout_probability, rollout_steps: with that probability an iteration's batch is first
     advanced 1..rollout_steps steps by the model itself (no gradient), so that it trains on the
     states its own rollouts visit (a state that leaves the bounds of own_rollout keeps its
@@ -69,9 +74,7 @@ class TrainConfig:
     initialization, same arithmetic), and the projection acts only in the finished model."""
     newton_weight: float = 0.0
     energy_weight: float = 1.0
-    rest_weight: float = 0.0
     normalize: bool = False
-    normalize_floor: float = 0.0
     rollout_probability: float = 0.0
     rollout_steps: int = 10
     iterations: int = 1000
@@ -91,12 +94,9 @@ class TrainConfig:
     through_galerkin: bool = True
 
     def __post_init__(self):
-        for name in ("newton_weight", "energy_weight", "rest_weight", "normalize_floor"):
+        for name in ("newton_weight", "energy_weight"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"[train] {name}: must be >= 0, got {getattr(self, name)}")
-        if self.normalize_floor > 0 and not self.normalize:
-            raise ValueError(f"[train] normalize_floor: {self.normalize_floor} bounds the "
-                             "normalizer of normalize = true from below, which is off")
         if not 0 <= self.rollout_probability <= 1:
             raise ValueError("[train] rollout_probability: must be in [0, 1], got "
                              f"{self.rollout_probability}")
@@ -106,9 +106,8 @@ class TrainConfig:
         if not isinstance(self.through_galerkin, bool):
             raise ValueError(f"[train] through_galerkin: expected true or false, got "
                              f"{self.through_galerkin!r}")
-        if self.newton_weight == 0 and self.energy_weight == 0 and self.rest_weight == 0:
-            raise ValueError("[train] newton_weight, energy_weight, rest_weight: at least one "
-                             "must be > 0")
+        if self.newton_weight == 0 and self.energy_weight == 0:
+            raise ValueError("[train] newton_weight, energy_weight: at least one must be > 0")
 
 
 @dataclass
@@ -140,7 +139,7 @@ def make_config(raw, source="config", **overrides):
     parts = {}
     for name, cls in (("model", ModelConfig), ("sampler", SamplerConfig),
                       ("train", TrainConfig)):
-        values = dict(raw.get(name, {}))
+        values = without_retired(raw.get(name, {}), RETIRED[name], name)
         if name == "train":
             values.update(overrides)
         known = {f.name for f in dataclasses.fields(cls)}
@@ -171,10 +170,10 @@ def batch_graph(samples, device, dtype=torch.float32):
 
 
 def make_batch(samples, dt, device, dtype=torch.float32, weights=None, normalize=False,
-               graph=None, normalize_floor=0.0):
+               graph=None):
     """Batch of anisognn.sampler.Samples: one disjoint graph (graph, when the caller already
     built batch_graph(samples, device, dtype)), stacked states, and the incremental potentials
-    of one step of dt from each sample's state (weights, normalize, normalize_floor: see
+    of one step of dt from each sample's state (weights, normalize: see
     BatchPotential.backward_euler)."""
     if graph is None:
         graph = batch_graph(samples, device, dtype)
@@ -182,7 +181,7 @@ def make_batch(samples, dt, device, dtype=torch.float32, weights=None, normalize
     v = np.concatenate([s.v for s in samples])
     f = np.concatenate([s.scene.external_force for s in samples])
     pot = BatchPotential.backward_euler([s.scene for s in samples], x, v, dt, weights,
-                                        normalize, normalize_floor)
+                                        normalize)
     return Batch(graph, *(torch.as_tensor(a, dtype=dtype, device=device) for a in (x, v, f)),
                  pot)
 
@@ -217,13 +216,13 @@ def own_rollout(model, samples, graph, steps, dt):
     return out, advanced
 
 
-def batch_loss(net, batch, dt, newton_weight=0.0, energy_weight=1.0, rest_weight=0.0):
+def batch_loss(net, batch, dt, newton_weight=0.0, energy_weight=1.0):
     """(loss tensor, x_next) of the network net (a GraphNet, possibly wrapped by DDP) on a
     Batch at x_next = x + dt v + dt^2 net(...): anisognn.loss.potential_loss with these
     weights (the defaults: sum_i w_i G_i(x_next))."""
     a = net(batch.x, batch.v, batch.f_ext, batch.graph)
     x_next, _ = integrate(batch.x, batch.v, a, dt, batch.graph)
-    loss = potential_loss(x_next, batch.potential, newton_weight, energy_weight, rest_weight)
+    loss = potential_loss(x_next, batch.potential, newton_weight, energy_weight)
     return loss, x_next
 
 
@@ -233,7 +232,7 @@ def fit_normalization(model, samples):
     x = torch.as_tensor(np.concatenate([s.x for s in samples]))
     v = torch.as_tensor(np.concatenate([s.v for s in samples]))
     f = torch.as_tensor(np.concatenate([s.scene.external_force for s in samples]))
-    model.vertex_norm.fit(model.vertex_features(x, v, f, g))
+    model.vertex_norm.fit(model.vertex_features(v, f, g))
     model.edge_norm.fit(model.edge_features(x, g))
     accel = f / g.mass
     model.accel_scale.fill_(float(torch.sqrt((accel ** 2).sum(dim=1).mean())))
@@ -446,10 +445,8 @@ def _train(config, progress, rank, world, device):
                                             config.model.dt)
         batch = make_batch(samples, config.model.dt, device,
                            weights=np.full(tc.batch_size, 1.0 / tc.batch_size),
-                           normalize=tc.normalize, graph=graph,
-                           normalize_floor=tc.normalize_floor)
-        loss, _ = batch_loss(net, batch, config.model.dt, tc.newton_weight, tc.energy_weight,
-                             tc.rest_weight)
+                           normalize=tc.normalize, graph=graph)
+        loss, _ = batch_loss(net, batch, config.model.dt, tc.newton_weight, tc.energy_weight)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(

@@ -32,7 +32,7 @@ Graph of a tet mesh with n vertices (all arrays are numpy; float32 unless said):
 - mass (n, 1) kg: lumped, density * volume / 4 of every tet to each of its vertices.
 - fixed (n, 3): 1.0 where a component is held (Dirichlet), else 0.0; fixed_positions (n, 3)
   float64 m: where held components are held (here: their rest positions).
-- per-tet constants of the elastic force (read only by models with elastic_force): tets (m, 4)
+- per-tet constants of the elastic force (read only by models with the Galerkin step): tets (m, 4)
   int64; tet_gradients (m, 4, 3) 1/m, the gradients of the four linear shape functions (row a
   is grad N_a, so F = sum_a x_a grad N_a^T); tet_material (m, 4): rest volume (m^3), mu, lam,
   kappa (Pa); tet_fiber (m, 3) unit fiber directions; corners (n, C) int64, the slots 4 t + a

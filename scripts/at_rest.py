@@ -10,7 +10,7 @@
                                                far it still moves over the last 100, next to the
                                                FEM's; a galerkin model with its network's
                                                direction zeroed, or its network alone
-    python scripts/at_rest.py learn [--iterations N] [--floor C] [--energy-weight W]
+    python scripts/at_rest.py learn [--iterations N] [--energy-weight W]
                                     [--no-normalize] [--fixed]
                                                train a fresh 32 x 6 directional model on at-rest
                                                samples only (fresh each iteration, or one fixed
@@ -29,6 +29,7 @@ import anisofem
 from anisofem.potential import Potential
 from anisognn import evaluate, shipped
 from anisognn import train as T
+from anisognn.elastic import elastic_force
 from anisognn.graph import from_scene
 from anisognn.loss import optimal_decrease
 from anisognn.model import GraphNet, ModelConfig, with_galerkin
@@ -144,7 +145,7 @@ def probe(models):
             print(f"  {name[-40:]:40}" + "".join(f"{a:8.3f}" for a in acc))
 
 
-def learn(iterations, floor, energy_weight, normalize, fixed):
+def learn(iterations, energy_weight, normalize, fixed):
     torch.manual_seed(0)
     sampler = Sampler(7, AT_REST)
     held = [Sampler(99, AT_REST).sample(i) for i in range(24)]
@@ -159,7 +160,7 @@ def learn(iterations, floor, energy_weight, normalize, fixed):
         if batch is None or not fixed:
             samples = [sampler.sample(it * 8 + j) for j in range(8)]
             batch = T.make_batch(samples, DT, "cpu", weights=np.full(8, 1 / 8),
-                                 normalize=normalize, normalize_floor=floor)
+                                 normalize=normalize)
         train_step(model, optimizer, batch, energy_weight)
         if it % 200 == 0:
             model.eval()
@@ -190,28 +191,22 @@ def noise():
         force, external = force_channel(scale)
         print(f"noise x {scale:g}: rms of the elastic-force input (f_elastic(x + dt v) + f_ext)/m "
               f"{force:.3g} m/s^2 (external force alone {external:.3g})")
-    for modes in (4, 8, 16):
-        force, external = force_channel(1.0, modes)
-        print(f"noise x 1 in the {modes} softest modes (noise_modes = {modes}): rms of the "
-              f"elastic-force input {force:.3g} m/s^2 (external force alone {external:.3g})")
 
 
-def force_channel(scale, modes=0, count=64):
-    """(rms force input, rms external force / m) in m/s^2 over the free components of count
-    training samples whose state noise is scale times the default, in the modes softest modes
-    (white noise when modes is 0)."""
-    net = GraphNet(ModelConfig(latent=8, steps=1, elastic_force=True))
+def force_channel(scale, count=64):
+    """(rms of (f_elastic(x + dt v) + f_ext) / m, rms external force / m) in m/s^2 over the
+    free components of count training samples whose state noise is scale times the default."""
     defaults = SamplerConfig()
     sampler = Sampler(0, SamplerConfig(equilibrium_probability=0.6,
                                        noise_position=scale * defaults.noise_position,
-                                       noise_velocity=scale * defaults.noise_velocity,
-                                       noise_modes=modes))
+                                       noise_velocity=scale * defaults.noise_velocity))
     force, external = [], []
     for i in range(count):
         s = sampler.sample(i)
         graph = from_scene(s.scene, torch.float64)
         f = torch.tensor(s.scene.external_force)
-        channel = net.vertex_features(torch.tensor(s.x), torch.tensor(s.v), f, graph)[:, 7:]
+        predictor = torch.tensor(s.x + DT * s.v)
+        channel = (elastic_force(predictor, graph) + f) / graph.mass
         free = ~s.scene.fixed_mask
         force.append(channel.numpy()[free])
         external.append((s.scene.external_force / s.scene.masses[:, None])[free])
@@ -229,7 +224,6 @@ def main():
                                        default="on")
     q = sub.add_parser("learn")
     q.add_argument("--iterations", type=int, default=1200)
-    q.add_argument("--floor", type=float, default=0.0)
     q.add_argument("--energy-weight", type=float, default=1.0)
     q.add_argument("--no-normalize", action="store_true")
     q.add_argument("--fixed", action="store_true")
@@ -243,7 +237,7 @@ def main():
     elif args.command == "settle":
         settle(args.models, args.steps, args.network)
     elif args.command == "learn":
-        learn(args.iterations, args.floor, args.energy_weight, not args.no_normalize, args.fixed)
+        learn(args.iterations, args.energy_weight, not args.no_normalize, args.fixed)
     else:
         noise()
 

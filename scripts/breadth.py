@@ -6,10 +6,8 @@ direction changes bending (docs/experiments.md).
                                                each axis, at 45 degrees, and quantiles over 40
                                                random directions
     python scripts/breadth.py learn [--dirs axes|random|curriculum] [--kappa-max K]
-                                    [--loads gravity|random] [--fiber-stress] [--alignment]
-                                    [--tensor] [--elastic-force] [--force-scale S]
-                                    [--anchored] [--no-deformation] [--force-only]
-                                    [--aggregation sum] [--iterations N]
+                                    [--loads gravity|random] [--aggregation sum]
+                                    [--iterations N]
                                                train a fresh 32 x 6 model for N iterations
                                                (shipped loss, learning rate 1e-3 halved
                                                three times over the run, no own-rollout
@@ -26,11 +24,7 @@ direction changes bending (docs/experiments.md).
                                                cantilevers, next to the FEM's; at the end the
                                                tip deflection after 300 steps from rest
 
---alignment appends the edge channel kappa (d . n)^2 (Pa), the fiber's alignment with the rest
-edge; --tensor replaces the fiber feature kappa d by kappa d d^T (6 channels, even in d); neither
-is a ModelConfig option. --elastic-force, --force-scale, --anchored and --force-only are the
-ModelConfig options of those names, --no-deformation is deformation_inputs = false. Run with
-OMP_NUM_THREADS=1; `learn` takes 5-10 minutes.
+Run with OMP_NUM_THREADS=1; `learn` takes 5-10 minutes.
 """
 import argparse
 
@@ -98,41 +92,6 @@ class Restricted(Sampler):
         return {"body_force": np.tile([0.0, 0.0, -rng.uniform(0, 15e3)], (mesh.n_tets, 1))}
 
 
-class AlignedConfig(ModelConfig):
-    @property
-    def edge_channels(self):
-        return super().edge_channels + 1
-
-
-class TensorConfig(ModelConfig):
-    @property
-    def edge_channels(self):
-        return super().edge_channels + 3
-
-
-class Aligned(GraphNet):
-    """GraphNet with the edge channel kappa (d . n)^2 (Pa) appended."""
-
-    def edge_features(self, x, graph):
-        kappa = torch.linalg.vector_norm(graph.fiber, dim=1, keepdim=True)
-        along = (graph.fiber * graph.rest[:, :3]).sum(dim=1, keepdim=True)
-        return torch.cat([super().edge_features(x, graph),
-                          along * along / torch.clamp(kappa, min=1e-30)], dim=1)
-
-
-class Tensor(GraphNet):
-    """GraphNet with the fiber feature kappa d (3) replaced by the fiber tensor kappa d d^T
-    (6: xx, yy, zz, xy, xz, yz; Pa): even in d, so no sign convention and no jump."""
-
-    def edge_features(self, x, graph):
-        base = super().edge_features(x, graph)
-        f = graph.fiber
-        kappa = torch.clamp(torch.linalg.vector_norm(f, dim=1, keepdim=True), min=1e-30)
-        i, j = (0, 1, 2, 0, 0, 1), (0, 1, 2, 1, 2, 2)
-        tensor = f[:, i] * f[:, j] / kappa
-        return torch.cat([base[:, :8], tensor, base[:, 11:]], dim=1)
-
-
 def tip_table(run, cases, x_fem):
     """(4, 3) tip z accelerations (m/s^2) one step from rest at SHARES of the FEM deflection."""
     return np.round([tip_accelerations(run, c.scene, xf, SHARES)
@@ -144,13 +103,8 @@ def learn(args):
     options = (args.dirs, args.kappa_max, args.loads)
     sampler = Restricted(0, config, *options, samples=8 * args.iterations)
     torch.manual_seed(0)
-    kind, model_config = ((Aligned, AlignedConfig) if args.alignment else
-                          (Tensor, TensorConfig) if args.tensor else (GraphNet, ModelConfig))
-    force = dict(elastic_force=True, force_scale=args.force_scale, anchored=args.anchored,
-                 deformation_inputs=not args.no_deformation, force_only=args.force_only)
-    model = kind(model_config(latent=32, hidden_layers=2, steps=6, aggregation=args.aggregation,
-                              fiber_stress=args.fiber_stress,
-                              **(force if args.elastic_force else {})))
+    model = GraphNet(ModelConfig(latent=32, hidden_layers=2, steps=6,
+                                 aggregation=args.aggregation))
     T.fit_normalization(model, [Restricted(1, config, *options).sample(i) for i in range(128)])
     optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
     cases = evaluate.cases()[:4]
@@ -184,20 +138,9 @@ def main():
     q.add_argument("--dirs", choices=("axes", "random", "curriculum"), default="axes")
     q.add_argument("--kappa-max", type=float, default=0.0)
     q.add_argument("--loads", choices=("gravity", "random"), default="gravity")
-    q.add_argument("--fiber-stress", action="store_true")
-    q.add_argument("--alignment", action="store_true")
-    q.add_argument("--tensor", action="store_true")
-    q.add_argument("--elastic-force", action="store_true")
-    q.add_argument("--force-scale", type=float, default=0.0)
-    q.add_argument("--anchored", action="store_true")
-    q.add_argument("--no-deformation", action="store_true")
-    q.add_argument("--force-only", action="store_true")
     q.add_argument("--aggregation", choices=("directional", "sum"), default="directional")
     q.add_argument("--iterations", type=int, default=3000)
     args = p.parse_args()
-    if args.command == "learn" and args.tensor and args.no_deformation:
-        p.error("--tensor replaces the fiber channels of the full edge inputs; "
-                "it does not combine with --no-deformation")
     torch.set_num_threads(1)
     if args.command == "deflections":
         deflections()

@@ -159,23 +159,6 @@ def test_newton_term_is_the_mass_scaled_newton_step(kappa):
     assert e2 == pytest.approx(e1 - e0, rel=1e-9)
 
 
-@pytest.mark.parametrize("kappa", [2e5, 1e7])
-def test_rest_term_is_the_newton_step_through_the_long_step_hessian(kappa):
-    """gradient(rest=beta) - gradient(0) = beta W K_r^-1 W H^-1 g on free components (W = M/dt^2,
-    K_r the projected Hessian at 10 dt, H at dt; against dense solves), nothing on held
-    ones, loss beta/2 (W s) . K_r^-1 W s; ordinary and stiff fibers."""
-    s, beta = newton_setup(kappa, seed=2), 30.0
-    e1, gr = s.pot.energy_gradient(s.x, rest_weight=beta)
-    g, free = s.g, s.free
-    K_r = af.hessian(s.scene, s.x, s.x + s.dt * s.v, 10 * s.dt, project=True).toarray()
-    Ws = s.W * np.linalg.solve(s.H, g.reshape(-1)[free])
-    rest = (gr - g).reshape(-1)[free] / beta / s.W
-    dense = np.linalg.solve(K_r[np.ix_(free, free)], Ws)
-    assert np.allclose(rest, dense, rtol=1e-9, atol=1e-9 * np.abs(dense).max())
-    assert (gr[s.scene.fixed_mask] == g[s.scene.fixed_mask]).all()
-    assert e1 == pytest.approx(s.e0 + 0.5 * beta * Ws @ rest, rel=1e-12)
-
-
 @pytest.mark.parametrize("dt", [1e-4, 0.02])
 def test_normalization_divides_by_the_newton_decrease_at_the_start(dt):
     """weights / D with D = 1/2 g0^T H0^-1 g0 at x_hat; for a tiny step from rest D is the
@@ -193,29 +176,6 @@ def test_normalization_divides_by_the_newton_decrease_at_the_start(dt):
         f = scene.external_force.reshape(-1)[free]
         m = np.repeat(scene.masses, 3)[free]
         assert decrease == pytest.approx(0.5 * dt ** 2 * (f ** 2 / m).sum(), rel=1e-3)
-
-
-@pytest.mark.parametrize("floor", [0.01, 0.2])
-def test_normalization_floor_is_a_share_of_the_load_decrease_at_equilibrium(floor):
-    """At the static equilibrium at rest the Newton decrease is ~0 and the normalizer is the
-    floor: floor * 1/2 f^T H0^-1 f; away from it (from the rest shape) the floor does not act."""
-    scene = fiber_scene(af.box_beam(cells=(3, 1, 1)))
-    rest = scene.initial_positions()
-    x_eq = af.solve(scene).x
-    v = np.zeros_like(rest)
-    dt = 0.02
-    free = ~scene.fixed_mask.reshape(-1)
-    f = scene.external_force.reshape(-1)[free]
-    H0 = af.hessian(scene, x_eq, x_eq, dt, project=True).toarray()[np.ix_(free, free)]
-    load = 0.5 * f @ np.linalg.solve(H0, f)
-    at_rest = BatchPotential.backward_euler([scene], x_eq, v, dt, normalize=True,
-                                            normalize_floor=floor)
-    unfloored = BatchPotential.backward_euler([scene], x_eq, v, dt, normalize=True)
-    assert at_rest.weights[0] == pytest.approx(1.0 / (floor * load), rel=1e-9)
-    assert unfloored.weights[0] > 1e4 * at_rest.weights[0]
-    start = [BatchPotential.backward_euler([scene], rest, v, dt, normalize=True,
-                                           normalize_floor=c).weights[0] for c in (0.0, floor)]
-    assert start[1] == pytest.approx(start[0], rel=1e-12)  # the same sample, solved twice
 
 
 def test_model_runs_on_a_batch_equal_to_its_parts():
@@ -249,52 +209,20 @@ def test_config_validation():
         ModelConfig(latent=0)
     with pytest.raises(ValueError, match="dt"):
         ModelConfig(dt=0.0)
-    with pytest.raises(ValueError, match="fiber_stress"):
-        ModelConfig(fiber_stress=1)
-    with pytest.raises(ValueError, match="elastic_force"):
-        ModelConfig(elastic_force="yes")
-    with pytest.raises(ValueError, match="force_scale.*elastic_force"):
-        ModelConfig(force_scale=1.0)
-    with pytest.raises(ValueError, match="force_scale"):
-        ModelConfig(elastic_force=True, force_scale=-1.0)
-    with pytest.raises(ValueError, match="anchored.*elastic_force"):
-        ModelConfig(anchored=True)
-    with pytest.raises(ValueError, match="anchored"):
-        ModelConfig(elastic_force=True, anchored=1)
-    with pytest.raises(ValueError, match="deformation_inputs.*elastic_force"):
-        ModelConfig(deformation_inputs=False)
-    with pytest.raises(ValueError, match="deformation_inputs.*fiber_stress"):
-        ModelConfig(deformation_inputs=False, elastic_force=True, fiber_stress=True)
-    force_only = dict(elastic_force=True, deformation_inputs=False, force_only=True)
-    with pytest.raises(ValueError, match="force_only.*deformation_inputs"):
-        ModelConfig(**dict(force_only, deformation_inputs=True))
-    with pytest.raises(ValueError, match="force_only.*anchored"):
-        ModelConfig(**force_only, anchored=True)
-    with pytest.raises(ValueError, match="force_only.*force_scale"):
-        ModelConfig(**force_only, force_scale=1.0)
-    with pytest.raises(ValueError, match="force_only"):
-        ModelConfig(**dict(force_only, force_only="yes"))
+    with pytest.raises(ValueError, match="galerkin"):
+        ModelConfig(galerkin=1)
+    with pytest.raises(ValueError, match="galerkin_passes.*galerkin = true"):
+        ModelConfig(galerkin_passes=2)
     assert anisognn.ModelConfig().latent == 128 and ModelConfig().steps == 15
 
 
-def test_fiber_stress_channel_is_the_fiber_stress_along_each_edge():
-    mesh = af.box_beam(cells=(4, 2, 2))
-    d, kappa = np.array([0.6, 0.0, 0.8]), 3e5
-    g = G.from_scene(fiber_scene(mesh, d, kappa))
-    F = np.array([[1.01, 0.002, 0.0], [0.0, 0.995, 0.003], [0.004, 0.0, 1.02]])
-    x = torch.tensor(mesh.vertices @ F.T, dtype=torch.float32)
-    plain = GraphNet(ModelConfig(latent=8, steps=1)).edge_features(x, g)
-    with_stress = GraphNet(ModelConfig(latent=8, steps=1, fiber_stress=True)).edge_features(x, g)
-    assert plain.shape[1] == 15 and with_stress.shape[1] == 16
-    assert torch.equal(with_stress[:, :15], plain)
-    n = g.rest[:, :3].double().numpy()
-    green = 0.5 * (np.einsum("ei,ij,ej->e", n, F.T @ F, n) - 1.0)  # Green strain along n
-    expected = kappa * (n @ d) ** 2 * green
-    assert np.allclose(with_stress[:, 15].numpy(), expected, rtol=1e-3, atol=1e-4 * kappa * 0.02)
-    assert np.abs(expected).max() > 1e-3 * kappa
-    free = GraphNet(ModelConfig(latent=8, steps=1, fiber_stress=True)).edge_features(
-        x, G.from_scene(fiber_scene(mesh, d, 0.0)))
-    assert torch.equal(free[:, 15], torch.zeros(g.n_edges))  # no fiber, no stress
+def test_saved_configs_with_retired_options_load_only_where_they_were_unused():
+    saved = dict(ModelConfig(latent=16).to_dict(), fiber_stress=False, anchored=False,
+                 elastic_force=False, force_scale=0.0, deformation_inputs=True, force_only=False)
+    assert ModelConfig.from_dict(saved) == ModelConfig(latent=16)
+    with pytest.raises(ValueError, match=r"\[model\] elastic_force = True: an option of "
+                                         r"earlier versions"):
+        ModelConfig.from_dict(dict(saved, elastic_force=True))
 
 
 def per_element_fiber_scene(mesh, seed):
@@ -329,103 +257,6 @@ def test_runtime_shape_gradients_are_anisofems():
                                mesh.shape_gradients, rtol=1e-12, atol=1e-9)
 
 
-def test_elastic_force_input_vanishes_at_equilibrium_and_points_back_beyond_it():
-    """(f_elastic(x + dt v) + f_ext) / m: ~0 at anisofem's static equilibrium under gravity;
-    at half and 1.5 times its displacement the free vertices' mass-weighted mean is about
-    -g/2 and +g/2 along z (the stiffness the channel carries; nonlinear, so not exactly)."""
-    scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
-    x_eq = af.solve(scene).x
-    rest = scene.initial_positions()
-    net = GraphNet(ModelConfig(latent=8, steps=1, elastic_force=True))
-    g = G.from_scene(scene, torch.float64)
-    f = torch.tensor(scene.external_force)
-    free = ~scene.fixed_mask[:, 0]
-    weights = scene.masses[free] / scene.masses[free].sum()
-
-    def channel(x):
-        features = net.vertex_features(torch.tensor(x), torch.zeros(x.shape, dtype=torch.float64),
-                                       f, g)
-        return features[:, 7:].numpy()
-    assert channel(x_eq).shape == (scene.mesh.n_vertices, 3)
-    assert np.abs(channel(x_eq)).max() < 1e-6 * 9.81
-    for scale, expected in ((0.5, -9.81 / 2), (1.5, 9.81 / 2)):
-        mean = weights @ channel(rest + scale * (x_eq - rest))[free, 2]
-        assert mean == pytest.approx(expected, rel=0.25), scale
-    assert np.all(channel(rest)[scene.fixed_mask] == 0.0)  # held components read 0
-
-
-def test_force_scale_compresses_the_force_input_and_keeps_small_forces_linear():
-    """sign(a) log(1 + |a| / force_scale): the plain channel's a / force_scale where
-    |a| << force_scale, sign(a) log(|a| / force_scale) where |a| >> force_scale; the other
-    inputs unchanged."""
-    scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
-    g = G.from_scene(scene, torch.float64)
-    f = torch.tensor(scene.external_force)
-    rng = np.random.default_rng(0)
-    noisy = torch.tensor(scene.initial_positions() + rng.normal(0, 1e-4, (g.n_vertices, 3)))
-    v = torch.zeros_like(noisy)
-    plain = GraphNet(ModelConfig(latent=8, steps=1, elastic_force=True))
-    squeezed = GraphNet(ModelConfig(latent=8, steps=1, elastic_force=True, force_scale=2.0))
-    a = plain.vertex_features(noisy, v, f, g)
-    b = squeezed.vertex_features(noisy, v, f, g)
-    assert torch.equal(a[:, :7], b[:, :7])
-    small, large = a[:, 7:].abs() < 0.02, a[:, 7:].abs() > 400.0
-    assert small.any() and large.any()
-    np.testing.assert_allclose(b[:, 7:][small] * 2.0, a[:, 7:][small], rtol=2e-2, atol=1e-12)
-    expected = torch.sign(a[:, 7:][large]) * torch.log(a[:, 7:][large].abs() / 2.0)
-    np.testing.assert_allclose(b[:, 7:][large], expected, rtol=0, atol=1e-2)
-
-
-@pytest.mark.parametrize("aggregation", ["directional", "sum"])
-def test_anchored_model_is_still_at_the_fem_equilibrium_not_under_load_or_moving(aggregation):
-    """With anchored = true the output is zero at anisofem's static equilibrium at rest (to the
-    solver's tolerance; a random network, not trained), and not at the rest shape under load
-    or at the equilibrium with a velocity; without anchoring the random network moves there."""
-    scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
-    g = G.from_scene(scene, torch.float64)
-    f = torch.tensor(scene.external_force)
-    x_eq = torch.tensor(af.solve(scene, rtol=1e-10).x)
-    still = torch.zeros_like(x_eq)
-    nets = {}
-    for anchored in (True, False):
-        torch.manual_seed(0)
-        net = GraphNet(ModelConfig(latent=16, steps=2, aggregation=aggregation,
-                                   elastic_force=True, force_scale=1.0, anchored=anchored))
-        torch.nn.init.normal_(net.decoder[-1].weight)
-        nets[anchored] = net.double()
-    with torch.no_grad():
-        def largest(net, x, v):
-            return float(net(x, v, f, g).abs().max())
-        at_equilibrium = largest(nets[True], x_eq, still)
-        under_load = largest(nets[True], torch.tensor(scene.initial_positions()), still)
-        moving = largest(nets[True], x_eq, torch.full_like(x_eq, 0.05))
-        assert at_equilibrium < 1e-4 * min(under_load, moving)
-        assert largest(nets[False], x_eq, still) > 1e3 * at_equilibrium
-
-
-def test_without_deformation_inputs_the_edges_see_only_the_rest_shape_and_fiber():
-    """deformation_inputs = false: edge inputs are the rest unit vector, rest length and fiber
-    feature (E, 7), the same for any positions; the output still changes with the positions,
-    through the elastic-force input."""
-    scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
-    g = G.from_scene(scene, torch.float64)
-    f = torch.tensor(scene.external_force)
-    torch.manual_seed(0)
-    net = GraphNet(ModelConfig(latent=16, steps=2, elastic_force=True,
-                               deformation_inputs=False)).double()
-    torch.nn.init.normal_(net.decoder[-1].weight)
-    rest = torch.tensor(scene.initial_positions())
-    bent = torch.tensor(af.solve(scene).x)
-    assert net.config.edge_channels == 7
-    expected = torch.cat([g.rest, g.fiber], dim=1)
-    assert torch.equal(net.edge_features(rest, g), expected)
-    assert torch.equal(net.edge_features(bent, g), expected)
-    still = torch.zeros_like(rest)
-    with torch.no_grad():
-        change = (net(bent, still, f, g) - net(rest, still, f, g)).abs().max()
-    assert change > 1e-3
-
-
 def force_only_net(aggregation="directional"):
     """A random (decoder normal-initialized) 16 x 2 force_only network in float64."""
     torch.manual_seed(0)
@@ -435,57 +266,3 @@ def force_only_net(aggregation="directional"):
     return net.double()
 
 
-@pytest.mark.parametrize("aggregation", ["directional", "sum"])
-def test_force_only_output_is_odd_in_the_force_and_scales_with_it(aggregation, monkeypatch):
-    """force_only: for any force input g, the output for -g is minus the output for g; while
-    g is small against the saturation C, for 3 g it is three times the output for g, for 0
-    zero, and for two different g the outputs are not proportional; for g far above C the
-    output stops growing."""
-    scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
-    g = G.from_scene(scene, torch.float64)
-    x = torch.tensor(scene.initial_positions())
-    v, f = torch.zeros_like(x), torch.tensor(scene.external_force)
-    net = force_only_net(aggregation)
-    rng = np.random.default_rng(1)
-    first = torch.tensor(rng.normal(0, 5.0, x.shape)) * (1 - g.fixed)
-    second = torch.tensor(rng.normal(0, 5.0, x.shape)) * (1 - g.fixed)
-
-    def out(force):
-        monkeypatch.setattr(net, "force_input", lambda *args: force)
-        with torch.no_grad():
-            return net(x, v, f, g)
-    net.accel_scale.fill_(1e12)  # m/s^2: the forces above are small against C
-    a = out(first)
-    assert float(a.abs().max()) > 1e-2
-    np.testing.assert_allclose(out(-first), -a, rtol=0, atol=1e-12 * float(a.abs().max()))
-    np.testing.assert_allclose(out(3.0 * first), 3.0 * a, rtol=1e-8, atol=1e-12)
-    assert float(out(0.0 * first).abs().max()) == 0.0
-    b = out(second)
-    ratio = (b * a).sum() / (a * a).sum()
-    assert float((b - ratio * a).abs().max()) > 1e-3 * float(b.abs().max())
-    net.accel_scale.fill_(1.0)  # C = FORCE_SATURATION m/s^2
-    big, bigger = out(1e4 * first), out(1e7 * first)
-    np.testing.assert_allclose(out(-1e4 * first), -big, rtol=0,
-                               atol=1e-12 * float(big.abs().max()))
-    assert float(bigger.abs().max()) < 2.0 * float(big.abs().max())
-
-
-def test_force_only_model_sees_the_state_only_through_the_predictor_force():
-    """force_only: the output for (x, v) is the output for (x + dt v, 0); it is zero at
-    anisofem's static equilibrium at rest and not under load from the rest shape."""
-    scene = fiber_scene(af.box_beam(cells=(6, 2, 2)))
-    g = G.from_scene(scene, torch.float64)
-    f = torch.tensor(scene.external_force)
-    net = force_only_net()
-    x_eq = torch.tensor(af.solve(scene, rtol=1e-10).x)
-    rest = torch.tensor(scene.initial_positions())
-    v = torch.tensor(np.random.default_rng(2).normal(0, 0.05, x_eq.shape)) * (1 - g.fixed)
-    with torch.no_grad():
-        moving = net(rest, v, f, g)
-        predicted = net(rest + net.config.dt * v, torch.zeros_like(v), f, g)
-        np.testing.assert_allclose(moving, predicted, rtol=0,
-                                   atol=1e-9 * float(moving.abs().max()))
-        under_load = float(net(rest, torch.zeros_like(v), f, g).abs().max())
-        at_equilibrium = float(net(x_eq, torch.zeros_like(v), f, g).abs().max())
-    assert under_load > 1e-2
-    assert at_equilibrium < 1e-4 * under_load

@@ -116,7 +116,7 @@ def test_resume_after_kill_gives_the_parameters_of_an_uninterrupted_run(tmp_path
 
 def test_a_finished_run_extends_to_the_longer_run_from_a_copied_folder(tmp_path):
     """6 iterations, the folder copied, then extended to 12: the parameters of a 12-iteration
-    run, also when the checkpoint predates a setting at its default (rest_weight); fewer
+    run, also when the checkpoint holds options since retired at their unused values; fewer
     iterations than the checkpoint's, or another setting, are refused."""
     config = write_config(tmp_path / "tiny.toml", TINY)
     whole = train.train(train.load_config(config, out=str(tmp_path / "whole")),
@@ -127,7 +127,8 @@ def test_a_finished_run_extends_to_the_longer_run_from_a_copied_folder(tmp_path)
     moved = str(tmp_path / "moved")
     shutil.copytree(short, moved)
     payload = torch.load(os.path.join(moved, "checkpoint.pt"), weights_only=False)
-    del payload["run"]["train"]["rest_weight"]
+    payload["run"]["train"]["rest_weight"] = 0.0
+    payload["run"]["model"]["fiber_stress"] = False
     torch.save(payload, os.path.join(moved, "checkpoint.pt"))
     longer = train.train(train.load_config(config, out=moved), progress=False)[1]
     assert longer["resumed_from"] == 6 and longer["digest"] == whole["digest"]
@@ -215,8 +216,14 @@ def test_config_errors_name_the_problem(tmp_path):
         train.make_config({"train": {"rollout_steps": 0}})
     with pytest.raises(ValueError, match="at least one must be > 0"):
         train.make_config({"train": {"energy_weight": 0.0}})
-    with pytest.raises(ValueError, match=r"normalize_floor: 0.1 bounds .* normalize = true"):
+    with pytest.raises(ValueError, match=r"\[train\] normalize_floor = 0.1: an option of "
+                                         r"earlier versions"):
         train.make_config({"train": {"normalize_floor": 0.1}})
+    with pytest.raises(ValueError, match=r"\[sampler\] noise_modes = 8: an option"):
+        train.make_config({"sampler": {"noise_modes": 8}})
+    retired = train.make_config({"model": {"anchored": False}, "sampler": {"noise_decades": 0.0},
+                                 "train": {"rest_weight": 0.0}})
+    assert retired == train.make_config({})
     with pytest.raises(ValueError,
                        match=r"\[sampler\] equilibrium_probability: must be in \[0, 1\]"):
         train.make_config({"sampler": {"equilibrium_probability": 1.5}})
