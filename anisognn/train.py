@@ -386,7 +386,7 @@ def trained_config(config):
     """The ModelConfig of the network a RunConfig trains: its model's, without galerkin when
     [train] through_galerkin = false."""
     if config.model.galerkin and not config.train.through_galerkin:
-        return dataclasses.replace(config.model, galerkin=False)
+        return dataclasses.replace(config.model, galerkin=False, galerkin_passes=1)
     return config.model
 
 
