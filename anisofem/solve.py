@@ -90,17 +90,18 @@ def _no_energy_gain(potential, x, v):
     mechanical energy H = 1/2 v^T M v + elastic - f_ext . x than it started with (up to
     round-off). The exact backward-Euler step never gains energy where the elastic energy is
     convex; a step cut short can, and a budget must not buy a blow-up."""
-    mass = potential.mass_over_dt2[:, None]  # kg / s^2: |y - x|^2_M / dt^2 = |v|^2_M
+    mass_over_dt2 = potential.mass_over_dt2[:, None]  # kg/s^2
 
-    def half_norm(d):
-        return 0.5 * float((mass * d * d).sum())
+    def kinetic(displacement):
+        """1/2 |displacement / dt|^2_M in J: the kinetic energy of moving that far in dt."""
+        return 0.5 * float((mass_over_dt2 * displacement * displacement).sum())
 
     x_hat = potential.x_hat
-    h0 = potential.energy(x)  # = elastic - f_ext . x + 1/2 v^T M v at the start
-    slack = 1e-12 * (abs(h0) + abs(float((potential.scene.external_force * x).sum())))
+    start_energy = potential.energy(x)  # G(x) = elastic - f_ext . x + kinetic(x - x_hat)
+    slack = 1e-12 * (abs(start_energy) + abs(float((potential.scene.external_force * x).sum())))
 
     def accept(y, g):
-        return g - half_norm(y - x_hat) + half_norm(y - x) <= h0 + slack
+        return g - kinetic(y - x_hat) + kinetic(y - x) <= start_energy + slack
     return accept
 
 
