@@ -60,3 +60,12 @@ def per_element(value, name, m, width=None):
     if arr.shape == (width,) or arr.shape == (m, width):
         return np.broadcast_to(arr, (m, width)).copy()
     raise ValueError(f"{name}: expected shape ({width},) or ({m}, {width}), got {arr.shape}")
+
+
+def as_count(value, name):
+    """value as an int >= 0; a float (even an integral one) or a bool is a TypeError."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name}: expected a whole number, got {value!r}")
+    if value < 0:
+        raise ValueError(f"{name}: must be >= 0, got {value}")
+    return int(value)

@@ -8,12 +8,13 @@
   python -m anisofem bench --json bench_anisofem.json
 """
 import argparse
+import os
 import sys
 
 import numpy as np
 
 from . import bench, ladder, meshgen, methods
-from .io import read_mesh, write_mesh
+from .io import check_output_path, read_mesh, write_mesh
 from .material import Material
 from .metrics import end_vertices, tip_displacement
 from .scene import Scene
@@ -32,7 +33,8 @@ def _fixed(mesh, spec):
         axis, side = spec.split("-")
         return end_vertices(mesh, "xyz".index(axis), side)
     except ValueError:
-        raise SystemExit(f"--fixed: expected AXIS-SIDE like x-min or z-max, got {spec!r}")
+        raise ValueError(f"--fixed: expected AXIS-SIDE like x-min or z-max, got {spec!r}") \
+            from None
 
 
 def _shape_arguments(p):
@@ -57,8 +59,11 @@ def _scene_arguments(s):
 
 
 def _scene(args, mesh):
-    material = Material(args.young, args.poisson, args.density,
-                        np.asarray(args.fiber) / np.linalg.norm(args.fiber), args.kappa)
+    fiber = np.asarray(args.fiber)
+    if not np.linalg.norm(fiber) > 0:
+        raise ValueError(f"--fiber: a direction needs a nonzero vector, got {args.fiber}")
+    material = Material(args.young, args.poisson, args.density, fiber / np.linalg.norm(fiber),
+                        args.kappa)
     return Scene(mesh, material, fixed=_fixed(mesh, args.fixed), gravity=args.gravity)
 
 
@@ -104,48 +109,55 @@ def _parser():
 
 
 def main(argv=None):
+    """Run a command; bad input ends it with a one-line error and exit status 2, before any
+    long work starts."""
     parser = _parser()
     args = parser.parse_args(argv)
-    if args.command == "mesh":
-        mesh = _SHAPES[args.shape](args)
-        write_mesh(args.output, mesh)
-        print(f"{mesh} -> {args.output}")
-    elif args.command == "solve":
-        mesh = read_mesh(args.mesh)
-        scene = _scene(args, mesh)
-        how = {"method": args.method, "rtol": args.rtol, "iterations": args.iterations}
-        if args.steps:
-            roll = simulate(scene, args.steps, args.dt, **how)
-            x, ok = roll.positions[-1], roll.completed
-            budget = (f" (a budget of {args.iterations} iterations per step)"
-                      if args.iterations else "")
-            print(f"{len(roll.positions) - 1} steps, converged: {roll.converged}{budget}")
-        else:
-            res = solve(scene, **how)
-            x, ok = res.x, res.converged
-            print(f"{res.iterations} Newton iterations, converged: {ok}, relative residual "
-                  f"{res.residuals[-1]:.2e}")
-        print("tip displacement (m):", np.array2string(tip_displacement(mesh, x),
-                                                       precision=6))
-        write_mesh(args.output, mesh, x, scene)
-        print(f"-> {args.output}")
-        return 0 if ok else 1
-    elif args.command == "trade":
-        return _trade(args, parser)
-    else:
-        bench.run(tuple(args.sizes), args.json)
+    try:
+        return _COMMANDS[args.command](args)
+    except (ValueError, TypeError, FileNotFoundError) as err:
+        parser.exit(2, f"{parser.prog} {args.command}: error: {err}\n")
+
+
+def _mesh(args):
+    check_output_path(args.output)
+    mesh = _SHAPES[args.shape](args)
+    write_mesh(args.output, mesh)
+    print(f"{mesh} -> {args.output}")
     return 0
 
 
-def _trade(args, parser):
+def _solve(args):
+    check_output_path(args.output)
+    mesh = read_mesh(args.mesh)
+    scene = _scene(args, mesh)
+    how = {"method": args.method, "rtol": args.rtol, "iterations": args.iterations}
+    methods.make(**how)  # bad options fail here, before the solve
+    if args.steps:
+        roll = simulate(scene, args.steps, args.dt, **how)
+        x, ok = roll.positions[-1], roll.completed
+        budget = (f" (a budget of {args.iterations} iterations per step)"
+                  if args.iterations else "")
+        print(f"{len(roll.positions) - 1} steps, converged: {roll.converged}{budget}")
+    else:
+        res = solve(scene, **how)
+        x, ok = res.x, res.converged
+        print(f"{res.iterations} Newton iterations, converged: {ok}, relative residual "
+              f"{res.residuals[-1]:.2e}")
+    print("tip displacement (m):", np.array2string(tip_displacement(mesh, x), precision=6))
+    write_mesh(args.output, mesh, x, scene)
+    print(f"-> {args.output}")
+    return 0 if ok else 1
+
+
+def _trade(args):
     """python -m anisofem trade: print the table, write the JSON and the plot."""
+    for path in (args.json, args.png):
+        if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
+            raise FileNotFoundError(f"the folder of {path!r} does not exist")
     mesh = _SHAPES[args.scene](args) if args.scene in _SHAPES else read_mesh(args.scene)
-    try:
-        result = ladder.trade(_scene(args, mesh), args.steps, args.dt,
-                             tolerance=args.tolerance, surrogates=not args.no_surrogates,
-                             name=args.scene)
-    except (ValueError, TypeError) as err:
-        parser.error(str(err))
+    result = ladder.trade(_scene(args, mesh), args.steps, args.dt, tolerance=args.tolerance,
+                          surrogates=not args.no_surrogates, name=args.scene)
     print(ladder.trade_table(result))
     if args.json:
         ladder.write_json(result, args.json)
@@ -154,6 +166,14 @@ def _trade(args, parser):
         ladder.plot(result, args.png)
         print(f"-> {args.png}")
     return 0
+
+
+def _bench(args):
+    bench.run(tuple(args.sizes), args.json)
+    return 0
+
+
+_COMMANDS = {"mesh": _mesh, "solve": _solve, "trade": _trade, "bench": _bench}
 
 
 if __name__ == "__main__":

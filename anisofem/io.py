@@ -21,7 +21,14 @@ def read_mesh(path, **mesh_options):
     (surface triangles, lines) are common in .msh files, and the vertices only they use are
     dropped unless unreferenced is given.
     """
-    m = meshio.read(os.fspath(path))
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"path: no such mesh file {path!r}")
+    try:
+        m = meshio.read(path)
+    except Exception as err:  # meshio raises ReadError, ValueError, IndexError... on bad files
+        raise ValueError(f"path: meshio cannot read {path!r}: {err or type(err).__name__}") \
+            from None
     tets = [c.data for c in m.cells if c.type == "tetra"]
     if not tets:
         raise ValueError(f"path: {path} holds no tetra cells (found "
@@ -30,12 +37,25 @@ def read_mesh(path, **mesh_options):
     return TetMesh(m.points[:, :3], np.concatenate(tets).astype(np.int64), **mesh_options)
 
 
+def check_output_path(path):
+    """path (a str) if a mesh can be written there: a format meshio knows from the extension,
+    in a folder that exists; else FileNotFoundError / ValueError naming it."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(f"path: the folder of {path!r} does not exist")
+    if not any(path.lower().endswith(ext) for ext in meshio.extension_to_filetypes):
+        raise ValueError(f"path: {path!r} has no mesh format meshio writes (use .vtu, .xdmf, "
+                         f".msh, ...)")
+    return path
+
+
 def write_mesh(path, mesh, x=None, scene=None):
     """Write the rest mesh with the state x (n, 3) as the point field "displacement" (x - X; in
     ParaView, "Warp By Vector" shows the deformed shape); the format follows the extension.
     With a scene, the energy and fiber fields of the module docstring are added. The file is
     written under a temporary name in the same folder, then renamed (atomic)."""
-    path = os.fspath(path)
+    path = check_output_path(path)
     x = mesh.vertices if x is None else as_float_array(x, "x", shape=mesh.vertices.shape)
     points = {"displacement": x - mesh.vertices}
     cells = {"volume_change": [volume_change(mesh, x)]}

@@ -20,17 +20,19 @@ class TetMesh:
     vertices : (n, 3) float array, rest positions in m.
     tets : (m, 4) integer array of vertex indices. Each tet must be positively oriented:
         det([X1-X0, X2-X0, X3-X0]) > 0.
-    fix_orientation : if True, negatively oriented tets are reordered instead of rejected.
+    fix_orientation : True (default): negatively oriented tets are reordered (two vertices
+        swapped: the same element, labelled the other way round, as export/runtime.py reads
+        it); False: they are an error.
     unreferenced : what to do with vertices that no tet uses: "warn" (default: keep them; a
         Scene holds them in place, they carry no mass), "drop" (remove them and renumber;
         ``kept_vertices`` maps new to old indices) or "error".
 
     Raises ValueError / TypeError naming the problem: wrong shapes or dtypes, NaN or inf,
-    indices out of range, repeated vertices in a tet, duplicate tets, zero-volume or
-    inverted tets.
+    indices out of range, repeated vertices in a tet, duplicate tets, zero-volume tets, and
+    inverted ones with fix_orientation=False.
     """
 
-    def __init__(self, vertices, tets, *, fix_orientation=False, unreferenced="warn"):
+    def __init__(self, vertices, tets, *, fix_orientation=True, unreferenced="warn"):
         vertices = as_float_array(vertices, "vertices", shape=(None, 3))
         tets = as_index_array(tets, "tets", shape=(None, 4))
         n = vertices.shape[0]

@@ -89,6 +89,8 @@ class Scene:
         mask = np.zeros((n, 3), bool)
         if fixed is not None:
             arr = np.asarray(fixed)
+            if arr.size == 0:  # [] or (): no vertex held (numpy reads [] as float64)
+                arr = np.zeros(0, np.int64)
             if arr.dtype == bool:
                 if arr.shape == (n,):
                     mask[arr] = True

@@ -4,7 +4,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import methods
-from ._validate import as_scalar
+from ._validate import as_count, as_scalar
 from .material import Material
 from .mesh import TetMesh
 from .newton import NewtonResult, minimize
@@ -153,9 +153,7 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, method="new
     completed=False, at the first step whose solve fails (a step that spends a fixed iteration
     budget does not fail); what came before is kept.
     """
-    steps = int(steps)
-    if steps < 0:
-        raise ValueError(f"steps: must be >= 0, got {steps}")
+    steps = as_count(steps, "steps")
     x = scene.with_fixed(scene.initial_positions() if x0 is None
                     else check_positions(scene, x0, "x0"))
     v = np.zeros_like(x) if v0 is None else check_positions(scene, v0, "v0")

@@ -4,6 +4,7 @@ import sys
 
 import meshio
 import numpy as np
+import pytest
 
 
 def run(*args, cwd):
@@ -28,3 +29,33 @@ def test_bad_fixed_spec_is_a_clear_error(tmp_path):
     run("mesh", "box", "--cells", "2", "2", "2", "-o", "b.vtu", cwd=tmp_path)
     r = run("solve", "b.vtu", "--fixed", "left", "-o", "o.vtu", cwd=tmp_path)
     assert r.returncode != 0 and "--fixed: expected AXIS-SIDE" in r.stderr
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    """A folder with beam.msh (a 40-tet box) and an empty empty.msh."""
+    path = tmp_path_factory.mktemp("cli")
+    assert run("mesh", "box", "--cells", "4", "1", "2", "-o", "beam.msh", cwd=path).returncode == 0
+    (path / "empty.msh").write_text("")
+    return path
+
+
+@pytest.mark.parametrize("args, says", [
+    (("solve", "missing.msh", "-o", "o.vtu"), "path: no such mesh file 'missing.msh'"),
+    (("solve", "beam.msh", "--poisson", "0.5", "-o", "o.vtu"), "poisson: Poisson's ratio"),
+    (("mesh", "box", "--cells", "10", "2", "-o", "b.msh"), "cells: expected 3"),
+    (("solve", "beam.msh", "-o", "out.txt"), "path: 'out.txt' has no mesh format"),
+    (("solve", "beam.msh", "-o", "nowhere/o.vtu"), "the folder of 'nowhere/o.vtu' does not"),
+    (("solve", "beam.msh", "--fiber", "0", "0", "0", "--kappa", "1e5", "-o", "o.vtu"),
+     "--fiber: a direction needs a nonzero vector"),
+    (("solve", "empty.msh", "-o", "o.vtu"), "path: meshio cannot read 'empty.msh'"),
+    (("solve", "beam.msh", "--method", "lbfgs", "--iterations", "0", "-o", "o.vtu"),
+     "iterations: a budget of at least 1"),
+    (("trade", "box", "--steps", "10", "--json", "nowhere/t.json"),
+     "the folder of 'nowhere/t.json' does not exist"),
+])
+def test_bad_input_is_one_line_before_any_work(folder, args, says):
+    r = run(*args, cwd=folder)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert says in r.stderr and "Traceback" not in r.stderr
+    assert r.stdout.strip() == ""  # nothing ran

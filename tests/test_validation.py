@@ -16,7 +16,6 @@ def test_valid_mesh_is_accepted():
 
 
 @pytest.mark.parametrize("vertices,tets,error,match", [
-    (X, [[0, 2, 1, 3]], ValueError, "inverted"),
     (np.vstack([X[:3], [0.5, 0.5, 0]]), [[0, 1, 2, 3]], ValueError, "zero rest volume"),
     (X, [[0, 1, 1, 3]], ValueError, "repeat a vertex"),
     (X, [[0, 1, 2, 7]], ValueError, "out of range"),
@@ -36,8 +35,10 @@ def test_bad_meshes(vertices, tets, error, match):
         af.TetMesh(vertices, tets)
 
 
-def test_inverted_tets_can_be_reoriented():
-    mesh = af.TetMesh(X, [[0, 2, 1, 3]], fix_orientation=True, unreferenced="drop")
+def test_inverted_tets_are_reoriented_unless_refused():
+    with pytest.raises(ValueError, match="inverted"):
+        af.TetMesh(X, [[0, 2, 1, 3]], fix_orientation=False, unreferenced="drop")
+    mesh = af.TetMesh(X, [[0, 2, 1, 3]], unreferenced="drop")
     assert mesh.rest_volumes[0] > 0
 
 
@@ -164,3 +165,21 @@ def test_non_convergence_is_never_success(mesh):
         roll = af.simulate(af.default_scene(mesh), steps=3, max_iter=0)
     assert not result.converged and np.isfinite(result.x).all()
     assert not roll.converged and roll.positions.shape[0] == 1
+
+
+def test_library_boundaries_name_the_users_input(tmp_path):
+    mesh = af.box_beam(cells=(2, 1, 1))
+    assert not af.Scene(mesh, fixed=[]).fixed_mask[mesh.vertices[:, 0] < 1e-9].any()
+    with pytest.raises(TypeError, match="steps: expected a whole number, got 2.5"):
+        af.simulate(af.default_scene(mesh), steps=2.5)
+    with pytest.raises(TypeError, match="bogus: not an option of method 'newton'"):
+        af.solve(mesh, bogus=3)
+    with pytest.raises(FileNotFoundError, match="the folder of .*nowhere.* does not exist"):
+        af.write_mesh(tmp_path / "nowhere" / "o.vtu", mesh)
+    with pytest.raises(ValueError, match="has no mesh format"):
+        af.write_mesh(tmp_path / "o.txt", mesh)
+    (tmp_path / "empty.msh").write_text("")
+    with pytest.raises(ValueError, match="path: meshio cannot read"):
+        af.read_mesh(tmp_path / "empty.msh")
+    with pytest.raises(FileNotFoundError, match="path: no such mesh file"):
+        af.read_mesh(tmp_path / "missing.msh")
