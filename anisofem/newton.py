@@ -1,8 +1,9 @@
 """The minimization loop every method shares (see anisofem.methods for the methods).
 
 Unknowns are the free vertex components; fixed ones stay at their prescribed positions.
-Converged means |dG/dx|_free <= max(rtol * scale, atol), with scale = max(|dG/dx(x0)|_free,
-|f_ext|_free) in N. The default atol is the round-off level of the gradient,
+Converged means |dG/dx|_free <= max(rtol * scale, atol), with scale the problem's force scale
+in N (Potential.force_scale: external, elastic and inertial forces at the problem's start, not
+at the solve's first iterate, so a poor first guess cannot loosen the test). The default atol is the round-off level of the gradient,
 ROUNDOFF * E_max * l^2 * sqrt(unknowns) (l: mean rest edge length), below which the gradient
 cannot be resolved; pass atol=0 to insist on rtol alone. Each iteration line-searches the
 method's directions in turn (backtracking to the Armijo condition on G) until one makes
@@ -103,7 +104,7 @@ def _iterate(potential, x0, method, accept):
     x = np.array(x0, dtype=float)
     energy, grad = potential.energy_gradient(x)
     g = grad.ravel()[free]
-    scale = max(_norm(g), _norm(scene.external_force.ravel()[free]))
+    scale = potential.force_scale()
     atol = method.atol
     if atol is None:
         atol = ROUNDOFF * scene.force_unit * math.sqrt(free.size)

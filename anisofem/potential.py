@@ -17,9 +17,13 @@ _NO_MASS = np.empty(0)
 
 
 class Potential:
-    """G of a scene, statics (x_hat = dt = None) or one backward-Euler step."""
+    """G of a scene, statics (x_hat = dt = None) or one backward-Euler step.
 
-    def __init__(self, scene, x_hat=None, dt=None):
+    x_start (n, 3), m: the state the problem starts from, which sets its force scale
+    (force_scale): a step's x_n (default x_hat), statics' the scene's initial positions.
+    """
+
+    def __init__(self, scene, x_hat=None, dt=None, x_start=None):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
         if (x_hat is None) != (dt is None):
@@ -35,6 +39,21 @@ class Potential:
             self.x_hat = check_positions(scene, x_hat, "x_hat")
             self.mass_over_dt2 = scene.masses / self.dt ** 2
             self.mass_per_dof = np.repeat(self.mass_over_dt2, 3)
+        if x_start is None:
+            x_start = self.x_hat if self.dynamic else scene.initial_positions()
+        self.x_start = check_positions(scene, x_start, "x_start")
+
+    def force_scale(self):
+        """The size of this problem's forces in N, whatever the start of a solve: the norms
+        over the free components of the external force, the elastic force at x_start and, in
+        a step, the inertial force M (x_start - x_hat) / dt^2 (= -M v_n / dt), summed. Newton's
+        tolerance is relative to it."""
+        free = self.scene.free_dofs
+        _, _, elastic = kernels.assemble(self.x_start, self.scene.elements, want_grad=True)
+        parts = [self.scene.external_force, elastic]
+        if self.dynamic:
+            parts.append(self.mass_over_dt2[:, None] * (self.x_start - self.x_hat))
+        return float(sum(np.linalg.norm(p.ravel()[free]) for p in parts))
 
     def _elastic(self, x, want_grad=False, layout=None, project=False):
         """Elastic part: (e_iso (m,), e_fib (m,), gradient (n, 3) or None, Hessian data or

@@ -78,7 +78,7 @@ def step(scene, x, v, dt, a_guess=None, method="newton", warn=True, **options):
     x_hat = x + dt * v
     start = x_hat if a_guess is None else x_hat + dt ** 2 * check_positions(scene, a_guess,
                                                                            "a_guess")
-    potential = Potential(scene, x_hat, dt)
+    potential = Potential(scene, x_hat, dt, x_start=x)
     method = methods.make(method, **options)
     accept = _no_energy_gain(potential, x, v) if method.budget else None
     result = minimize(potential, scene.with_fixed(start), method, warn=warn, accept=accept)

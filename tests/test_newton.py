@@ -1,5 +1,7 @@
 """Newton: quadratic convergence, the adaptive Hessian choice, linear solvers, failures."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -118,3 +120,32 @@ def test_step_from_equilibrium_stays_put(beam):
     res = af.step(scene, static, np.zeros_like(static), 0.02)
     assert res.converged and res.newton.iterations <= 1
     assert np.abs(res.x - static).max() < 1e-12
+
+
+def test_converged_means_small_against_a_scale_the_start_cannot_change(beam):
+    """A far-off first guess or a violent step must not loosen the test: whenever a result says
+    converged, its free-gradient norm is within rtol of the problem's own force scale (the
+    load, the elastic force at the start and, in a step, the inertial force)."""
+    scene = af.Scene(beam, af.Material.paper((1, 0, 0), 1e5),
+                     fixed=af.metrics.end_vertices(beam, 0, "min"), gravity=(0, 0, -9.81))
+    free = scene.free_dofs
+    load = np.linalg.norm(scene.external_force.ravel()[free])
+    rng = np.random.default_rng(1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", af.ConvergenceWarning)
+        for size in (1e-3, 3e-3):
+            x0 = beam.vertices + size * rng.standard_normal(beam.vertices.shape)
+            res = af.solve(scene, x0=x0)
+            g = af.gradient(scene, res.x).ravel()[free]
+            assert not res.converged or np.linalg.norm(g) <= 1e-8 * load * 1.0001
+        x = scene.initial_positions()
+        v = np.zeros_like(x)
+        v[af.metrics.end_vertices(beam, 0, "max"), 2] = -5.0
+        for dt in (0.02, 0.2, 1.0):
+            res = af.step(scene, x, v, dt)
+            pot = Potential(scene, x + dt * v, dt, x_start=x)
+            g = af.gradient(scene, res.x, x + dt * v, dt).ravel()[free]
+            print(dt, res.newton)
+            assert not res.converged or np.linalg.norm(g) <= 1e-8 * pot.force_scale() * 1.0001
+            assert pot.force_scale() >= load  # the start's violence raises the scale, never
+            # the first iterate's
