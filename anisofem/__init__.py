@@ -5,13 +5,13 @@ from .ladder import trade, trade_table
 from .material import Material
 from .mesh import TetMesh
 from .meshgen import box_beam, cylinder_beam, hexes_to_tets, t_shape, y_shape
-from .newton import ConvergenceWarning, NewtonResult
+from .newton import ConvergenceWarning, InversionWarning, NewtonResult
 from .potential import element_energy, energy, gradient, hessian
 from .scene import Scene
 from .solve import Rollout, StepResult, Stepper, default_scene, simulate, solve, step
 
 __all__ = ["methods", "metrics", "read_mesh", "write_mesh", "trade", "trade_table", "Material",
            "TetMesh", "box_beam", "cylinder_beam", "hexes_to_tets", "t_shape", "y_shape",
-           "ConvergenceWarning", "NewtonResult", "element_energy", "energy", "gradient",
-           "hessian", "Scene", "Rollout", "StepResult", "Stepper", "default_scene", "simulate",
-           "solve", "step"]
+           "ConvergenceWarning", "InversionWarning", "NewtonResult", "element_energy", "energy",
+           "gradient", "hessian", "Scene", "Rollout", "StepResult", "Stepper", "default_scene",
+           "simulate", "solve", "step"]

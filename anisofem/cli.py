@@ -15,6 +15,7 @@ import numpy as np
 
 from . import bench, ladder, meshgen, methods
 from .io import check_output_path, read_mesh, write_mesh
+from .inversion import inversion
 from .material import Material
 from .metrics import end_vertices, tip_displacement
 from .scene import Scene
@@ -145,6 +146,10 @@ def _solve(args):
         print(f"{res.iterations} Newton iterations, converged: {ok}, relative residual "
               f"{res.residuals[-1]:.2e}")
     print("tip displacement (m):", np.array2string(tip_displacement(mesh, x), precision=6))
+    inv = inversion(mesh, x)
+    if not inv.physical:
+        print(f"not physical: {inv.inverted} of {mesh.n_tets} elements turned inside out "
+              f"(smallest det F {inv.min_volume_ratio:.3g}; the 'inverted' field marks them)")
     write_mesh(args.output, mesh, x, scene)
     print(f"-> {args.output}")
     return 0 if ok else 1

@@ -1,7 +1,8 @@
 """Reading meshes and writing results through meshio (.msh, .vtu, .xdmf and the rest of
 meshio's formats). Results carry fields a person can open in ParaView: point data
 "displacement" (m), cell data "fiber_direction", "fiber_stiffness" (Pa), "energy" (J per tet),
-"energy_density" (J/m^3) and "volume_change" (det F - 1)."""
+"energy_density" (J/m^3), "volume_change" (det F - 1) and "inverted" (1 where det F <= 0: the
+element is turned inside out)."""
 import os
 
 import meshio
@@ -58,7 +59,8 @@ def write_mesh(path, mesh, x=None, scene=None):
     path = check_output_path(path)
     x = mesh.vertices if x is None else as_float_array(x, "x", shape=mesh.vertices.shape)
     points = {"displacement": x - mesh.vertices}
-    cells = {"volume_change": [volume_change(mesh, x)]}
+    change = volume_change(mesh, x)
+    cells = {"volume_change": [change], "inverted": [(change <= -1.0).astype(np.int32)]}
     if scene is not None:
         energy = element_energy(scene, x)
         cells["energy"] = [energy]

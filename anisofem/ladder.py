@@ -21,6 +21,7 @@ the scene out from rest in the same process; what is compared:
   static potential|: backward Euler never gains energy (<= 0), a rung that does is unstable;
 - stable: every step was taken (none failed), every state finite, energy_drift <= 0.01;
 - min_volume_ratio: the smallest det(F) over tets and time (<= 0: an inverted element);
+  inverted: the most tets turned inside out (det F <= 0) at any recorded state;
   max_volume_change: the largest |det(F) - 1|.
 """
 import json
@@ -239,6 +240,7 @@ def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt
     drift = (max(energies) - energies[0]) / static_energy
     change = [volume_change(scene.mesh, x) for x, _ in states.values()]
     ratio = min(float(c.min()) for c in change) + 1.0
+    inverted = max(int((c <= -1.0).sum()) for c in change)
     secs = run["seconds"]
     timed = secs[1:] if len(secs) > 1 else secs
     per_step = 1e3 * float(np.mean(timed)) / rung.dt_factor
@@ -246,7 +248,7 @@ def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt
            "ms_per_step": per_step,
            "ms_median": 1e3 * float(np.median(timed)) / rung.dt_factor,
            "errors": errors, "max_error": max(errors), "field_errors": field_errors,
-           "energy_drift": drift, "min_volume_ratio": ratio,
+           "energy_drift": drift, "min_volume_ratio": ratio, "inverted": inverted,
            "max_volume_change": max(float(np.abs(c).max()) for c in change),
            "stable": bool(run["completed"] and drift <= ENERGY_GAIN_MAX),
            "steps_taken": len(secs)}

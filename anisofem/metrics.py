@@ -5,6 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
+from .inversion import DEGENERATE_J, Inversion, inversion, volume_change  # noqa: F401
 from .material import Material
 from .meshgen import box_beam
 from .potential import energy, gradient
@@ -28,14 +29,6 @@ def tip_displacement(mesh, x, axis=0):
     x = np.asarray(x, dtype=float)
     tip = end_vertices(mesh, axis, "max")
     return (x[tip] - mesh.vertices[tip]).mean(axis=0)
-
-
-def volume_change(mesh, x):
-    """(m,) relative volume change det(F) - 1 of each tet (0: volume kept)."""
-    x = np.asarray(x, dtype=float)
-    d = x[mesh.tets[:, 1:]] - x[mesh.tets[:, :1]]
-    return np.einsum("ij,ij->i", d[:, 0], np.cross(d[:, 1], d[:, 2])) / (
-        6.0 * mesh.rest_volumes) - 1.0
 
 
 @dataclass

@@ -3,9 +3,10 @@
 Unknowns are the free vertex components; fixed ones stay at their prescribed positions.
 Converged means |dG/dx|_free <= max(rtol * scale, atol), with scale the problem's force scale
 in N (Potential.force_scale: external, elastic and inertial forces at the problem's start, not
-at the solve's first iterate, so a poor first guess cannot loosen the test). The default atol is the round-off level of the gradient,
-ROUNDOFF * E_max * l^2 * sqrt(unknowns) (l: mean rest edge length), below which the gradient
-cannot be resolved; pass atol=0 to insist on rtol alone. Each iteration line-searches the
+at the solve's first iterate, so a poor first guess cannot loosen the test). The default
+atol is the round-off level of the gradient, ROUNDOFF * E_max * l^2 * sqrt(unknowns) (l: mean
+rest edge length), below which the gradient cannot be resolved; pass atol=0 to insist on rtol
+alone. Each iteration line-searches the
 method's directions in turn (backtracking to the Armijo condition on G) until one makes
 progress. The result is never NaN: a failure returns the last iterate, converged=False,
 failed=True and a message saying why.
@@ -26,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import methods
+from .inversion import Inversion, inversion
 
 ROUNDOFF = 1e-14
 ARMIJO = 1e-4
@@ -34,6 +36,10 @@ MIN_STEP = 1e-10
 
 class ConvergenceWarning(RuntimeWarning):
     """A solve stopped without reaching its tolerance (and not because of a fixed budget)."""
+
+
+class InversionWarning(RuntimeWarning):
+    """A result has elements turned inside out (det F <= 0): not a physical state."""
 
 
 #: NewtonResult.message of a solve that spent its fixed iteration budget.
@@ -49,6 +55,8 @@ class NewtonResult:
     start). energy: G(x), J. projected: directions from the PSD-projected Hessian.
     factorizations: sparse or dense factorizations. linear_iterations: conjugate-gradient
     iterations. method: the method's name. message: why it stopped. seconds: wall time.
+    inversion: the anisofem.inversion.Inversion of x (inverted and degenerate elements, the
+    smallest det F); converged speaks of the equations, physical of the state.
     """
     x: np.ndarray
     converged: bool
@@ -61,6 +69,12 @@ class NewtonResult:
     method: str = "newton"
     message: str = ""
     seconds: float = 0.0
+    inversion: Inversion = None
+
+    @property
+    def physical(self):
+        """No element is turned inside out."""
+        return self.inversion is None or self.inversion.physical
 
     @property
     def failed(self):
@@ -71,7 +85,8 @@ class NewtonResult:
         return (f"NewtonResult(method={self.method!r}, converged={self.converged}, "
                 f"iterations={self.iterations}, residual={self.residuals[-1]:.3g}, "
                 f"projected={self.projected}, factorizations={self.factorizations}, "
-                f"message={self.message!r})")
+                f"message={self.message!r}"
+                + ("" if self.physical else f", inverted={self.inversion.inverted}") + ")")
 
 
 def minimize(potential, x0, method="newton", *, warn=True, accept=None, **options):
@@ -90,10 +105,16 @@ def minimize(potential, x0, method="newton", *, warn=True, accept=None, **option
         x, converged, it, res, energy, message = _iterate(potential, x0, method, accept)
     result = NewtonResult(x=x, converged=converged, iterations=it, residuals=res, energy=energy,
                           method=method.name, message=message,
-                          seconds=time.perf_counter() - t0, **method.counts)
+                          seconds=time.perf_counter() - t0,
+                          inversion=inversion(potential.scene.mesh, x), **method.counts)
     if warn and result.failed:
         warnings.warn(f"{method.name} did not converge: {message} after {it} iterations, "
                       f"relative residual {res[-1]:.3g}", ConvergenceWarning, stacklevel=3)
+    if warn and not result.physical:
+        inv = result.inversion
+        warnings.warn(f"{inv.inverted} of {potential.scene.mesh.n_tets} elements are turned "
+                      f"inside out (det F <= 0, smallest {inv.min_volume_ratio:.3g}): the state "
+                      f"is not physical", InversionWarning, stacklevel=3)
     return result
 
 

@@ -110,7 +110,8 @@ class Rollout:
     """positions, velocities: (k + 1, n, 3) states from the start through the last step that
     did not fail; steps: the StepResults. completed: all requested steps were taken, none
     failed. converged: completed, and every step met its tolerance (False for a method with
-    a fixed iteration budget that stopped short of it)."""
+    a fixed iteration budget that stopped short of it). physical: no step ended with an
+    element turned inside out; inverted: the most inverted elements of any step."""
     positions: np.ndarray
     velocities: np.ndarray
     steps: list
@@ -119,6 +120,14 @@ class Rollout:
     @property
     def converged(self):
         return self.completed and all(s.converged for s in self.steps)
+
+    @property
+    def inverted(self):
+        return max((s.newton.inversion.inverted for s in self.steps), default=0)
+
+    @property
+    def physical(self):
+        return self.inverted == 0
 
 
 class Stepper:

@@ -150,8 +150,13 @@ STATE = ("positions", "velocities", "external_force")
 
 def tet_volumes(vertices, tets):
     """(m,) float64 unsigned tet volumes in m^3."""
+    return np.abs(_signed_volumes(vertices, tets))
+
+
+def _signed_volumes(vertices, tets):
+    """(m,) float64 signed tet volumes in m^3 (negative for a tet ordered the other way)."""
     a, b, c, d = (vertices[tets[:, i]] for i in range(4))
-    return np.abs(np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a)) / 6.0
+    return np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a) / 6.0
 
 
 def lumped_masses(vertices, tets, density):
@@ -224,6 +229,8 @@ class OnnxSimulator:
         direction, stiffness = _fibers(fiber_direction, fiber_stiffness, m)
         self.fixed = _fixed(fixed, n)
         self.rest_positions = vertices
+        self.tets = tets
+        self._rest_signed = _signed_volumes(vertices, tets)
         self.masses = lumped_masses(vertices, tets, density)
         if session_options is None:
             session_options = onnxruntime.SessionOptions()
@@ -271,6 +278,12 @@ class OnnxSimulator:
         if not (np.isfinite(x_next).all() and np.isfinite(v_next).all()):
             raise FloatingPointError("step: the model predicted a non-finite state")
         return x_next, v_next
+
+    def inversion(self, x):
+        """(tets turned inside out, smallest volume ratio det F) at positions x (n, 3) m: a state
+        with inverted tets is not physical. Costs one pass over the tets (numpy)."""
+        ratio = _signed_volumes(_real(x, "x", (self.n_vertices, 3)), self.tets) / self._rest_signed
+        return int((ratio <= 0).sum()), float(ratio.min())
 
     def rollout(self, steps, external_force, x0=None, v0=None):
         """Positions of every step, (steps + 1, n, 3) m, from x0 (default rest) and v0

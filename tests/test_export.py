@@ -334,3 +334,14 @@ def test_onnx_example_draws_the_cantilever(tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
     assert "240 tets" in done.stdout
     assert (tmp_path / "out" / "onnx_cantilever.png").stat().st_size > 10_000
+
+
+def test_the_runtime_tells_inverted_tets_from_rest_and_flipped_ones(exported):
+    mesh = box((3, 2, 1))
+    scene = scene_of(mesh, fixed_for(mesh, "x0"))
+    sim = simulator(exported["directional"][1], scene)
+    assert sim.inversion(mesh.vertices) == (0, pytest.approx(1.0))
+    x = mesh.vertices.copy()
+    x[:, 2] *= -1.0  # mirror: every tet turned inside out
+    count, smallest = sim.inversion(x)
+    assert count == mesh.n_tets and smallest == pytest.approx(-1.0)

@@ -82,6 +82,7 @@ def buckling_scene():
     return scene, x0
 
 
+@pytest.mark.filterwarnings("ignore::anisofem.InversionWarning")  # the true-Hessian-only run
 @pytest.mark.parametrize("solver", ["dense", "banded", "superlu", CHOLMOD])
 def test_buckling_needs_the_projected_fallback(solver):
     scene, x0 = buckling_scene()
@@ -132,7 +133,7 @@ def test_converged_means_small_against_a_scale_the_start_cannot_change(beam):
     load = np.linalg.norm(scene.external_force.ravel()[free])
     rng = np.random.default_rng(1)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", af.ConvergenceWarning)
+        warnings.simplefilter("ignore")  # far starts may not converge, or end inverted
         for size in (1e-3, 3e-3):
             x0 = beam.vertices + size * rng.standard_normal(beam.vertices.shape)
             res = af.solve(scene, x0=x0)

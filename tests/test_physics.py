@@ -1,5 +1,8 @@
 """Physics against closed forms and limits: uniaxial bars, symmetric cantilevers, mesh
 refinement, dynamics settling to statics."""
+import warnings
+
+import meshio
 import numpy as np
 import pytest
 from conftest import mirror_partner
@@ -116,3 +119,29 @@ def test_volume_change_and_imbalanced_force_metrics(beam):
     # at equilibrium under dead load: elastic energy ~ half the external work (nonlinear: close)
     assert split["kinetic"] == 0.0 and split["fiber"] == 0.0
     assert 0.4 < split["isotropic"] / -split["external"] < 0.6
+
+
+@pytest.mark.parametrize("g, inverted", [(9.81, False), (98.1, True), (981.0, True)])
+def test_turned_inside_out_is_reported_not_hidden(beam, tmp_path, g, inverted):
+    """The 200-tet cantilever (fibers along it, kappa = E) under 1, 10 and 100 g: StVK converges
+    to equilibria with inverted elements under the larger loads; the result, the warning, the
+    rollout and the written file say so."""
+    scene = af.Scene(beam, af.Material(1e5, 0.48, 1000.0, (1, 0, 0), 1e5),
+                     fixed=af.metrics.end_vertices(beam, 0, "min"), gravity=(0, 0, -g))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = af.solve(scene)
+    warned = [w for w in caught if issubclass(w.category, af.InversionWarning)]
+    J = af.metrics.volume_change(beam, res.x) + 1.0
+    assert res.inversion.inverted == int((J <= 0).sum())
+    assert res.inversion.min_volume_ratio == pytest.approx(J.min())
+    assert res.physical == (not inverted) and bool(warned) == inverted
+    if inverted:
+        assert "not physical" in str(warned[0].message) and res.inversion.inverted >= 10
+        af.write_mesh(tmp_path / "bent.vtu", beam, res.x, scene)
+        cells = meshio.read(tmp_path / "bent.vtu").cell_data["inverted"][0]
+        assert int(cells.sum()) == res.inversion.inverted
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        roll = af.simulate(scene, 3, x0=res.x)
+    assert roll.physical == (not inverted)
