@@ -10,9 +10,13 @@ import numpy as np
 def volume_change(mesh, x):
     """(m,) relative volume change det(F) - 1 of each tet (0: volume kept)."""
     x = np.asarray(x, dtype=float)
-    d = x[mesh.tets[:, 1:]] - x[mesh.tets[:, :1]]
-    return np.einsum("ij,ij->i", d[:, 0], np.cross(d[:, 1], d[:, 2])) / (
-        6.0 * mesh.rest_volumes) - 1.0
+    t = mesh.tets
+    a, b, c = (x[t[:, k]] - x[t[:, 0]] for k in (1, 2, 3))  # (m, 3) edge vectors
+    # the triple product a . (b x c) by components (np.cross costs 4x more on small meshes)
+    det = (a[:, 0] * (b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1])
+           + a[:, 1] * (b[:, 2] * c[:, 0] - b[:, 0] * c[:, 2])
+           + a[:, 2] * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0]))
+    return det / (6.0 * mesh.rest_volumes) - 1.0
 
 
 #: An element whose volume ratio det F is below this is degenerate (nearly flat).
