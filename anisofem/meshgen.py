@@ -162,23 +162,24 @@ def _masked_section(width, height, cell, inside):
     return section, quads.reshape(-1, 4)
 
 
-def t_shape(width=0.1, height=0.08, bar=0.02, stem=0.02, depth=0.02, cell=0.01):
-    """A T in the x-z plane extruded along y over [-depth/2, depth/2]: a top bar of the given
-    width and thickness `bar` on a stem of width `stem`, standing on z = 0. Cubic cells of
+def t_shape(width=0.1, height=0.08, flange=0.02, stem=0.02, depth=0.02, cell=0.01):
+    """A T in the x-z plane extruded along y over [-depth/2, depth/2]: a top flange of the given
+    width and thickness `flange` on a stem of width `stem`, standing on z = 0. Cubic cells of
     edge `cell` (m); keep width / cell and stem / cell even for x-mirror symmetry."""
     section, quads = _masked_section(
-        width, height, cell, lambda x, z: (z > height - bar) | (np.abs(x) < stem / 2))
+        width, height, cell, lambda x, z: (z > height - flange) | (np.abs(x) < stem / 2))
     ny = max(1, int(round(depth / cell)))
     pts, hexes = _extrude(section, quads, np.linspace(-depth / 2, depth / 2, ny + 1), axis=1)
     return hexes_to_tets(pts, hexes)
 
 
-def y_shape(width=0.1, height=0.08, bar=0.02, stem=0.02, depth=0.02, cell=0.01, angle=35.0):
+def y_shape(width=0.1, height=0.08, flange=0.02, stem=0.02, depth=0.02, cell=0.01,
+            angle=35.0):
     """A Y: the T of t_shape with both arms bent upward by `angle` degrees from the horizontal
     (vertices with |x| > stem/2 rise by (|x| - stem/2) tan(angle))."""
     if not 0 <= angle < 80:
         raise ValueError(f"angle: expected degrees in [0, 80), got {angle}")
-    mesh = t_shape(width, height, bar, stem, depth, cell)
+    mesh = t_shape(width, height, flange, stem, depth, cell)
     X = mesh.vertices.copy()
     X[:, 2] += np.maximum(np.abs(X[:, 0]) - stem / 2, 0.0) * np.tan(np.radians(angle))
     return TetMesh(X, mesh.tets)

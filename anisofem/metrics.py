@@ -1,5 +1,5 @@
 """Quantities the paper evaluates: tip displacement, volume change, imbalanced force, energy
-split, and the uniaxial stress-strain response of a bar (FEM and closed form)."""
+split, and the uniaxial stress-strain response of a rod (FEM and closed form)."""
 from dataclasses import dataclass
 
 import numpy as np
@@ -82,7 +82,7 @@ def _stiffness_voigt(young, poisson, d, kappa):
 
 def uniaxial_analytic(nominal_stress, young=1e5, poisson=0.48, fiber_direction=(1, 0, 0),
                       fiber_stiffness=0.0):
-    """Exact homogeneous answer for a bar pulled along x by a dead traction (Pa per rest area)
+    """Exact homogeneous answer for a rod pulled along x by a dead traction (Pa per rest area)
     with free lateral surfaces: S = diag(s, 0, 0). The model's stress is linear in the Green
     strain, so E = s D^-1 e_x e_x^T; F is the upper-triangular root of C = I + 2E (the frame
     in which x_i = F_ij X_j keeps the x-axis and the x-y plane), and P_xx = s F_xx.
@@ -118,7 +118,7 @@ def uniaxial_analytic(nominal_stress, young=1e5, poisson=0.48, fiber_direction=(
 
 
 def uniaxial_bar_scene(mesh, material, nominal_stress):
-    """Bar along x loaded by dead tractions +-t e_x on its end faces, held only by six pin
+    """Rod along x loaded by dead tractions +-t e_x on its end faces, held only by six pin
     components that the homogeneous answer leaves unloaded (a corner A fully; the corner at
     the far end along x in y and z; the corner across y from A in z)."""
     X = mesh.vertices
@@ -128,7 +128,7 @@ def uniaxial_bar_scene(mesh, material, nominal_stress):
     def corner(p):
         i = int(np.argmin(np.linalg.norm(X - p, axis=1)))
         if np.linalg.norm(X[i] - p) > tol:
-            raise ValueError("mesh: a box-shaped bar with vertices at its corners is needed")
+            raise ValueError("mesh: a box-shaped rod with vertices at its corners is needed")
         return i
 
     a = corner(lo)
@@ -148,10 +148,10 @@ def uniaxial_bar_scene(mesh, material, nominal_stress):
 
 
 def uniaxial_curve(material, nominal_stresses, mesh=None, **newton):
-    """FEM stress-strain curve of a bar pulled along x (paper Fig. 5).
+    """FEM stress-strain curve of a rod pulled along x (paper Fig. 5).
 
     material: a Material with scalar parameters. nominal_stresses: (k,) tractions in Pa.
-    mesh: a box-shaped bar along x (default box_beam((0.1, 0.02, 0.02), (10, 2, 2))).
+    mesh: a box-shaped rod along x (default box_beam((0.1, 0.02, 0.02), (10, 2, 2))).
     Returns (stretch (k,), nominal stress (k,)): the stretch is the mean end-face separation
     over the rest length. Each load step starts from the previous answer.
     """

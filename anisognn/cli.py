@@ -16,7 +16,7 @@ def main(argv=None):
     p.add_argument("--out", help="output folder (overrides [train] out)")
     p.add_argument("--iterations", type=int, help="overrides [train] iterations")
     p.add_argument("--seed", type=int, help="overrides [train] seed (samples and initial weights)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", action="store_true", help="no progress display")
     p = sub.add_parser("evaluate", help="the evaluation suite against anisofem (paper Tables "
                        "1, 2, Fig. 6), models side by side")
     p.add_argument("models", nargs="+", metavar="MODEL",

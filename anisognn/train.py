@@ -427,7 +427,7 @@ def _train(config, progress, rank, world, device):
             checkpoint.save(ckpt_path, model, optimizer=optimizer.state_dict(),
                             iteration=iteration, run=config.to_dict())
 
-    bar = _Progress(start, tc.iterations, enabled=progress and rank == 0)
+    progress_display = _Progress(start, tc.iterations, enabled=progress and rank == 0)
     t0 = time.perf_counter()
     loss_value = float("nan")
     for it in range(start, tc.iterations):
@@ -469,8 +469,8 @@ def _train(config, progress, rank, world, device):
             log.write({"iteration": done, "event": "eval", **evaluation(model)})
         if done % tc.checkpoint_every == 0 or done == tc.iterations:
             save(done)
-        bar.update(loss_value)
-    bar.close()
+        progress_display.update(loss_value)
+    progress_display.close()
     summary = {"rank": rank, "iterations": tc.iterations, "resumed_from": start, "final_loss": loss_value,
                "digest": parameter_digest(model)}
     if world > 1:
@@ -486,23 +486,23 @@ def _train(config, progress, rank, world, device):
 
 
 class _Progress:
-    """tqdm progress bar when tqdm is installed and enabled, else silent."""
+    """tqdm progress display when tqdm is installed and enabled, else silent."""
 
     def __init__(self, start, total, enabled):
-        self.bar = None
+        self.display = None
         if enabled:
             try:
                 from tqdm import tqdm
             except ImportError:
                 tqdm = None
             if tqdm is not None:
-                self.bar = tqdm(total=total, initial=start, file=sys.stderr, unit="it")
+                self.display = tqdm(total=total, initial=start, file=sys.stderr, unit="it")
 
     def update(self, loss):
-        if self.bar is not None:
-            self.bar.set_postfix(loss=f"{loss:.4g}", refresh=False)
-            self.bar.update(1)
+        if self.display is not None:
+            self.display.set_postfix(loss=f"{loss:.4g}", refresh=False)
+            self.display.update(1)
 
     def close(self):
-        if self.bar is not None:
-            self.bar.close()
+        if self.display is not None:
+            self.display.close()

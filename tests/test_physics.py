@@ -1,4 +1,4 @@
-"""Physics against closed forms and limits: uniaxial bars, symmetric cantilevers, mesh
+"""Physics against closed forms and limits: uniaxial rods, symmetric cantilevers, mesh
 refinement, dynamics settling to statics."""
 import warnings
 
