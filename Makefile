@@ -27,7 +27,7 @@ bench: $(VENV)/.installed
 	$(PY) -m anisognn bench
 	$(PY) -m export bench
 
-# Trains both shipped models side by side (one CPU thread each, about 40 minutes on 2 cores)
+# Trains both shipped models side by side (one CPU thread each, about 15 minutes on 2 cores)
 # and installs them, with their configs and logs, as anisognn.pretrained(...) and as
 # export/models/NAME.onnx.
 pretrained: $(VENV)/.installed

@@ -128,6 +128,7 @@ class Newton(Method):
 
     def __init__(self, projection="adaptive", linear_solver="auto", **stopping):
         super().__init__(**stopping)
+        self._solve = None
         if projection not in self._CHOICES:
             raise ValueError(f"projection: expected one of {tuple(self._CHOICES)}, got "
                              f"{projection!r}")
@@ -144,22 +145,32 @@ class Newton(Method):
     def threads(self):
         return self.solver.threads()
 
-    def factor(self, x, projected):
-        """H^-1 as a function of the Hessian at x, or None when it cannot be factored."""
-        data = self.potential.hessian_data(x, self.layout, project=projected,
-                                           want_grad=False)[2]
+    def refresh(self, x, projected, data=None):
+        """Factor the Hessian at x (assembled unless its data in self.layout is given) and keep
+        it as self._solve; False when it cannot be factored."""
+        if data is None:
+            data = self.potential.hessian_data(x, self.layout, project=projected,
+                                               want_grad=False)[2]
         self.counts["factorizations"] += 1
         try:
-            return self.solver.factor(self.layout, data)
+            self._solve = self.solver.factor(self.layout, data)
         except linsolve.FactorizationError:
-            return None
+            return False
+        return True
+
+    def apply(self, g):
+        """The inverse-Hessian approximation applied to g."""
+        return self._solve(g)
+
+    def forget(self):
+        """Called when a direction failed to make progress."""
 
     def directions(self, x, g, residual):
         for projected in self._CHOICES[self.projection]:
-            solve = self.factor(x, projected)
-            if solve is not None:
+            if self.refresh(x, projected):
                 self.counts["projected"] += projected
-                yield -solve(g)
+                yield -self.apply(g)
+                self.forget()
 
 
 def _key(potential):
@@ -173,7 +184,7 @@ class _KeptFactor(Newton):
 
     def __init__(self, **newton):
         super().__init__(**newton)
-        self._owner, self._solve = None, None
+        self._owner = None
 
     def start(self, potential):
         super().start(potential)
@@ -184,19 +195,6 @@ class _KeptFactor(Newton):
 
     def first_factor(self, potential):
         """Set up the factor the first iteration uses (default none: it factors at once)."""
-
-    def refresh(self, x, projected, data=None):
-        """Factor the Hessian at x (assembled unless its data in self.layout is given) and keep
-        it; False when it cannot be factored."""
-        if data is None:
-            data = self.potential.hessian_data(x, self.layout, project=projected,
-                                               want_grad=False)[2]
-        self.counts["factorizations"] += 1
-        try:
-            self._solve = self.solver.factor(self.layout, data)
-        except linsolve.FactorizationError:
-            return False
-        return True
 
 
 class FactorReuse(_KeptFactor):
@@ -218,18 +216,7 @@ class FactorReuse(_KeptFactor):
             yield -self.apply(g)
             self.forget()
         self._fresh = True
-        for projected in self._CHOICES[self.projection]:
-            if self.refresh(x, projected):
-                self.counts["projected"] += projected
-                yield -self.apply(g)
-                self.forget()
-
-    def apply(self, g):
-        """The inverse-Hessian approximation applied to g."""
-        return self._solve(g)
-
-    def forget(self):
-        """Called when a direction failed to make progress."""
+        yield from super().directions(x, g, residual)
 
     def accepted(self, s, y, progress):
         if not self._fresh and progress > self.refactor:

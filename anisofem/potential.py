@@ -6,6 +6,7 @@ Backward Euler:   G(x) = 1/(2 dt^2) (x - x_hat)^T M (x - x_hat) + sum_e Psi_e(x)
                   with x_hat = x_n + dt v_n and the lumped mass matrix M.
 Positions x are (n, 3) in m, energies in J, gradients in N, Hessians in N/m.
 """
+import functools
 import math
 
 import numpy as np
@@ -51,8 +52,7 @@ class Potential:
         a step, the inertial force M (x_start - x_hat) / dt^2 (= -M v_n / dt), summed. Newton's
         tolerance is relative to it."""
         free = self.scene.free_dofs
-        _, _, elastic = kernels.assemble(self.x_start, self.scene.elements, want_grad=True)
-        parts = [self.scene.external_force, elastic]
+        parts = [self.scene.external_force, self._start[1]]
         if self.dynamic:
             parts.append(self.mass_over_dt2[:, None] * (self.x_start - self.x_hat))
         total = 0.0
@@ -60,6 +60,19 @@ class Potential:
             v = part.ravel()[free]
             total += math.sqrt(float(np.dot(v, v)))
         return total
+
+    def start_energy(self):
+        """G(x_start) in J; for a step, the mechanical energy it starts with:
+        elastic - f_ext . x_n + 1/2 v_n^T M v_n."""
+        return self._start[0]
+
+    @functools.cached_property
+    def _start(self):
+        """(G, elastic force (n, 3)) at x_start, from one assembly."""
+        e_iso, e_fib, elastic = kernels.assemble(self.x_start, self.scene.elements,
+                                                 want_grad=True)
+        external, kinetic = self._loads(self.x_start, kernels.EMPTY_GRAD)
+        return float(e_iso.sum()) + float(e_fib.sum()) + external + kinetic, elastic
 
     def _elastic(self, x, want_grad=False, layout=None, project=False):
         """Elastic part: (e_iso (m,), e_fib (m,), gradient (n, 3) or None, Hessian data or

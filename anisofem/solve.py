@@ -80,15 +80,15 @@ def step(scene, x, v, dt, a_guess=None, method="newton", warn=True, **options):
                                                                            "a_guess")
     potential = Potential(scene, x_hat, dt, x_start=x)
     method = methods.make(method, **options)
-    accept = _no_energy_gain(potential, x, v) if method.budget else None
+    accept = _no_energy_gain(potential) if method.budget else None
     result = minimize(potential, scene.with_fixed(start), method, warn=warn, accept=accept)
     return StepResult(result.x, (result.x - x) / dt, result)
 
 
-def _no_energy_gain(potential, x, v):
-    """accept(y, G(y)) for a budgeted step from x, v: whether the step to y ends with no more
-    mechanical energy H = 1/2 v^T M v + elastic - f_ext . x than it started with (up to
-    round-off). The exact backward-Euler step never gains energy where the elastic energy is
+def _no_energy_gain(potential):
+    """accept(y, G(y)) for a budgeted step of potential (from its x_start = x_n): whether the
+    step to y ends with no more mechanical energy H = 1/2 v^T M v + elastic - f_ext . x than it
+    started with (up to round-off). The exact backward-Euler step never gains energy where the elastic energy is
     convex; a step cut short can, and a budget must not buy a blow-up."""
     mass_over_dt2 = potential.mass_over_dt2[:, None]  # kg/s^2
 
@@ -96,8 +96,8 @@ def _no_energy_gain(potential, x, v):
         """1/2 |displacement / dt|^2_M in J: the kinetic energy of moving that far in dt."""
         return 0.5 * float((mass_over_dt2 * displacement * displacement).sum())
 
-    x_hat = potential.x_hat
-    start_energy = potential.energy(x)  # G(x) = elastic - f_ext . x + kinetic(x - x_hat)
+    x, x_hat = potential.x_start, potential.x_hat
+    start_energy = potential.start_energy()
     slack = 1e-12 * (abs(start_energy) + abs(float((potential.scene.external_force * x).sum())))
 
     def accept(y, g):

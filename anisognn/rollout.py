@@ -38,21 +38,33 @@ def rollout(model, scene, steps, dt=None, x0=None, v0=None):
     x = scene.initial_positions() if x0 is None else scene.with_fixed(
         as_float_array(x0, "x0", (n, 3)))
     v = np.zeros((n, 3)) if v0 is None else as_float_array(v0, "v0", (n, 3))
-    held = scene.fixed_mask
+    advance = network_step(model, scene)
+    out = np.empty((steps + 1, n, 3))
+    out[0] = x
+    for k in range(steps):
+        x_next, v, _ = advance(x, v)
+        if not np.isfinite(x_next).all():
+            raise FloatingPointError(f"rollout: the predicted state is not finite at step "
+                                     f"{k + 1}")
+        x = out[k + 1] = x_next
+    return out
+
+
+def network_step(model, scene):
+    """advance(x, v) -> (x_next, v_next, a): one step of the model's dt on scene, the network
+    in its own dtype and device, the state (n, 3) in float64 m and m/s; a (n, 3) m/s^2 is the
+    model's acceleration; held components stay at the scene's fixed positions."""
     param = next(model.parameters())
     graph = from_scene(scene).to(param.device, param.dtype)
     f_ext = torch.tensor(scene.external_force, dtype=param.dtype, device=param.device)
-    out = np.empty((steps + 1, n, 3))
-    out[0] = x
-    with torch.no_grad():
-        for k in range(steps):
+    held, dt = scene.fixed_mask, model.config.dt
+
+    def advance(x, v):
+        with torch.no_grad():
             a = model(torch.as_tensor(x, dtype=param.dtype, device=param.device),
                       torch.as_tensor(v, dtype=param.dtype, device=param.device), f_ext, graph)
-            x_next = x + dt * v + dt * dt * a.to("cpu", torch.float64).numpy()
-            x_next[held] = scene.fixed_positions[held]
-            if not np.isfinite(x_next).all():
-                raise FloatingPointError(f"rollout: the predicted state is not finite at step "
-                                         f"{k + 1}")
-            v = (x_next - x) / dt
-            x = out[k + 1] = x_next
-    return out
+        a = a.to("cpu", torch.float64).numpy()
+        x_next = x + dt * v + dt * dt * a
+        x_next[held] = scene.fixed_positions[held]
+        return x_next, (x_next - x) / dt, a
+    return advance

@@ -4,14 +4,13 @@ iteration."""
 import os
 
 import numpy as np
-import torch
 
 from anisofem import Material, Scene
 from anisofem.solve import Stepper
 from anisofem.ladder import Rung
 
-from .graph import from_scene
 from .model import with_galerkin
+from .rollout import network_step
 from .sampler import DENSITY, POISSON, YOUNG
 from .shipped import NAMES, pretrained
 
@@ -21,22 +20,13 @@ ONNX_FOLDER = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__fil
 
 
 def _network_step(model, scene):
-    """advance(x, v) for the trained model's step on scene (float32 network, float64 state);
-    the model's own acceleration is also returned in info["acceleration"]."""
-    param = next(model.parameters())
-    graph = from_scene(scene).to(param.device, param.dtype)
-    f_ext = torch.tensor(scene.external_force, dtype=param.dtype, device=param.device)
-    held, dt = scene.fixed_mask, model.config.dt
+    """advance(x, v) -> (x, v, info) of the model on scene for ladder.Rung, with the model's
+    acceleration in info["acceleration"]."""
+    step = network_step(model, scene)
 
     def advance(x, v):
-        with torch.no_grad():
-            a = model(torch.as_tensor(x, dtype=param.dtype, device=param.device),
-                      torch.as_tensor(v, dtype=param.dtype, device=param.device), f_ext, graph)
-        a = a.to("cpu", torch.float64).numpy()
-        x_next = x + dt * v + dt * dt * a
-        x_next[held] = scene.fixed_positions[held]
-        ok = bool(np.isfinite(x_next).all())
-        return x_next, (x_next - x) / dt, {"failed": not ok, "acceleration": a}
+        x_next, v_next, a = step(x, v)
+        return x_next, v_next, {"failed": not bool(np.isfinite(x_next).all()), "acceleration": a}
     return advance
 
 
