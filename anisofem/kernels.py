@@ -1,4 +1,5 @@
-"""Numba element kernels: energy, gradient and Hessian of StVK + fiber, and their assembly.
+"""Numba element kernels: energy, gradient and Hessian of StVK or Neo-Hookean + fiber, and
+their assembly.
 
 Per linear tetrahedron e with rest volume v, shape-function gradients G (4, 3) (row a is
 grad N_a in material space, 1/m), deformation gradient F = sum_a x_a G_a^T (3, 3):
@@ -30,6 +31,24 @@ Element Hessian entries (a, b vertices; i, k components), with q_a = F G_a and s
     H[3a+i, 3b+k] = v ( delta_ik G_a^T S G_b + mu q_b,i q_a,k + mu (F F^T)_ik G_a.G_b
                         + lam q_a,i q_b,k + 8 kappa (Fd)_i (Fd)_k s_a s_b ).
 
+Neo-Hookean base (model code NEOHOOKEAN; see anisofem.material for when to pick it), with
+J = det F and the same fiber term:
+
+    psi = mu/2 (tr C - 3) - mu ln J + lam/2 (ln J)^2 + kappa (d^T C d - 1)^2,   psi = +inf for J <= 0
+
+S = mu (I - C^-1) + lam ln J C^-1 + 4 kappa (I4 - 1) d d^T, so the gradient is the same
+v F S G_a. Its isotropic Hessian is written through the analytic eigensystem of isotropic
+energies (F = U Sigma V^T from the eigen-decomposition of C; Teran et al. 2005, Smith et al.
+2019): with psi_i = mu s_i - c / s_i and c = mu - lam ln J for the singular values s_i,
+- three scaling modes U diag(z) V^T, z the eigenvectors of the 3x3 matrix
+  d2psi/ds_i ds_j = delta_ij (mu + c / s_i^2) + lam / (s_i s_j);
+- for each pair i < j a twist mode U (e_i e_j^T - e_j e_i^T) V^T / sqrt 2, eigenvalue
+  mu - c / (s_i s_j), and a flip mode U (e_i e_j^T + e_j e_i^T) V^T / sqrt 2, eigenvalue
+  mu + c / (s_i s_j).
+The exact Hessian sums all nine modes; the projected one drops those with negative
+eigenvalues. The fiber term adds 8 kappa (Fd)(Fd)^T s_a s_b (PSD) and the geometric
+4 kappa (I4 - 1) s_a s_b delta_ik, dropped when projecting with I4 < 1.
+
 Assembly runs over element colors (no two elements of a color share a vertex), so the
 elements of one color are scattered in parallel without races, and results do not depend
 on the thread count.
@@ -56,10 +75,13 @@ def _rotate_columns(M, p, q, c, s):
 
 
 @njit(cache=True, inline="always")
-def _sym3_positive_part(S, out):
-    """Write the positive part of the symmetric 3x3 matrix S into out (cyclic Jacobi)."""
+def _sym3_eigen(S, w, V):
+    """Eigenvalues w (3,) and eigenvectors (columns of V, 3x3) of the symmetric 3x3 matrix S
+    (cyclic Jacobi)."""
     a = S.copy()
-    V = np.eye(3)
+    for i in range(3):
+        for j in range(3):
+            V[i, j] = 1.0 if i == j else 0.0
     for _sweep in range(30):
         off = a[0, 1] ** 2 + a[0, 2] ** 2 + a[1, 2] ** 2
         scale = a[0, 0] ** 2 + a[1, 1] ** 2 + a[2, 2] ** 2 + off
@@ -76,15 +98,24 @@ def _sym3_positive_part(S, out):
                 _rotate_columns(a, p, q, c, s)    # a <- J^T a J
                 _rotate_columns(a.T, p, q, c, s)
                 _rotate_columns(V, p, q, c, s)    # V <- V J
+    for k in range(3):
+        w[k] = a[k, k]
+
+
+@njit(cache=True, inline="always")
+def _sym3_positive_part(S, out):
+    """Write the positive part of the symmetric 3x3 matrix S into out."""
+    w = np.empty(3)
+    V = np.empty((3, 3))
+    _sym3_eigen(S, w, V)
     for i in range(3):
         for j in range(3):
             out[i, j] = 0.0
     for k in range(3):
-        lam_k = a[k, k]
-        if lam_k > 0.0:
+        if w[k] > 0.0:
             for i in range(3):
                 for j in range(3):
-                    out[i, j] += lam_k * V[i, k] * V[j, k]
+                    out[i, j] += w[k] * V[i, k] * V[j, k]
 
 
 @njit(cache=True, inline="always")
@@ -104,11 +135,15 @@ def _has_negative_eigenvalue(S):
     return det < 0.0
 
 
+#: Model codes of ElementData.model.
+STVK, NEOHOOKEAN = 0, 1
+
+
 @njit(cache=True, inline="always")
-def _stress(e, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber, F, S, Fd):
+def _stress(e, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber, F, S, Fd):
     """Fill F (deformation gradient) and S (total 2nd Piola-Kirchhoff stress, Pa) of element e,
-    and Fd = F d when it has fibers. Returns (isotropic energy, fiber energy, kappa) in J, J, Pa.
-    """
+    and Fd = F d when it has fibers. Returns (isotropic energy, fiber energy, kappa) in J, J, Pa;
+    a Neo-Hookean element with det F <= 0 has isotropic energy +inf (and S = 0)."""
     G = grads[e]
     t = tets[e]
     for i in range(3):
@@ -117,28 +152,12 @@ def _stress(e, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber, F, S, Fd):
             for a in range(4):
                 acc += x[t[a], i] * G[a, j]
             F[i, j] = acc
-    # Green strain E = (F^T F - I) / 2, kept in S for now
-    for i in range(3):
-        for j in range(i, 3):
-            acc = 0.0
-            for k in range(3):
-                acc += F[k, i] * F[k, j]
-            if i == j:
-                acc -= 1.0
-            S[i, j] = 0.5 * acc
-            S[j, i] = 0.5 * acc
-    trE = S[0, 0] + S[1, 1] + S[2, 2]
-    EE = 0.0
-    for i in range(3):
-        for j in range(3):
-            EE += S[i, j] * S[i, j]
     m_e = mu[e]
     l_e = lam[e]
-    e_iso = vol[e] * (0.5 * l_e * trE * trE + m_e * EE)
-    for i in range(3):
-        for j in range(3):
-            S[i, j] *= 2.0 * m_e
-        S[i, i] += l_e * trE
+    if model[e] == NEOHOOKEAN:
+        e_iso = _neohookean_stress(F, m_e, l_e, S) * vol[e]
+    else:
+        e_iso = _stvk_stress(F, m_e, l_e, S) * vol[e]
     k_e = kappa[e] if has_fiber else 0.0
     if k_e == 0.0:
         return e_iso, 0.0, 0.0
@@ -154,6 +173,66 @@ def _stress(e, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber, F, S, Fd):
 
 
 @njit(cache=True, inline="always")
+def _stvk_stress(F, m_e, l_e, S):
+    """S = 2 mu E + lam tr(E) I of Saint Venant-Kirchhoff; returns psi (J/m^3)."""
+    # Green strain E = (F^T F - I) / 2, kept in S for now
+    for i in range(3):
+        for j in range(i, 3):
+            acc = 0.0
+            for k in range(3):
+                acc += F[k, i] * F[k, j]
+            if i == j:
+                acc -= 1.0
+            S[i, j] = 0.5 * acc
+            S[j, i] = 0.5 * acc
+    trE = S[0, 0] + S[1, 1] + S[2, 2]
+    EE = 0.0
+    for i in range(3):
+        for j in range(3):
+            EE += S[i, j] * S[i, j]
+    for i in range(3):
+        for j in range(3):
+            S[i, j] *= 2.0 * m_e
+        S[i, i] += l_e * trE
+    return 0.5 * l_e * trE * trE + m_e * EE
+
+
+@njit(cache=True, inline="always")
+def _neohookean_stress(F, m_e, l_e, S):
+    """S = mu (I - C^-1) + lam ln J C^-1 of Neo-Hookean; returns psi (J/m^3), +inf (S = 0)
+    where J = det F <= 0. C^-1 = cof(F)^T cof(F) / J^2."""
+    c00 = F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]
+    c01 = F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2]
+    c02 = F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]
+    J = F[0, 0] * c00 + F[0, 1] * c01 + F[0, 2] * c02
+    if not J > 0.0:
+        for i in range(3):
+            for j in range(3):
+                S[i, j] = 0.0
+        return math.inf
+    c10 = F[0, 2] * F[2, 1] - F[0, 1] * F[2, 2]
+    c11 = F[0, 0] * F[2, 2] - F[0, 2] * F[2, 0]
+    c12 = F[0, 1] * F[2, 0] - F[0, 0] * F[2, 1]
+    c20 = F[0, 1] * F[1, 2] - F[0, 2] * F[1, 1]
+    c21 = F[0, 2] * F[1, 0] - F[0, 0] * F[1, 2]
+    c22 = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
+    log_j = math.log(J)
+    coef = (l_e * log_j - m_e) / (J * J)
+    # S_ij = mu delta_ij + coef sum_k cof_ki cof_kj
+    S[0, 0] = coef * (c00 * c00 + c10 * c10 + c20 * c20) + m_e
+    S[1, 1] = coef * (c01 * c01 + c11 * c11 + c21 * c21) + m_e
+    S[2, 2] = coef * (c02 * c02 + c12 * c12 + c22 * c22) + m_e
+    S[0, 1] = S[1, 0] = coef * (c00 * c01 + c10 * c11 + c20 * c21)
+    S[0, 2] = S[2, 0] = coef * (c00 * c02 + c10 * c12 + c20 * c22)
+    S[1, 2] = S[2, 1] = coef * (c01 * c02 + c11 * c12 + c21 * c22)
+    trC = 0.0
+    for i in range(3):
+        for j in range(3):
+            trC += F[i, j] * F[i, j]
+    return 0.5 * m_e * (trC - 3.0) - m_e * log_j + 0.5 * l_e * log_j * log_j
+
+
+@njit(cache=True, inline="always")
 def _scatter_gradient(e, tets, G, v, F, S, grad):
     """grad[vertex a] += v F S G_a for the four vertices of element e (N)."""
     for i in range(3):
@@ -165,8 +244,40 @@ def _scatter_gradient(e, tets, G, v, F, S, grad):
 
 
 @njit(cache=True, inline="always")
-def _element_hessian(G, v, m_e, l_e, k_e, d, F, S, Fd, project, Sg, B, q, He):
-    """Fill He (12, 12), the element Hessian in N/m (projected: S+ in the geometric part)."""
+def _element_hessian(G, v, model, m_e, l_e, k_e, d, F, S, Fd, project, Sg, B, q, work, He):
+    """Fill He (12, 12), the element Hessian in N/m (projected: see the module docstring)."""
+    if model == NEOHOOKEAN:
+        _neohookean_hessian(G, v, m_e, l_e, F, project, work, He)
+        if k_e != 0.0:
+            c = 4.0 * k_e * (Fd[0] * Fd[0] + Fd[1] * Fd[1] + Fd[2] * Fd[2] - 1.0)
+            if not (project and c < 0.0):
+                for a in range(4):
+                    sa = v * c * (d[0] * G[a, 0] + d[1] * G[a, 1] + d[2] * G[a, 2])
+                    for b in range(a, 4):
+                        sab = sa * (d[0] * G[b, 0] + d[1] * G[b, 1] + d[2] * G[b, 2])
+                        for i in range(3):
+                            He[3 * a + i, 3 * b + i] += sab
+    else:
+        _stvk_hessian(G, v, m_e, l_e, F, S, project, Sg, B, q, He)
+    if k_e != 0.0:
+        for a in range(4):
+            sa = 8.0 * k_e * v * (d[0] * G[a, 0] + d[1] * G[a, 1] + d[2] * G[a, 2])
+            for b in range(a, 4):
+                sab = sa * (d[0] * G[b, 0] + d[1] * G[b, 1] + d[2] * G[b, 2])
+                for i in range(3):
+                    for k in range(3):
+                        He[3 * a + i, 3 * b + k] += sab * Fd[i] * Fd[k]
+    for a in range(4):
+        for b in range(a + 1, 4):
+            for i in range(3):
+                for k in range(3):
+                    He[3 * b + k, 3 * a + i] = He[3 * a + i, 3 * b + k]
+
+
+@njit(cache=True, inline="always")
+def _stvk_hessian(G, v, m_e, l_e, F, S, project, Sg, B, q, He):
+    """Blocks a <= b of the StVK element Hessian with the total stress S in its geometric part
+    (projected: S+), N/m."""
     if project and _has_negative_eigenvalue(S):
         _sym3_positive_part(S, Sg)
     else:
@@ -191,39 +302,112 @@ def _element_hessian(G, v, m_e, l_e, k_e, d, F, S, Fd, project, Sg, B, q, He):
                     He[3 * a + i, 3 * b + k] = v * h
             for i in range(3):
                 He[3 * a + i, 3 * b + i] += v * geo
-    if k_e != 0.0:
-        for a in range(4):
-            sa = 8.0 * k_e * v * (d[0] * G[a, 0] + d[1] * G[a, 1] + d[2] * G[a, 2])
-            for b in range(a, 4):
-                sab = sa * (d[0] * G[b, 0] + d[1] * G[b, 1] + d[2] * G[b, 2])
-                for i in range(3):
-                    for k in range(3):
-                        He[3 * a + i, 3 * b + k] += sab * Fd[i] * Fd[k]
+
+
+#: Rows of the workspace _neohookean_hessian uses (each 3x3 or shorter).
+_C, _V, _U, _A, _Z, _P, _D = range(7)
+WORK_SHAPE = (9, 4, 3)
+
+
+@njit(cache=True, inline="always")
+def _neohookean_hessian(G, v, m_e, l_e, F, project, work, He):
+    """The whole isotropic Neo-Hookean element Hessian (N/m) from its nine eigenmodes
+    (projected: the modes with negative eigenvalues dropped). work: WORK_SHAPE scratch."""
+    for r in range(12):
+        for c in range(12):
+            He[r, c] = 0.0
+    J = (F[0, 0] * (F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1])
+         - F[0, 1] * (F[1, 0] * F[2, 2] - F[1, 2] * F[2, 0])
+         + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
+    if not J > 0.0:
+        return  # outside the energy's domain (psi = +inf): no Hessian
+    C, V, U, A, Z, P, D = (work[_C, :3], work[_V, :3], work[_U, :3], work[_A, :3],
+                           work[_Z, :3], work[_P], work[_D, :3])
+    w = work[7, 0]
+    z = work[7, 1]
+    sig = work[7, 2]
+    b = work[8].reshape(12)
+    for i in range(3):
+        for j in range(3):
+            C[i, j] = F[0, i] * F[0, j] + F[1, i] * F[1, j] + F[2, i] * F[2, j]
+    _sym3_eigen(C, w, V)
+    for k in range(3):
+        sig[k] = math.sqrt(max(w[k], 0.0))
+    # rescale so that the product of the singular values is J exactly
+    ratio = (J / max(sig[0] * sig[1] * sig[2], 1e-300)) ** (1.0 / 3.0)
+    for k in range(3):
+        sig[k] *= ratio
+    for i in range(3):
+        for k in range(3):
+            U[i, k] = (F[i, 0] * V[0, k] + F[i, 1] * V[1, k] + F[i, 2] * V[2, k]) / sig[k]
     for a in range(4):
-        for b in range(a + 1, 4):
-            for i in range(3):
-                for k in range(3):
-                    He[3 * b + k, 3 * a + i] = He[3 * a + i, 3 * b + k]
+        for k in range(3):
+            P[a, k] = V[0, k] * G[a, 0] + V[1, k] * G[a, 1] + V[2, k] * G[a, 2]
+    c = m_e - l_e * math.log(J)
+    # scaling modes: eigenvectors of d2psi / ds_i ds_j
+    for i in range(3):
+        for j in range(3):
+            A[i, j] = l_e / (sig[i] * sig[j])
+        A[i, i] += m_e + c / (sig[i] * sig[i])
+    _sym3_eigen(A, z, Z)
+    for k in range(3):
+        for i in range(3):
+            for j in range(3):
+                D[i, j] = Z[i, k] if i == j else 0.0
+        _add_mode(He, v, z[k], project, U, P, D, b)
+    # twist and flip modes of each pair of singular values
+    h = 1.0 / math.sqrt(2.0)
+    for i in range(2):
+        for j in range(i + 1, 3):
+            ratio = c / (sig[i] * sig[j])
+            for sign in (-1.0, 1.0):
+                for r in range(3):
+                    for s in range(3):
+                        D[r, s] = 0.0
+                D[i, j] = h
+                D[j, i] = sign * h
+                _add_mode(He, v, m_e + sign * ratio, project, U, P, D, b)
+
+
+@njit(cache=True, inline="always")
+def _add_mode(He, v, eigenvalue, project, U, P, D, b):
+    """He += v eigenvalue b b^T for the mode dF = U D V^T, b[3a+i] = (dF G_a)_i (skipped when
+    projecting a negative eigenvalue). P[a] = V^T G_a."""
+    if project and eigenvalue <= 0.0:
+        return
+    for a in range(4):
+        for l in range(3):
+            t = D[l, 0] * P[a, 0] + D[l, 1] * P[a, 1] + D[l, 2] * P[a, 2]
+            b[3 * a + l] = t
+    for a in range(4):
+        t0, t1, t2 = b[3 * a], b[3 * a + 1], b[3 * a + 2]
+        for i in range(3):
+            b[3 * a + i] = U[i, 0] * t0 + U[i, 1] * t1 + U[i, 2] * t2
+    coef = v * eigenvalue
+    for r in range(12):
+        br = coef * b[r]
+        for col in range(12):
+            He[r, col] += br * b[col]
 
 
 @njit(cache=True)
-def _run_gradient(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber, e_iso,
-                  e_fib, grad, want_grad):
+def _run_gradient(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber,
+                  e_iso, e_fib, grad, want_grad):
     """Energies (J) and, if want_grad, gradient contributions of elements order[lo:hi]."""
     F = np.empty((3, 3))
     S = np.empty((3, 3))
     Fd = np.empty(3)
     for idx in range(lo, hi):
         e = order[idx]
-        e_iso[e], e_fib[e], _ = _stress(e, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber,
-                                        F, S, Fd)
+        e_iso[e], e_fib[e], _ = _stress(e, x, tets, grads, vol, model, mu, lam, kappa, fdir,
+                                        has_fiber, F, S, Fd)
         if want_grad:
             _scatter_gradient(e, tets, grads[e], vol[e], F, S, grad)
 
 
 @njit(cache=True)
-def _run_hessian(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber, e_iso,
-                 e_fib, grad, want_grad, project, hess_map, hess_data):
+def _run_hessian(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber,
+                 e_iso, e_fib, grad, want_grad, project, hess_map, hess_data):
     """Energies, (gradient,) and Hessian contributions of elements order[lo:hi]; hess_map[e]
     (144,) gives the position in hess_data of each He entry (-1: dropped)."""
     F = np.empty((3, 3))
@@ -233,15 +417,17 @@ def _run_hessian(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_f
     B = np.empty((3, 3))
     q = np.empty((4, 3))
     He = np.empty((12, 12))
+    work = np.empty(WORK_SHAPE)
     for idx in range(lo, hi):
         e = order[idx]
-        ei, ef, k_e = _stress(e, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber, F, S, Fd)
+        ei, ef, k_e = _stress(e, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber, F,
+                              S, Fd)
         e_iso[e] = ei
         e_fib[e] = ef
         if want_grad:
             _scatter_gradient(e, tets, grads[e], vol[e], F, S, grad)
-        _element_hessian(grads[e], vol[e], mu[e], lam[e], k_e, fdir[e], F, S, Fd, project, Sg,
-                         B, q, He)
+        _element_hessian(grads[e], vol[e], model[e], mu[e], lam[e], k_e, fdir[e], F, S, Fd,
+                         project, Sg, B, q, work, He)
         row = hess_map[e]
         for r in range(12):
             for c in range(12):
@@ -251,20 +437,20 @@ def _run_hessian(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_f
 
 
 @njit(cache=True)
-def _run_range(mode, lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber,
-               e_iso, e_fib, grad, want_grad, project, hess_map, hess_data):
+def _run_range(mode, lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir,
+               has_fiber, e_iso, e_fib, grad, want_grad, project, hess_map, hess_data):
     """mode 0: energies (+ gradient if want_grad), 2: + Hessian."""
     if mode == 0:
-        _run_gradient(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber,
-                      e_iso, e_fib, grad, want_grad)
+        _run_gradient(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir,
+                      has_fiber, e_iso, e_fib, grad, want_grad)
     else:
-        _run_hessian(lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir, has_fiber,
-                     e_iso, e_fib, grad, want_grad, project, hess_map, hess_data)
+        _run_hessian(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir,
+                     has_fiber, e_iso, e_fib, grad, want_grad, project, hess_map, hess_data)
 
 
 @njit(cache=True, parallel=True)
-def _run_colors(nthreads, order, color_ptr, mode, x, tets, grads, vol, mu, lam, kappa, fdir,
-                has_fiber, e_iso, e_fib, grad, want_grad, project, hess_map, hess_data):
+def _run_colors(nthreads, order, color_ptr, mode, x, tets, grads, vol, model, mu, lam, kappa,
+                fdir, has_fiber, e_iso, e_fib, grad, want_grad, project, hess_map, hess_data):
     """Parallel over the elements of each color, colors one after another."""
     for c in range(color_ptr.shape[0] - 1):
         start = color_ptr[c]
@@ -273,7 +459,7 @@ def _run_colors(nthreads, order, color_ptr, mode, x, tets, grads, vol, mu, lam, 
         for k in prange(nchunk):
             lo = start + (count * k) // nchunk
             hi = start + (count * (k + 1)) // nchunk
-            _run_range(mode, lo, hi, order, x, tets, grads, vol, mu, lam, kappa, fdir,
+            _run_range(mode, lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir,
                        has_fiber, e_iso, e_fib, grad, want_grad, project, hess_map, hess_data)
 
 
@@ -315,9 +501,9 @@ def assemble(x, elements, *, want_grad=False, want_hess=False, project=False, he
     if not want_hess:
         hess_map, hess_data = _EMPTY_MAP, _EMPTY_DATA
     mode = 2 if want_hess else 0
-    args = (mode, x, elements.tets, elements.grads, elements.volumes, elements.mu, elements.lam,
-            elements.kappa, elements.fiber, elements.has_fiber, e_iso, e_fib, grad, want_grad,
-            project, hess_map, hess_data)
+    args = (mode, x, elements.tets, elements.grads, elements.volumes, elements.model,
+            elements.mu, elements.lam, elements.kappa, elements.fiber, elements.has_fiber, e_iso,
+            e_fib, grad, want_grad, project, hess_map, hess_data)
     if m < PARALLEL_MIN_ELEMENTS or numba.get_num_threads() == 1:
         _run_range(mode, 0, m, elements.serial_order, *args[1:])
     else:

@@ -1,17 +1,39 @@
-"""Transversely isotropic material: StVK base plus one family of fibers."""
+"""Transversely isotropic material: a StVK or Neo-Hookean base plus one family of fibers."""
 import numpy as np
 
 from ._validate import as_float_array, per_element
+
+#: Base material models, in the order of their codes in anisofem.kernels (STVK, NEOHOOKEAN).
+MODELS = ("stvk", "neohookean")
 
 #: Tolerance on |d| - 1 for fiber directions of elements with fiber_stiffness > 0.
 UNIT_TOLERANCE = 1e-6
 
 
 class Material:
-    """Saint Venant-Kirchhoff base material reinforced by fibers.
+    """A base material reinforced by fibers.
 
-    Every parameter is a scalar or a per-element array (one value per tet), so fibers and
-    stiffness may vary element by element.
+    Every parameter is a scalar or a per-element array (one value per tet), so fibers, stiffness
+    and even the base model may vary element by element.
+
+    The base model (same Lame parameters, same fiber term kappa (I4 - 1)^2):
+
+    - "stvk", Saint Venant-Kirchhoff, psi = lam/2 tr(E)^2 + mu tr(E^2): the paper's material
+      and the one the network is trained on. It depends on F only through C = F^T F, so an
+      element and its mirror image have the same energy, and it softens under compression:
+      squeezed hard (a cantilever under 10 g, a block pressed to half its height) Newton can
+      converge to states with elements turned inside out (det F <= 0), which results report
+      (NewtonResult.inversion, InversionWarning). Fine for moderate strains.
+    - "neohookean", compressible Neo-Hookean,
+      psi = mu/2 (tr C - 3) - mu ln J + lam/2 (ln J)^2 (J = det F), +inf for J <= 0. The
+      energy grows without bound as an element flattens, and the line search rejects any
+      trial state with J <= 0 (its energy is infinite), so no solve or step ever produces an
+      inverted element, whatever the load. Chosen over the Stable Neo-Hookean energy of Smith,
+      de Goes and Kim (2018), which stays finite through J <= 0 and so resists inversion
+      without excluding it. Its cost: a solve must start from a state with det F > 0
+      everywhere (rest is; prescribed positions that jump too far in one step are refused
+      with an error), and its Hessian needs one small eigen-decomposition more per element.
+      Pick it whenever a scene compresses hard. Both agree to first order in the strain.
 
     Parameters
     ----------
@@ -22,10 +44,12 @@ class Material:
         Required to be unit length wherever fiber_stiffness > 0; ignored elsewhere.
     fiber_stiffness : kappa in psi_fiber = kappa (d^T C d - 1)^2, Pa (>= 0). The paper samples
         kappa in [0, 10 E].
+    model : "stvk" (default) or "neohookean", or a per-element sequence of them (m,).
     """
 
     def __init__(self, young=1e5, poisson=0.48, density=1000.0, fiber_direction=(1.0, 0.0, 0.0),
-                 fiber_stiffness=0.0):
+                 fiber_stiffness=0.0, model="stvk"):
+        self.model = _model_codes(model)
         self.young = as_float_array(young, "young")
         self.poisson = as_float_array(poisson, "poisson")
         self.density = as_float_array(density, "density")
@@ -66,13 +90,15 @@ class Material:
     def __repr__(self):
         def show(a):
             return f"{float(a):g}" if a.ndim == 0 else f"array{a.shape}"
+        model = MODELS[int(self.model)] if self.model.ndim == 0 else f"array{self.model.shape}"
         return (f"Material(young={show(self.young)}, poisson={show(self.poisson)}, "
                 f"density={show(self.density)}, fiber_direction="
                 f"{self.fiber_direction.tolist() if self.fiber_direction.ndim == 1 else 'array'}"
-                f", fiber_stiffness={show(self.fiber_stiffness)})")
+                f", fiber_stiffness={show(self.fiber_stiffness)}, model={model!r})")
 
     def per_element(self, m):
-        """Broadcast to m elements: dict of mu, lam, kappa, density (m,) and fiber (m, 3)."""
+        """Broadcast to m elements: dict of mu, lam, kappa, density (m,), fiber (m, 3) and
+        model (m,) int8 (index into MODELS)."""
         young = per_element(self.young, "young", m)
         nu = per_element(self.poisson, "poisson", m)
         return {
@@ -81,4 +107,27 @@ class Material:
             "kappa": per_element(self.fiber_stiffness, "fiber_stiffness", m),
             "fiber": per_element(self.fiber_direction, "fiber_direction", m, width=3),
             "density": per_element(self.density, "density", m),
+            "model": _per_element_model(self.model, m),
         }
+
+
+def _model_codes(model):
+    """A model name or a sequence of them as int8 codes (index into MODELS): () or (m,)."""
+    names = np.asarray(model, dtype=object)
+    if names.ndim > 1 or names.size == 0:
+        raise ValueError(f"model: expected one of {MODELS} or a per-element sequence of them, "
+                         f"got shape {names.shape}")
+    bad = [n for n in names.ravel() if n not in MODELS]
+    if bad:
+        raise ValueError(f"model: expected one of {MODELS}, got {bad[0]!r}")
+    if names.ndim == 0:
+        return np.array(MODELS.index(model), dtype=np.int8)
+    return np.array([MODELS.index(n) for n in names], dtype=np.int8)
+
+
+def _per_element_model(codes, m):
+    codes = np.asarray(codes)
+    if codes.ndim and codes.shape != (m,):
+        raise ValueError(f"model: expected one name or {m} per-element names, got "
+                         f"{codes.shape[0]}")
+    return np.broadcast_to(codes, (m,)).astype(np.int8)

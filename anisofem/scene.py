@@ -17,6 +17,7 @@ class ElementData:
     tets: np.ndarray          # (m, 4) int64
     grads: np.ndarray         # (m, 4, 3) shape-function gradients, 1/m
     volumes: np.ndarray       # (m,) rest volumes, m^3
+    model: np.ndarray         # (m,) int8 base model (anisofem.kernels.STVK, NEOHOOKEAN)
     mu: np.ndarray            # (m,) Pa
     lam: np.ndarray           # (m,) Pa
     kappa: np.ndarray         # (m,) Pa
@@ -160,7 +161,7 @@ class Scene:
         kappa = p["kappa"]
         return ElementData(
             tets=np.ascontiguousarray(self.mesh.tets, dtype=np.int64),
-            grads=self.mesh.shape_gradients, volumes=self.mesh.rest_volumes,
+            grads=self.mesh.shape_gradients, volumes=self.mesh.rest_volumes, model=p["model"],
             mu=p["mu"], lam=p["lam"], kappa=kappa, fiber=p["fiber"],
             has_fiber=bool((kappa > 0).any()),
             serial_order=np.arange(self.mesh.n_tets, dtype=np.int64),
