@@ -64,21 +64,9 @@ PARALLEL_MIN_ELEMENTS = 4000
 
 
 @njit(cache=True, inline="always")
-def _rotate_columns(M, p, q, c, s):
-    """Columns p, q of the 3-row matrix M (or rows, given M.T) times the Givens rotation
-    [[c, s], [-s, c]]."""
-    for k in range(3):
-        mkp = M[k, p]
-        mkq = M[k, q]
-        M[k, p] = c * mkp - s * mkq
-        M[k, q] = s * mkp + c * mkq
-
-
-@njit(cache=True, inline="always")
-def _sym3_eigen(S, w, V):
-    """Eigenvalues w (3,) and eigenvectors (columns of V, 3x3) of the symmetric 3x3 matrix S
-    (cyclic Jacobi)."""
-    a = S.copy()
+def _sym3_eigen(a, w, V):
+    """Eigenvalues w (3,) and eigenvectors (columns of V, 3x3) of the symmetric 3x3 matrix a,
+    which is overwritten (cyclic Jacobi rotations, Numerical Recipes' update)."""
     for i in range(3):
         for j in range(3):
             V[i, j] = 1.0 if i == j else 0.0
@@ -87,27 +75,37 @@ def _sym3_eigen(S, w, V):
         scale = a[0, 0] ** 2 + a[1, 1] ** 2 + a[2, 2] ** 2 + off
         if off <= 1e-32 * scale or off == 0.0:
             break
-        for p in range(2):
-            for q in range(p + 1, 3):
-                if a[p, q] == 0.0:
-                    continue
-                theta = (a[q, q] - a[p, p]) / (2.0 * a[p, q])
-                t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
-                c = 1.0 / math.sqrt(t * t + 1.0)
-                s = t * c
-                _rotate_columns(a, p, q, c, s)    # a <- J^T a J
-                _rotate_columns(a.T, p, q, c, s)
-                _rotate_columns(V, p, q, c, s)    # V <- V J
+        for p, q, r in ((0, 1, 2), (0, 2, 1), (1, 2, 0)):
+            apq = a[p, q]
+            if apq == 0.0:
+                continue
+            theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+            t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+            c = 1.0 / math.sqrt(t * t + 1.0)
+            s = t * c
+            tau = s / (1.0 + c)
+            a[p, p] -= t * apq
+            a[q, q] += t * apq
+            a[p, q] = a[q, p] = 0.0
+            arp, arq = a[r, p], a[r, q]
+            a[r, p] = a[p, r] = arp - s * (arq + tau * arp)
+            a[r, q] = a[q, r] = arq + s * (arp - tau * arq)
+            for k in range(3):
+                vkp, vkq = V[k, p], V[k, q]
+                V[k, p] = vkp - s * (vkq + tau * vkp)
+                V[k, q] = vkq + s * (vkp - tau * vkq)
     for k in range(3):
         w[k] = a[k, k]
 
 
 @njit(cache=True, inline="always")
-def _sym3_positive_part(S, out):
-    """Write the positive part of the symmetric 3x3 matrix S into out."""
-    w = np.empty(3)
-    V = np.empty((3, 3))
-    _sym3_eigen(S, w, V)
+def _sym3_positive_part(S, out, w, V):
+    """Write the positive part of the symmetric 3x3 matrix S into out (w (3,), V (3, 3):
+    scratch)."""
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = S[i, j]
+    _sym3_eigen(out, w, V)
     for i in range(3):
         for j in range(3):
             out[i, j] = 0.0
@@ -258,7 +256,7 @@ def _element_hessian(G, v, model, m_e, l_e, k_e, d, F, S, Fd, project, Sg, B, q,
                         for i in range(3):
                             He[3 * a + i, 3 * b + i] += sab
     else:
-        _stvk_hessian(G, v, m_e, l_e, F, S, project, Sg, B, q, He)
+        _stvk_hessian(G, v, m_e, l_e, F, S, project, Sg, B, q, work, He)
     if k_e != 0.0:
         for a in range(4):
             sa = 8.0 * k_e * v * (d[0] * G[a, 0] + d[1] * G[a, 1] + d[2] * G[a, 2])
@@ -275,11 +273,11 @@ def _element_hessian(G, v, model, m_e, l_e, k_e, d, F, S, Fd, project, Sg, B, q,
 
 
 @njit(cache=True, inline="always")
-def _stvk_hessian(G, v, m_e, l_e, F, S, project, Sg, B, q, He):
+def _stvk_hessian(G, v, m_e, l_e, F, S, project, Sg, B, q, work, He):
     """Blocks a <= b of the StVK element Hessian with the total stress S in its geometric part
-    (projected: S+), N/m."""
+    (projected: S+), N/m. work: WORK_SHAPE scratch."""
     if project and _has_negative_eigenvalue(S):
-        _sym3_positive_part(S, Sg)
+        _sym3_positive_part(S, Sg, work[9, 0], work[3, :3])
     else:
         for i in range(3):
             for j in range(3):
@@ -304,29 +302,68 @@ def _stvk_hessian(G, v, m_e, l_e, F, S, project, Sg, B, q, He):
                 He[3 * a + i, 3 * b + i] += v * geo
 
 
-#: Rows of the workspace _neohookean_hessian uses (each 3x3 or shorter).
-_C, _V, _U, _A, _Z, _P, _D = range(7)
-WORK_SHAPE = (9, 4, 3)
+#: Shape of the scratch array of _neohookean_hessian.
+WORK_SHAPE = (10, 4, 3)
 
 
 @njit(cache=True, inline="always")
 def _neohookean_hessian(G, v, m_e, l_e, F, project, work, He):
-    """The whole isotropic Neo-Hookean element Hessian (N/m) from its nine eigenmodes
-    (projected: the modes with negative eigenvalues dropped). work: WORK_SHAPE scratch."""
+    """Blocks a <= b of the isotropic Neo-Hookean element Hessian, N/m:
+
+        H[3a+i, 3b+k] = v (mu delta_ik G_a.G_b + lam r_a,i r_b,k + c r_a,k r_b,i),
+
+    r_a = F^-T G_a, c = mu - lam ln J; projected: minus its modes with negative eigenvalues
+    (see the module docstring). work: WORK_SHAPE scratch. Zero where det F <= 0 (outside the
+    energy's domain)."""
     for r in range(12):
-        for c in range(12):
-            He[r, c] = 0.0
-    J = (F[0, 0] * (F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1])
-         - F[0, 1] * (F[1, 0] * F[2, 2] - F[1, 2] * F[2, 0])
-         + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
+        for col in range(12):
+            He[r, col] = 0.0
+    cof = work[0, :3]
+    _cofactor(F, cof)
+    J = F[0, 0] * cof[0, 0] + F[0, 1] * cof[0, 1] + F[0, 2] * cof[0, 2]
     if not J > 0.0:
-        return  # outside the energy's domain (psi = +inf): no Hessian
-    C, V, U, A, Z, P, D = (work[_C, :3], work[_V, :3], work[_U, :3], work[_A, :3],
-                           work[_Z, :3], work[_P], work[_D, :3])
-    w = work[7, 0]
-    z = work[7, 1]
-    sig = work[7, 2]
-    b = work[8].reshape(12)
+        return
+    r = work[1]
+    for a in range(4):
+        for i in range(3):
+            r[a, i] = (cof[i, 0] * G[a, 0] + cof[i, 1] * G[a, 1] + cof[i, 2] * G[a, 2]) / J
+    c = m_e - l_e * math.log(J)
+    for a in range(4):
+        for b in range(a, 4):
+            gg = m_e * (G[a, 0] * G[b, 0] + G[a, 1] * G[b, 1] + G[a, 2] * G[b, 2])
+            for i in range(3):
+                for k in range(3):
+                    h = l_e * r[a, i] * r[b, k] + c * r[a, k] * r[b, i]
+                    if i == k:
+                        h += gg
+                    He[3 * a + i, 3 * b + k] = v * h
+    if project:
+        _drop_negative_modes(G, v, m_e, l_e, F, J, c, work, He)
+
+
+@njit(cache=True, inline="always")
+def _cofactor(F, cof):
+    """cof = the cofactor matrix of the 3x3 F (det F = F[0] . cof[0])."""
+    cof[0, 0] = F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]
+    cof[0, 1] = F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2]
+    cof[0, 2] = F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]
+    cof[1, 0] = F[0, 2] * F[2, 1] - F[0, 1] * F[2, 2]
+    cof[1, 1] = F[0, 0] * F[2, 2] - F[0, 2] * F[2, 0]
+    cof[1, 2] = F[0, 1] * F[2, 0] - F[0, 0] * F[2, 1]
+    cof[2, 0] = F[0, 1] * F[1, 2] - F[0, 2] * F[1, 1]
+    cof[2, 1] = F[0, 2] * F[1, 0] - F[0, 0] * F[1, 2]
+    cof[2, 2] = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
+
+
+@njit(cache=True, inline="always")
+def _drop_negative_modes(G, v, m_e, l_e, F, J, c, work, He):
+    """Subtract from the Neo-Hookean element Hessian its eigenmodes with negative eigenvalues
+    (F = U diag(sig) V^T from the eigen-decomposition of C = F^T F, J = det F > 0)."""
+    C, V, U, A, Z, D = work[2, :3], work[3, :3], work[4, :3], work[5, :3], work[6, :3], \
+        work[7, :3]
+    P = work[8]
+    w, z, sig = work[9, 0], work[9, 1], work[9, 2]
+    b = work[0].reshape(12)  # the cofactor rows are no longer needed
     for i in range(3):
         for j in range(3):
             C[i, j] = F[0, i] * F[0, j] + F[1, i] * F[1, j] + F[2, i] * F[2, j]
@@ -334,60 +371,61 @@ def _neohookean_hessian(G, v, m_e, l_e, F, project, work, He):
     for k in range(3):
         sig[k] = math.sqrt(max(w[k], 0.0))
     # rescale so that the product of the singular values is J exactly
-    ratio = (J / max(sig[0] * sig[1] * sig[2], 1e-300)) ** (1.0 / 3.0)
+    scale = (J / max(sig[0] * sig[1] * sig[2], 1e-300)) ** (1.0 / 3.0)
     for k in range(3):
-        sig[k] *= ratio
+        sig[k] *= scale
     for i in range(3):
         for k in range(3):
             U[i, k] = (F[i, 0] * V[0, k] + F[i, 1] * V[1, k] + F[i, 2] * V[2, k]) / sig[k]
     for a in range(4):
         for k in range(3):
             P[a, k] = V[0, k] * G[a, 0] + V[1, k] * G[a, 1] + V[2, k] * G[a, 2]
-    c = m_e - l_e * math.log(J)
-    # scaling modes: eigenvectors of d2psi / ds_i ds_j
+    # twist (sign -1) and flip (+1) modes of each pair of singular values
+    h = 1.0 / math.sqrt(2.0)
+    for i in range(2):
+        for j in range(i + 1, 3):
+            ratio = c / (sig[i] * sig[j])
+            for sign in (-1.0, 1.0):
+                eigenvalue = m_e + sign * ratio
+                if eigenvalue < 0.0:
+                    for p in range(3):
+                        for q in range(3):
+                            D[p, q] = 0.0
+                    D[i, j] = h
+                    D[j, i] = sign * h
+                    _add_mode(He, -v * eigenvalue, U, P, D, b)
+    # scaling modes: d2psi / ds_i ds_j = delta_ij (mu + c / s_i^2) + lam / (s_i s_j), PSD when
+    # its diagonal part is
+    if min(sig[0] ** 2, sig[1] ** 2, sig[2] ** 2) * m_e + c >= 0.0:
+        return
     for i in range(3):
         for j in range(3):
             A[i, j] = l_e / (sig[i] * sig[j])
         A[i, i] += m_e + c / (sig[i] * sig[i])
     _sym3_eigen(A, z, Z)
     for k in range(3):
-        for i in range(3):
-            for j in range(3):
-                D[i, j] = Z[i, k] if i == j else 0.0
-        _add_mode(He, v, z[k], project, U, P, D, b)
-    # twist and flip modes of each pair of singular values
-    h = 1.0 / math.sqrt(2.0)
-    for i in range(2):
-        for j in range(i + 1, 3):
-            ratio = c / (sig[i] * sig[j])
-            for sign in (-1.0, 1.0):
-                for r in range(3):
-                    for s in range(3):
-                        D[r, s] = 0.0
-                D[i, j] = h
-                D[j, i] = sign * h
-                _add_mode(He, v, m_e + sign * ratio, project, U, P, D, b)
+        if z[k] < 0.0:
+            for p in range(3):
+                for q in range(3):
+                    D[p, q] = Z[p, k] if p == q else 0.0
+            _add_mode(He, -v * z[k], U, P, D, b)
 
 
 @njit(cache=True, inline="always")
-def _add_mode(He, v, eigenvalue, project, U, P, D, b):
-    """He += v eigenvalue b b^T for the mode dF = U D V^T, b[3a+i] = (dF G_a)_i (skipped when
-    projecting a negative eigenvalue). P[a] = V^T G_a."""
-    if project and eigenvalue <= 0.0:
-        return
+def _add_mode(He, coef, U, P, D, b):
+    """Blocks a <= b of He += coef b b^T for the mode dF = U D V^T: b[3a+i] = (dF G_a)_i,
+    with P[a] = V^T G_a."""
     for a in range(4):
-        for l in range(3):
-            t = D[l, 0] * P[a, 0] + D[l, 1] * P[a, 1] + D[l, 2] * P[a, 2]
-            b[3 * a + l] = t
-    for a in range(4):
-        t0, t1, t2 = b[3 * a], b[3 * a + 1], b[3 * a + 2]
+        t0 = D[0, 0] * P[a, 0] + D[0, 1] * P[a, 1] + D[0, 2] * P[a, 2]
+        t1 = D[1, 0] * P[a, 0] + D[1, 1] * P[a, 1] + D[1, 2] * P[a, 2]
+        t2 = D[2, 0] * P[a, 0] + D[2, 1] * P[a, 1] + D[2, 2] * P[a, 2]
         for i in range(3):
             b[3 * a + i] = U[i, 0] * t0 + U[i, 1] * t1 + U[i, 2] * t2
-    coef = v * eigenvalue
-    for r in range(12):
-        br = coef * b[r]
-        for col in range(12):
-            He[r, col] += br * b[col]
+    for a in range(4):
+        for i in range(3):
+            br = coef * b[3 * a + i]
+            for col in range(3 * a, 12):
+                He[3 * a + i, col] += br * b[col]
 
 
 @njit(cache=True)

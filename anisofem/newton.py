@@ -6,10 +6,11 @@ in N (Potential.force_scale: external, elastic and inertial forces at the proble
 at the solve's first iterate, so a poor first guess cannot loosen the test). The default
 atol is the round-off level of the gradient, ROUNDOFF * E_max * l^2 * sqrt(unknowns) (l: mean
 rest edge length), below which the gradient cannot be resolved; pass atol=0 to insist on rtol
-alone. Each iteration line-searches the
-method's directions in turn (backtracking to the Armijo condition on G) until one makes
-progress. The result is never NaN: a failure returns the last iterate, converged=False,
-failed=True and a message saying why.
+alone. Each iteration line-searches the method's directions in turn (backtracking to the
+Armijo condition on G) until one makes progress; a trial point where G is +inf (a
+Neo-Hookean element with det F <= 0) is rejected like any other that does not descend, so
+no iterate ever leaves the material's domain. The result is never NaN: a failure returns
+the last iterate, converged=False, failed=True and a message saying why.
 
 Newton's Hessian choice (`projection`, see anisofem.methods.Newton): "adaptive" (default)
 first tries the true Hessian; it is used when it is positive definite (the Cholesky-type
@@ -124,6 +125,9 @@ def _iterate(potential, x0, method, accept):
     free = scene.free_dofs
     x = np.array(x0, dtype=float)
     energy, grad = potential.energy_gradient(x)
+    if not math.isfinite(energy):
+        raise ValueError(f"x0: the potential is {energy} at the start (elements outside the "
+                         f"material's domain, det F <= 0 for Neo-Hookean)")
     g = grad.ravel()[free]
     scale = potential.force_scale()
     atol = method.atol

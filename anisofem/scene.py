@@ -1,5 +1,6 @@
 """A scene: mesh + material + boundary conditions + dead loads, with the per-element data the
 kernels need, precomputed once."""
+import copy
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -7,6 +8,8 @@ import numpy as np
 
 from ._validate import as_float_array, as_index_array, check_shape, per_element
 from .assembly import BandedLayout, CsrLayout, DenseLayout
+from .inversion import volume_change
+from .kernels import STVK
 from .material import Material
 from .mesh import TetMesh
 
@@ -202,6 +205,27 @@ class Scene:
         x = np.array(x, dtype=float)
         x[self.fixed_mask] = self.fixed_positions[self.fixed_mask]
         return x
+
+    def held_at(self, fixed_positions):
+        """The same scene with its fixed components held at fixed_positions (n, 3), m: for
+        prescribed motion, one scene per step. Shares the per-element data, the sparsity
+        patterns and the loads, so it costs a copy of the positions."""
+        pos = as_float_array(fixed_positions, "fixed_positions",
+                             shape=(self.mesh.n_vertices, 3))
+        moved = copy.copy(self)
+        x = self.fixed_positions.copy()
+        x[self.fixed_mask] = pos[self.fixed_mask]
+        x.setflags(write=False)
+        moved.fixed_positions = x
+        return moved
+
+    def outside_domain(self, x):
+        """How many elements have infinite energy at positions x (n, 3): Neo-Hookean ones with
+        det F <= 0 (StVK is defined everywhere). A solve cannot start there."""
+        barrier = self.elements.model != STVK
+        if not barrier.any():
+            return 0
+        return int((volume_change(self.mesh, x)[barrier] <= -1.0).sum())
 
 
 def _to_vertices(mesh, per_tet):

@@ -41,6 +41,12 @@ def solve(scene, x0=None, method="newton", warn=True, **options):
     scene.check_static()
     x0 = scene.initial_positions() if x0 is None else scene.with_fixed(check_positions(
         scene, x0, "x0"))
+    bad = scene.outside_domain(x0)
+    if bad:
+        raise ValueError(f"x0: {bad} Neo-Hookean elements start turned inside out or flat "
+                         f"(det F <= 0), where their energy is infinite; start from a state "
+                         f"with det F > 0 (prescribed positions far from rest: reach them in "
+                         f"steps, scene.held_at)")
     return minimize(Potential(scene), x0, method, warn=warn, **options)
 
 
@@ -81,8 +87,25 @@ def step(scene, x, v, dt, a_guess=None, method="newton", warn=True, **options):
     potential = Potential(scene, x_hat, dt, x_start=x)
     method = methods.make(method, **options)
     accept = _no_energy_gain(potential) if method.budget else None
-    result = minimize(potential, scene.with_fixed(start), method, warn=warn, accept=accept)
+    result = minimize(potential, _start_in_domain(scene, start, x), method, warn=warn,
+                      accept=accept)
     return StepResult(result.x, (result.x - x) / dt, result)
+
+
+def _start_in_domain(scene, start, x):
+    """The step's first iterate: start (n, 3) with the fixed components at their prescribed
+    positions, or x (the state at the start of the step) so moved where that start leaves the
+    Neo-Hookean elements' domain (det F > 0); a ValueError where neither is in it."""
+    first = scene.with_fixed(start)
+    if not scene.outside_domain(first):
+        return first
+    first = scene.with_fixed(x)
+    bad = scene.outside_domain(first)
+    if bad:
+        raise ValueError(f"fixed_positions: {bad} Neo-Hookean elements would start the step "
+                         f"turned inside out or flat (det F <= 0), where their energy is "
+                         f"infinite; move the prescribed positions in smaller steps")
+    return first
 
 
 def _no_energy_gain(potential):
