@@ -65,37 +65,92 @@ PARALLEL_MIN_ELEMENTS = 4000
 
 @njit(cache=True, inline="always")
 def _sym3_eigen(a, w, V):
-    """Eigenvalues w (3,) and eigenvectors (columns of V, 3x3) of the symmetric 3x3 matrix a,
-    which is overwritten (cyclic Jacobi rotations, Numerical Recipes' update)."""
+    """Eigenvalues w (3,) and orthonormal eigenvectors (columns of V, 3x3) of the symmetric
+    3x3 matrix a (read only). Closed form, after Eberly's robust scheme: of B = (a - tr(a)/3 I)
+    / p, the root of the characteristic cubic farthest from the other two (trigonometric
+    solution; it is accurate where the other two nearly coincide), its eigenvector as the
+    longest cross product of two rows of B - beta I, the other two from the 2x2 restriction
+    of B to the orthogonal plane, diagonalized by one Jacobi rotation; the eigenvalues are the
+    Rayleigh quotients. No iteration, accurate for nearly repeated eigenvalues too."""
+    m = max(abs(a[0, 0]), abs(a[0, 1]), abs(a[0, 2]), abs(a[1, 1]), abs(a[1, 2]),
+            abs(a[2, 2]))
     for i in range(3):
         for j in range(3):
             V[i, j] = 1.0 if i == j else 0.0
-    for _sweep in range(30):
-        off = a[0, 1] ** 2 + a[0, 2] ** 2 + a[1, 2] ** 2
-        scale = a[0, 0] ** 2 + a[1, 1] ** 2 + a[2, 2] ** 2 + off
-        if off <= 1e-32 * scale or off == 0.0:
-            break
-        for p, q, r in ((0, 1, 2), (0, 2, 1), (1, 2, 0)):
-            apq = a[p, q]
-            if apq == 0.0:
-                continue
-            theta = (a[q, q] - a[p, p]) / (2.0 * apq)
-            t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
-            c = 1.0 / math.sqrt(t * t + 1.0)
-            s = t * c
-            tau = s / (1.0 + c)
-            a[p, p] -= t * apq
-            a[q, q] += t * apq
-            a[p, q] = a[q, p] = 0.0
-            arp, arq = a[r, p], a[r, q]
-            a[r, p] = a[p, r] = arp - s * (arq + tau * arp)
-            a[r, q] = a[q, r] = arq + s * (arp - tau * arq)
-            for k in range(3):
-                vkp, vkq = V[k, p], V[k, q]
-                V[k, p] = vkp - s * (vkq + tau * vkp)
-                V[k, q] = vkq + s * (vkp - tau * vkq)
+    if m == 0.0:
+        w[0] = w[1] = w[2] = 0.0
+        return
+    q = (a[0, 0] + a[1, 1] + a[2, 2]) / (3.0 * m)
+    b00, b11, b22 = a[0, 0] / m - q, a[1, 1] / m - q, a[2, 2] / m - q
+    b01, b02, b12 = a[0, 1] / m, a[0, 2] / m, a[1, 2] / m
+    p = math.sqrt((b00 * b00 + b11 * b11 + b22 * b22
+                   + 2.0 * (b01 * b01 + b02 * b02 + b12 * b12)) / 6.0)
+    if p == 0.0:
+        w[0] = w[1] = w[2] = q * m
+        return
+    b00, b11, b22, b01, b02, b12 = b00 / p, b11 / p, b22 / p, b01 / p, b02 / p, b12 / p
+    half_det = 0.5 * (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02)
+                      + b02 * (b01 * b12 - b11 * b02))
+    phi = math.acos(min(1.0, max(-1.0, half_det))) / 3.0
+    # the root farthest from the other two: the largest when half_det >= 0, else the smallest
+    beta = 2.0 * math.cos(phi if half_det >= 0.0 else phi + 2.0 * math.pi / 3.0)
+    e0, e1, e2 = V[:, 0], V[:, 1], V[:, 2]
+    if not _null_vector(b00 - beta, b01, b02, b11 - beta, b12, b22 - beta, e0):
+        e0[0], e0[1], e0[2] = 1.0, 0.0, 0.0
+    # u, v: an orthonormal basis of the plane orthogonal to e0
+    if abs(e0[0]) > abs(e0[1]):
+        inv = 1.0 / math.sqrt(e0[0] * e0[0] + e0[2] * e0[2])
+        u0, u1, u2 = -e0[2] * inv, 0.0, e0[0] * inv
+    else:
+        inv = 1.0 / math.sqrt(e0[1] * e0[1] + e0[2] * e0[2])
+        u0, u1, u2 = 0.0, e0[2] * inv, -e0[1] * inv
+    v0, v1, v2 = e0[1] * u2 - e0[2] * u1, e0[2] * u0 - e0[0] * u2, e0[0] * u1 - e0[1] * u0
+    # the 2x2 restriction [u v]^T B [u v], diagonalized by one Jacobi rotation
+    bu0 = b00 * u0 + b01 * u1 + b02 * u2
+    bu1 = b01 * u0 + b11 * u1 + b12 * u2
+    bu2 = b02 * u0 + b12 * u1 + b22 * u2
+    bv0 = b00 * v0 + b01 * v1 + b02 * v2
+    bv1 = b01 * v0 + b11 * v1 + b12 * v2
+    bv2 = b02 * v0 + b12 * v1 + b22 * v2
+    m00 = u0 * bu0 + u1 * bu1 + u2 * bu2
+    m01 = u0 * bv0 + u1 * bv1 + u2 * bv2
+    m11 = v0 * bv0 + v1 * bv1 + v2 * bv2
+    c, s = 1.0, 0.0
+    if m01 != 0.0:
+        theta = (m11 - m00) / (2.0 * m01)
+        t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+        c = 1.0 / math.sqrt(t * t + 1.0)
+        s = t * c
+    e1[0], e1[1], e1[2] = c * u0 - s * v0, c * u1 - s * v1, c * u2 - s * v2
+    e2[0], e2[1], e2[2] = s * u0 + c * v0, s * u1 + c * v1, s * u2 + c * v2
+    # Rayleigh quotients: accurate where the trigonometric roots are not (nearly double ones)
     for k in range(3):
-        w[k] = a[k, k]
+        e = V[:, k]
+        w[k] = m * (q + p * (b00 * e[0] * e[0] + b11 * e[1] * e[1] + b22 * e[2] * e[2]
+                             + 2.0 * (b01 * e[0] * e[1] + b02 * e[0] * e[2] + b12 * e[1] * e[2])))
+
+
+@njit(cache=True, inline="always")
+def _null_vector(a00, a01, a02, a11, a12, a22, out):
+    """Write into out a unit vector orthogonal to the rows of the symmetric 3x3 matrix given
+    by its upper triangle (rank 2): their longest cross product. False where all vanish."""
+    x0, y0, z0 = a01 * a12 - a02 * a11, a02 * a01 - a00 * a12, a00 * a11 - a01 * a01
+    x1, y1, z1 = a01 * a22 - a02 * a12, a02 * a02 - a00 * a22, a00 * a12 - a01 * a02
+    x2, y2, z2 = a11 * a22 - a12 * a12, a12 * a02 - a01 * a22, a01 * a12 - a11 * a02
+    n0 = x0 * x0 + y0 * y0 + z0 * z0
+    n1 = x1 * x1 + y1 * y1 + z1 * z1
+    n2 = x2 * x2 + y2 * y2 + z2 * z2
+    if n0 >= n1 and n0 >= n2:
+        x, y, z, n = x0, y0, z0, n0
+    elif n1 >= n2:
+        x, y, z, n = x1, y1, z1, n1
+    else:
+        x, y, z, n = x2, y2, z2, n2
+    if n == 0.0:
+        return False
+    inv = 1.0 / math.sqrt(n)
+    out[0], out[1], out[2] = x * inv, y * inv, z * inv
+    return True
 
 
 @njit(cache=True, inline="always")
@@ -359,8 +414,7 @@ def _cofactor(F, cof):
 def _drop_negative_modes(G, v, m_e, l_e, F, J, c, work, He):
     """Subtract from the Neo-Hookean element Hessian its eigenmodes with negative eigenvalues
     (F = U diag(sig) V^T from the eigen-decomposition of C = F^T F, J = det F > 0)."""
-    C, V, U, A, Z, D = work[2, :3], work[3, :3], work[4, :3], work[5, :3], work[6, :3], \
-        work[7, :3]
+    C, V, U, A, Z = work[2, :3], work[3, :3], work[4, :3], work[5, :3], work[6, :3]
     P = work[8]
     w, z, sig = work[9, 0], work[9, 1], work[9, 2]
     b = work[0].reshape(12)  # the cofactor rows are no longer needed
@@ -380,20 +434,20 @@ def _drop_negative_modes(G, v, m_e, l_e, F, J, c, work, He):
     for a in range(4):
         for k in range(3):
             P[a, k] = V[0, k] * G[a, 0] + V[1, k] * G[a, 1] + V[2, k] * G[a, 2]
-    # twist (sign -1) and flip (+1) modes of each pair of singular values
+    # twist (sign -1) and flip (+1) modes of each pair of singular values: dF = U D V^T with
+    # D = (e_i e_j^T + sign e_j e_i^T) / sqrt 2, eigenvalue mu + sign c / (s_i s_j); at most
+    # one of the two is negative
     h = 1.0 / math.sqrt(2.0)
     for i in range(2):
         for j in range(i + 1, 3):
             ratio = c / (sig[i] * sig[j])
-            for sign in (-1.0, 1.0):
-                eigenvalue = m_e + sign * ratio
-                if eigenvalue < 0.0:
-                    for p in range(3):
-                        for q in range(3):
-                            D[p, q] = 0.0
-                    D[i, j] = h
-                    D[j, i] = sign * h
-                    _add_mode(He, -v * eigenvalue, U, P, D, b)
+            sign = -1.0 if ratio > 0.0 else 1.0
+            eigenvalue = m_e - abs(ratio)
+            if eigenvalue < 0.0:
+                for a in range(4):
+                    for k in range(3):
+                        b[3 * a + k] = h * (U[k, i] * P[a, j] + sign * U[k, j] * P[a, i])
+                _add_outer(He, -v * eigenvalue, b)
     # scaling modes: d2psi / ds_i ds_j = delta_ij (mu + c / s_i^2) + lam / (s_i s_j), PSD when
     # its diagonal part is
     if min(sig[0] ** 2, sig[1] ** 2, sig[2] ** 2) * m_e + c >= 0.0:
@@ -405,27 +459,20 @@ def _drop_negative_modes(G, v, m_e, l_e, F, J, c, work, He):
     _sym3_eigen(A, z, Z)
     for k in range(3):
         if z[k] < 0.0:
-            for p in range(3):
-                for q in range(3):
-                    D[p, q] = Z[p, k] if p == q else 0.0
-            _add_mode(He, -v * z[k], U, P, D, b)
+            for a in range(4):
+                for i in range(3):
+                    b[3 * a + i] = (U[i, 0] * Z[0, k] * P[a, 0] + U[i, 1] * Z[1, k] * P[a, 1]
+                                    + U[i, 2] * Z[2, k] * P[a, 2])
+            _add_outer(He, -v * z[k], b)
 
 
 @njit(cache=True, inline="always")
-def _add_mode(He, coef, U, P, D, b):
-    """Blocks a <= b of He += coef b b^T for the mode dF = U D V^T: b[3a+i] = (dF G_a)_i,
-    with P[a] = V^T G_a."""
-    for a in range(4):
-        t0 = D[0, 0] * P[a, 0] + D[0, 1] * P[a, 1] + D[0, 2] * P[a, 2]
-        t1 = D[1, 0] * P[a, 0] + D[1, 1] * P[a, 1] + D[1, 2] * P[a, 2]
-        t2 = D[2, 0] * P[a, 0] + D[2, 1] * P[a, 1] + D[2, 2] * P[a, 2]
-        for i in range(3):
-            b[3 * a + i] = U[i, 0] * t0 + U[i, 1] * t1 + U[i, 2] * t2
-    for a in range(4):
-        for i in range(3):
-            br = coef * b[3 * a + i]
-            for col in range(3 * a, 12):
-                He[3 * a + i, col] += br * b[col]
+def _add_outer(He, coef, b):
+    """He += coef b b^T (12x12; only the blocks a <= b are read later)."""
+    for r in range(12):
+        br = coef * b[r]
+        for col in range(12):
+            He[r, col] += br * b[col]
 
 
 @njit(cache=True)
