@@ -212,6 +212,7 @@ class Scene:
         patterns and the loads, so it costs a copy of the positions."""
         pos = as_float_array(fixed_positions, "fixed_positions",
                              shape=(self.mesh.n_vertices, 3))
+        self.elements, self.dof_map, self.free_dofs  # computed once, shared by the copies
         moved = copy.copy(self)
         x = self.fixed_positions.copy()
         x[self.fixed_mask] = pos[self.fixed_mask]

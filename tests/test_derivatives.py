@@ -1,5 +1,6 @@
-"""Gradient and Hessian of the element energy against central finite differences, at ordinary
-and extreme parameters; rigid-rotation invariance; properties of the PSD projection."""
+"""Gradient and Hessian of the element energy (StVK and Neo-Hookean bases) against central
+finite differences, at ordinary and extreme parameters; rigid-rotation invariance; properties
+of the PSD projections."""
 import itertools
 
 import numpy as np
@@ -72,12 +73,13 @@ CASES = list(itertools.product(
 ))
 
 
+@pytest.mark.parametrize("model", af.material.MODELS)
 @pytest.mark.parametrize("kappa,nu,stretches", CASES)
-def test_gradient_and_hessian_match_finite_differences(kappa, nu, stretches):
+def test_gradient_and_hessian_match_finite_differences(kappa, nu, stretches, model):
     rng = np.random.default_rng(hash((kappa, nu, stretches)) % 2**32)
     mesh = random_tet(rng)
     d = rng.standard_normal(3)
-    mat = af.Material(E, nu, 1000.0, d / np.linalg.norm(d), kappa)
+    mat = af.Material(E, nu, 1000.0, d / np.linalg.norm(d), kappa, model=model)
     scene = af.Scene(mesh, mat)
     x = deformed(rng, mesh, stretches)
     h = 1e-6 * min_altitude(mesh)
@@ -88,16 +90,18 @@ def test_gradient_and_hessian_match_finite_differences(kappa, nu, stretches):
     assert np.abs(H - H.T).max() <= 1e-12 * np.abs(H).max()
 
 
+@pytest.mark.parametrize("model", af.material.MODELS)
 @pytest.mark.parametrize("flatness", [1e-2, 1e-3])
 @pytest.mark.parametrize("kappa", [0.0, E, 100 * E])
-def test_derivatives_on_nearly_flat_elements(flatness, kappa):
+def test_derivatives_on_nearly_flat_elements(flatness, kappa, model):
     rng = np.random.default_rng(int(flatness * 1e4) + int(kappa))
     mesh = random_tet(rng, flatness)
     quality = 6 * mesh.rest_volumes[0] / np.linalg.norm(
         mesh.vertices[1:] - mesh.vertices[0], axis=1).max() ** 3
     assert quality < 10 * flatness  # the element really is nearly flat
     d = rng.standard_normal(3)
-    scene = af.Scene(mesh, af.Material(E, 0.48, 1000.0, d / np.linalg.norm(d), kappa))
+    scene = af.Scene(mesh, af.Material(E, 0.48, 1000.0, d / np.linalg.norm(d), kappa,
+                                       model=model))
     x = deformed(rng, mesh, (1.2, 0.8, 1.0))
     h = 1e-6 * min_altitude(mesh)
     assert rel_err(af.gradient(scene, x), fd_gradient(scene, x, h)) < 1e-6
