@@ -11,9 +11,11 @@ import numpy as np
 
 from . import linsolve, reference_numpy
 from ._files import atomic_path
+from .material import MODELS, Material
 from .meshgen import box_beam
 from .newton import minimize
 from .potential import Potential
+from .scene import Scene
 from .solve import default_scene, simulate, solve, step
 
 #: cells (nx, ny, nz) of box beams of about 10^2, 10^3, 10^4 and 10^5 tets (5 per cell)
@@ -69,6 +71,35 @@ def bench_size(label, cells, with_numpy_solve):
             budget=10.0)
         row.update(solve_numpy_s=numpy_solve_s, newton_iterations_numpy=refs[-1].iterations)
     return row
+
+
+def bench_materials(cells=SIZES["1e4"]):
+    """Each base model (anisofem.material.MODELS) on the box cantilever with fibers along it
+    (kappa = E) under gravity: gradient, true Hessian and projected Hessian assembly (free
+    DOFs, CSR) at a rippled rest state (strains ~2%) and at the bent static equilibrium, and
+    the static solve; least seconds of repeated runs, models interleaved per quantity."""
+    mesh = box_beam(cells=cells)
+    fixed = np.flatnonzero(mesh.vertices[:, 0] <= 1e-9)
+    scenes = {name: Scene(mesh, Material(fiber_stiffness=1e5, model=name), fixed=fixed,
+                          gravity=(0.0, 0.0, -9.81)) for name in MODELS}
+    rows = {}
+    for name, scene in scenes.items():
+        solve(scene, max_iter=1, warn=False)  # compile and build the patterns
+        bent = solve(scene)
+        rows[name] = {"tets": mesh.n_tets, "solve_iterations": bent.iterations,
+                      "converged": bent.converged,
+                      "states": {"rippled": scene.initial_positions()
+                                 + 1e-4 * np.sin(mesh.vertices * 200), "bent": bent.x}}
+    for name, scene in scenes.items():
+        pot, layout, row = Potential(scene), scene.layout("csr"), rows[name]
+        for state, x in row.pop("states").items():
+            row[f"gradient_{state}_s"] = best_time(lambda: pot.energy_gradient(x), 30)
+            row[f"hessian_{state}_s"] = best_time(
+                lambda: pot.hessian_data(x, layout, project=False), 30)
+            row[f"projected_{state}_s"] = best_time(
+                lambda: pot.hessian_data(x, layout, project=True), 30)
+        row["solve_s"] = best_time(lambda: solve(scene), 5, budget=10.0)
+    return rows
 
 
 def bench_small_dynamics(cells=(5, 2, 2), steps=100, dt=0.02, repeats=5,
@@ -151,7 +182,8 @@ def run(sizes=tuple(SIZES), out="bench_anisofem.json"):
     report = {"assembly_and_static_solve": rows, "dynamics_100_tets": bench_small_dynamics(),
               "first_solve_new_process_s": first_solve_in_new_process(),
               "small_factorization": bench_small_factorizations(),
-              "factorization_s": factorization, "threads": numba.get_num_threads()}
+              "factorization_s": factorization, "materials_1e4": bench_materials(),
+              "threads": numba.get_num_threads()}
     print_report(report)
     if out:
         write_json_atomic(out, report)
@@ -187,6 +219,23 @@ def print_report(r):
     for label, times in r["factorization_s"].items():
         print(f"One factorization at {label} tets: " + ", ".join(
             f"{k} {v:.2f} s" for k, v in times.items()))
+    print_materials(r["materials_1e4"])
+
+
+def print_materials(rows):
+    """The table of bench_materials: ms, and in brackets the ratio to the first model."""
+    first = next(iter(rows.values()))
+    print(f"\nBase materials, {first['tets']} tets, fibers along the cantilever (kappa = E), "
+          f"ms (x the first row):")
+    keys = [f"{q}_{state}_s" for state in ("rippled", "bent")
+            for q in ("gradient", "hessian", "projected")]
+    heads = [f"{q} {state}" for state in ("rippled", "bent")
+             for q in ("gradient", "true H", "proj. H")]
+    print(f"{'model':<11}" + "".join(f"{h:>17}" for h in heads) + f"{'static solve':>19}")
+    for name, row in rows.items():
+        cells = [f"{1e3 * row[k]:8.2f} ({row[k] / first[k]:4.2f}x)" for k in keys + ["solve_s"]]
+        print(f"{name:<11}" + "".join(f"{c:>17}" for c in cells[:-1])
+              + f"{cells[-1]:>14} {row['solve_iterations']:2d} its")
 
 
 def write_json_atomic(path, obj):

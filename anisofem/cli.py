@@ -2,7 +2,7 @@
 
   python -m anisofem mesh box --cells 10 2 2 -o beam.msh
   python -m anisofem solve beam.msh --fixed x-min --gravity 0 0 -9.81 --fiber 1 0 0 \\
-      --kappa 1e5 -o beam.vtu
+      --kappa 1e5 --material neohookean -o beam.vtu
   python -m anisofem trade beam.msh --fiber 0.766 0 0.643 --kappa 1e5 --steps 100 \\
       --json trade.json --png trade.png
   python -m anisofem bench --json bench_anisofem.json
@@ -16,7 +16,7 @@ import numpy as np
 from . import bench, ladder, meshgen, methods
 from .io import check_output_path, read_mesh, write_mesh
 from .inversion import inversion
-from .material import Material
+from .material import MODELS, Material
 from .metrics import end_vertices, tip_displacement
 from .scene import Scene
 from .solve import simulate, solve
@@ -57,6 +57,9 @@ def _scene_arguments(s):
     s.add_argument("--fiber", type=float, nargs=3, default=(1.0, 0.0, 0.0),
                    help="unit fiber direction")
     s.add_argument("--kappa", type=float, default=0.0, help="fiber stiffness, Pa")
+    s.add_argument("--material", default="stvk", choices=MODELS,
+                   help="base material: stvk (the paper's) or neohookean (never turns inside "
+                        "out; pick it when the scene compresses hard)")
 
 
 def _scene(args, mesh):
@@ -64,7 +67,7 @@ def _scene(args, mesh):
     if not np.linalg.norm(fiber) > 0:
         raise ValueError(f"--fiber: a direction needs a nonzero vector, got {args.fiber}")
     material = Material(args.young, args.poisson, args.density, fiber / np.linalg.norm(fiber),
-                        args.kappa)
+                        args.kappa, model=args.material)
     return Scene(mesh, material, fixed=_fixed(mesh, args.fixed), gravity=args.gravity)
 
 

@@ -4,9 +4,8 @@ Unknowns are the free vertex components; fixed ones stay at their prescribed pos
 Converged means |dG/dx|_free <= max(rtol * scale, atol), with scale the problem's force scale
 in N (Potential.force_scale: external, elastic and inertial forces at the problem's start, not
 at the solve's first iterate, so a poor first guess cannot loosen the test). The default
-atol is the round-off level of the gradient, ROUNDOFF * E_max * l^2 * sqrt(unknowns) (l: mean
-rest edge length), below which the gradient cannot be resolved; pass atol=0 to insist on rtol
-alone. Each iteration line-searches the method's directions in turn (backtracking to the
+atol is Scene.gradient_roundoff, a few times the level below which float64 cannot resolve the
+gradient; pass atol=0 to insist on rtol alone. Each iteration line-searches the method's directions in turn (backtracking to the
 Armijo condition on G) until one makes progress; a trial point where G is +inf (a
 Neo-Hookean element with det F <= 0) is rejected like any other that does not descend, so
 no iterate ever leaves the material's domain. The result is never NaN: a failure returns
@@ -30,7 +29,6 @@ import numpy as np
 from . import methods
 from .inversion import Inversion, inversion
 
-ROUNDOFF = 1e-14
 ARMIJO = 1e-4
 MIN_STEP = 1e-10
 
@@ -132,7 +130,7 @@ def _iterate(potential, x0, method, accept):
     scale = potential.force_scale()
     atol = method.atol
     if atol is None:
-        atol = ROUNDOFF * scene.force_unit * math.sqrt(free.size)
+        atol = scene.gradient_roundoff
     tol = max(method.rtol * scale, atol)
     gnorm = _norm(g)
     res = [gnorm / scale if scale > 0 else 0.0]

@@ -14,6 +14,10 @@ from .material import Material
 from .mesh import TetMesh
 
 
+#: Scene.gradient_roundoff's margin over the smallest gradient norm Newton reaches.
+ROUNDOFF_FACTOR = 2.0
+
+
 @dataclass(frozen=True)
 class ElementData:
     """Arrays the element kernels read (see anisofem.kernels), one row per tet."""
@@ -154,8 +158,27 @@ class Scene:
         strains an element by 100%."""
         p = self._params
         modulus = float(np.max(2 * p["mu"] + np.abs(p["lam"]) + 8 * p["kappa"]))
+        return modulus * self._edge_length ** 2
+
+    @cached_property
+    def _edge_length(self):
+        """Root mean square rest edge length, m."""
         X = self.mesh.vertices[self.mesh.edges]
-        return modulus * float(((X[:, 1] - X[:, 0]) ** 2).sum(1).mean())
+        return float(np.sqrt(((X[:, 1] - X[:, 0]) ** 2).sum(1).mean()))
+
+    @cached_property
+    def gradient_roundoff(self):
+        """The free-gradient norm below which float64 cannot resolve G's gradient, N:
+        ROUNDOFF_FACTOR eps force_unit (R / l) sqrt(unknowns), with R the largest coordinate
+        and l the edge length. F sums absolute positions times shape gradients ~ 1 / l, so
+        its round-off is ~ eps R / l and each nodal force's ~ eps E l^2 R / l. Measured, the
+        smallest residual Newton reaches is 0.07 to 0.56 of eps force_unit (R / l)
+        sqrt(unknowns) (200 to 12,800 tets, nu 0.3 to 0.4999, kappa up to 1000 E, the mesh at
+        the origin or 1 m away)."""
+        R = float(np.abs(np.concatenate([self.mesh.vertices, self.fixed_positions])).max())
+        l = self._edge_length
+        return (ROUNDOFF_FACTOR * np.finfo(float).eps * self.force_unit * max(R, l) / l
+                * np.sqrt(self.n_free))
 
     @cached_property
     def elements(self):

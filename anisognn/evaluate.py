@@ -183,15 +183,27 @@ def score(scene, positions, x_fem):
 
 
 def evaluate(simulators, steps=STEPS, suite=None, progress=False):
-    """{simulator name: [metrics dict per case]} for simulators {name: (scene, steps, x0) ->
-    positions}; suite defaults to cases(). Also returns the cases. progress: a line on stderr
-    per simulator and case."""
+    """Score simulators {name: (scene, steps, x0) -> positions} on suite (default cases()).
+
+    Returns (results {simulator name: [metrics dict per scored case]}, the scored cases,
+    not_scored [{"case", "reason"}]). A case whose FEM equilibrium is not physical (StVK turned
+    inside out: no real material gets there) is not scored: there is no answer to compare with.
+    progress: a line on stderr per simulator and case."""
     suite = cases() if suite is None else suite
-    fem = [anisofem.solve(c.scene).x for c in suite]
+    scored, fem, not_scored = [], [], []
+    for c in suite:
+        ref = anisofem.solve(c.scene, warn=False)
+        if ref.physical:
+            scored.append(c)
+            fem.append(ref.x)
+        else:
+            not_scored.append({"case": c.label, "reason": (
+                f"the FEM equilibrium turns {ref.inversion.inverted} of {c.scene.mesh.n_tets} "
+                f"elements inside out (StVK): not a physical reference")})
     results = {name: [] for name in simulators}
-    total, done = len(simulators) * len(suite), 0
+    total, done = len(simulators) * len(scored), 0
     for name, run in simulators.items():
-        for c, x in zip(suite, fem):
+        for c, x in zip(scored, fem):
             if progress:
                 done += 1
                 print(f"[{done}/{total}] {name}: {c.label}", file=sys.stderr, flush=True)
@@ -199,7 +211,7 @@ def evaluate(simulators, steps=STEPS, suite=None, progress=False):
                                   **score(c.scene, _rollout(run, c.scene, steps), x),
                                   **rest_acceleration(run, c.scene, x),
                                   **rest_stiffness(run, c.scene, x)})
-    return results, suite
+    return results, scored, not_scored
 
 
 COLUMNS = {"cantilever": (("tip_error", "tip error m", "{:.2e}"), ("tip_ratio", "/FEM", "{:.3f}")),
@@ -273,22 +285,30 @@ def summary(results, suite, ratio=None):
     out = {}
     for name, rows in results.items():
         tips = _pick(rows, suite, "cantilever", "tip_ratio")
-        out[name] = {"tip_ratio_mean": float(np.mean(tips)), "tip_ratio_max": float(np.max(tips)),
-                     "force_mean": float(np.mean(_pick(rows, suite, "imbalance", "force_mean"))),
-                     "volume_change_error_max": float(np.max(
-                         _pick(rows, suite, "tension", "volume_change_error"))),
-                     "rest_acceleration_mean": float(np.mean(
-                         [r["rest_acceleration_mean"] for r in rows])),
-                     "rest_stiffness_mean": float(np.mean([r["rest_stiffness"] for r in rows])),
+        out[name] = {"tip_ratio_mean": _reduce(np.mean, tips),
+                     "tip_ratio_max": _reduce(np.max, tips),
+                     "force_mean": _reduce(np.mean, _pick(rows, suite, "imbalance",
+                                                          "force_mean")),
+                     "volume_change_error_max": _reduce(np.max, _pick(
+                         rows, suite, "tension", "volume_change_error")),
+                     "rest_acceleration_mean": _reduce(np.mean, [r["rest_acceleration_mean"]
+                                                                 for r in rows]),
+                     "rest_stiffness_mean": _reduce(np.mean, [r["rest_stiffness"]
+                                                              for r in rows]),
                      "all_bounded": all(r["bounded"] for r in rows)}
     if ratio:
         first, second = (results[n] for n in ratio)
         tips = [a["tip_error"] / b["tip_error"] for a, b, c in zip(first, second, suite)
                 if c.group == "cantilever" and "tip_error" in a and "tip_error" in b]
-        out["ratios"] = {"tip_error_mean": float(np.mean(tips)) if tips else math.nan,
-                         "tip_error_max": float(np.max(tips)) if tips else math.nan,
+        out["ratios"] = {"tip_error_mean": _reduce(np.mean, tips),
+                         "tip_error_max": _reduce(np.max, tips),
                          "force_mean": out[ratio[0]]["force_mean"] / out[ratio[1]]["force_mean"]}
     return out
+
+
+def _reduce(fn, values):
+    """fn(values) as a float; NaN for no values (every case of a group not scored)."""
+    return float(fn(values)) if len(values) else math.nan
 
 
 def _pick(rows, suite, group, key):
@@ -302,10 +322,12 @@ def run(models, steps=STEPS, out="evaluation.json", echo=print, progress=True):
     atomically; progress: a line on stderr per simulator and case. Returns the JSON dict."""
     simulators = {name: model_rollout(m) for name, m in models.items()}
     simulators["fem"] = fem_rollout
-    results, suite = evaluate(simulators, steps, progress=progress)
+    results, suite, not_scored = evaluate(simulators, steps, progress=progress)
     ratio = tuple(models)[:2] if len(models) >= 2 else None
     echo(format_tables(results, suite, ratio))
-    report = {"steps": steps, "dt": DT, "results": results,
+    for skipped in not_scored:
+        echo(f"not scored: {skipped['case']}: {skipped['reason']}")
+    report = {"steps": steps, "dt": DT, "results": results, "not_scored": not_scored,
               "summary": summary(results, suite, ratio)}
     echo("\nsummary: " + str(report["summary"]))
     if out:

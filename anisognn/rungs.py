@@ -6,6 +6,7 @@ import os
 import numpy as np
 
 from anisofem import Material, Scene
+from anisofem.kernels import STVK
 from anisofem.solve import Stepper
 from anisofem.ladder import Rung
 
@@ -92,6 +93,10 @@ def surrogate_rungs(scene, dt, notes):
     if not np.isclose(dt, trained_dt, rtol=1e-9, atol=0):
         notes.append(f"surrogate rungs skipped: the shipped models step dt = {trained_dt} s, "
                      f"the trade runs dt = {dt} s")
+        return []
+    if (scene.elements.model != STVK).any():
+        notes.append("surrogate rungs skipped: the shipped models were trained on the StVK "
+                     "base material, and this scene uses Neo-Hookean elements")
         return []
     if not _trained_material(scene):
         notes.append("the shipped models were trained on E = 100 kPa, nu = 0.48, 1000 kg/m^3; "

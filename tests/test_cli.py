@@ -25,6 +25,19 @@ def test_mesh_then_solve(tmp_path):
     assert {"energy", "fiber_direction"} <= set(out.cell_data)
 
 
+def test_material_flag_keeps_a_hard_squeeze_physical(tmp_path):
+    run("mesh", "box", "--cells", "10", "2", "2", "-o", "beam.msh", cwd=tmp_path)
+    said = {}
+    for model in ("stvk", "neohookean"):
+        r = run("solve", "beam.msh", "--fiber", "1", "0", "0", "--kappa", "1e5", "--gravity",
+                "0", "0", "-98.1", "--material", model, "-o", f"{model}.vtu", cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+        said[model] = r.stdout
+        inverted = meshio.read(tmp_path / f"{model}.vtu").cell_data["inverted"][0]
+        assert (inverted.sum() > 0) == (model == "stvk")
+    assert "not physical" in said["stvk"] and "not physical" not in said["neohookean"]
+
+
 def test_bad_fixed_spec_is_a_clear_error(tmp_path):
     run("mesh", "box", "--cells", "2", "2", "2", "-o", "b.vtu", cwd=tmp_path)
     r = run("solve", "b.vtu", "--fixed", "left", "-o", "o.vtu", cwd=tmp_path)
@@ -51,6 +64,8 @@ def folder(tmp_path_factory):
     (("solve", "empty.msh", "-o", "o.vtu"), "path: meshio cannot read 'empty.msh'"),
     (("solve", "beam.msh", "--method", "lbfgs", "--iterations", "0", "-o", "o.vtu"),
      "iterations: a budget of at least 1"),
+    (("solve", "beam.msh", "--material", "rubber", "-o", "o.vtu"),
+     "argument --material: invalid choice: 'rubber'"),
     (("trade", "box", "--steps", "10", "--json", "nowhere/t.json"),
      "the folder of 'nowhere/t.json' does not exist"),
 ])

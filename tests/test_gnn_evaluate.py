@@ -123,3 +123,16 @@ def test_evaluate_command_writes_both_models_side_by_side(tmp_path):
 def test_unknown_model_names_are_refused():
     with pytest.raises(ValueError, match="name: expected one of"):
         shipped.path("graphnet")
+
+
+def test_a_case_whose_reference_turns_inside_out_is_not_scored(suite):
+    scene = suite[0].scene
+    crushed = evaluate.Case("cantilever", "box under 100 g", evaluate.Scene(
+        scene.mesh, scene.material, fixed=scene.fixed_mask, gravity=(0, 0, -981.0)))
+    results, scored, not_scored = evaluate.evaluate({"still": stay_put}, steps=5,
+                                                    suite=[suite[0], crushed])
+    assert [c.label for c in scored] == [suite[0].label]
+    assert len(results["still"]) == 1
+    assert not_scored[0]["case"] == "box under 100 g"
+    assert "inside out (StVK)" in not_scored[0]["reason"]
+    assert np.isnan(evaluate.summary({"still": []}, [], None)["still"]["tip_ratio_mean"])

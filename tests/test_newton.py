@@ -148,3 +148,23 @@ def test_converged_means_small_against_a_scale_the_start_cannot_change(beam):
             g = af.gradient(scene, res.x, x + dt * v, dt).ravel()[free]
             print(dt, res.newton)
             assert not res.converged or np.linalg.norm(g) <= 1e-8 * pot.force_scale() * 1.0001
+
+
+@pytest.mark.parametrize("cells,offset", [((10, 2, 2), 0.0), ((10, 2, 2), 1.0),
+                                          ((20, 4, 4), 0.0), ((20, 4, 4), 1.0)])
+def test_default_atol_sits_a_few_times_above_the_reachable_floor(cells, offset):
+    # nearly incompressible with stiff fibers: where a constant atol was 35-80x too loose
+    mesh = af.box_beam(cells=cells)
+    mesh = af.TetMesh(mesh.vertices + offset, mesh.tets)
+    x = mesh.vertices[:, 0]
+    d = (np.cos(np.radians(40)), np.sin(np.radians(40)), 0.0)
+    scene = af.Scene(mesh, af.Material(1e5, 0.4999, 1000.0, d, 1e8),
+                     fixed=np.flatnonzero(x <= x.min() + 1e-9), gravity=(0, 0, -9.81))
+    scale = Potential(scene).force_scale()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", af.ConvergenceWarning)
+        floor = min(af.solve(scene, rtol=1e-30, atol=0, max_iter=60).residuals) * scale
+    print(f"atol / reachable floor: {scene.gradient_roundoff / floor:.1f}")
+    assert 2 * floor <= scene.gradient_roundoff <= 40 * floor
+    result = af.solve(scene, rtol=1e-14)  # asks for more than float64 holds: atol decides
+    assert result.converged and result.residuals[-1] * scale <= scene.gradient_roundoff

@@ -112,3 +112,27 @@ def test_surrogate_rungs_at_the_extremes_report_instead_of_returning_nan(beam, m
     print([(r["name"], r["max_error"], r["stable"]) for r in out["rungs"]], notes)
     for r in out["rungs"]:
         assert not any(math.isnan(e) for e in r["errors"] + [r["energy_drift"]])
+
+
+def test_surrogates_are_not_scored_against_an_inverted_or_foreign_reference():
+    mesh = af.box_beam(cells=(10, 2, 2))
+    x = mesh.vertices[:, 0]
+
+    def scene(model):
+        return af.Scene(mesh, af.Material(1e5, 0.48, 1000.0, (1, 0, 0), 1e5, model=model),
+                        fixed=np.flatnonzero(x <= 1e-9), gravity=(0, 0, -98.1))
+
+    still = ladder.Rung("still", "surrogate",
+                        lambda scene, dt: lambda x, v: (x, v, {"failed": False}))
+    rungs = [ladder.fem_rung("exact"), ladder.fem_rung("newton x1", iterations=1), still]
+    stvk = ladder.trade(scene("stvk"), steps=10, rungs=list(rungs), progress=False)
+    assert [r["name"] for r in stvk["rungs"]] == ["exact", "newton x1"]
+    assert stvk["rungs"][0]["inverted"] > 0
+    assert any("surrogate rungs not scored" in n for n in stvk["notes"])
+    nh = ladder.trade(scene("neohookean"), steps=10, rungs=list(rungs), progress=False)
+    assert [r["name"] for r in nh["rungs"]] == ["exact", "newton x1", "still"]
+    assert all(r["inverted"] == 0 for r in nh["rungs"]) and not nh["notes"]
+    from anisognn.rungs import surrogate_rungs
+    notes = []
+    assert surrogate_rungs(scene("neohookean"), 0.02, notes) == []
+    assert "trained on the StVK base material" in notes[0]
