@@ -11,7 +11,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 @pytest.mark.parametrize("script, picture, says", [
     ("cantilever.py", "cantilever.png", "fibers along the beam :  4 Newton iterations, "
                                         "converged True"),
-    ("onnx_cantilever.py", "onnx_cantilever.png", "wrote out/onnx_cantilever.png")])
+    ("onnx_cantilever.py", "onnx_cantilever.png", "wrote out/onnx_cantilever.png"),
+    ("squeeze.py", "squeeze.png", "monotone under Neo-Hookean: True")])
 def test_example_runs_and_draws(tmp_path, script, picture, says):
     r = subprocess.run([sys.executable, os.path.join(ROOT, "examples", script)], cwd=tmp_path,
                        capture_output=True, text=True, timeout=600)
