@@ -114,6 +114,7 @@ def test_surrogate_rungs_at_the_extremes_report_instead_of_returning_nan(beam, m
         assert not any(math.isnan(e) for e in r["errors"] + [r["energy_drift"]])
 
 
+@pytest.mark.filterwarnings("ignore::anisofem.InversionWarning")
 def test_surrogates_are_not_scored_against_an_inverted_or_foreign_reference():
     mesh = af.box_beam(cells=(10, 2, 2))
     x = mesh.vertices[:, 0]
