@@ -22,6 +22,12 @@ a Newton solve runs its factorizations in.
              as "superlu-colamd" for comparison.
 - "cholmod": CHOLMOD sparse Cholesky from scikit-sparse, used only if it is installed.
 - "auto":    banded up to BANDED_MAX unknowns, then cholmod if importable, else superlu.
+
+amg_preconditioner is no factorization: a smoothed-aggregation algebraic multigrid V-cycle
+(pyamg) whose coarse spaces are built from the six rigid-body modes, the near-null space of
+elasticity; the preconditioner of the "cg" method's preconditioner="amg". Without those modes
+smoothed aggregation is a poor elasticity preconditioner (350-425 CG iterations on the 10^5-tet
+cantilever, against 79 with them).
 """
 import contextlib
 import functools
@@ -157,6 +163,29 @@ def cholmod_available():
     except ImportError:
         return False
     return True
+
+
+def rigid_body_modes(x, free):
+    """(k, 6) translations and infinitesimal rotations (about the origin) of positions x
+    (n, 3), restricted to the free DOFs free (k,) (flat indices 3 i + c)."""
+    n = x.shape[0]
+    modes = np.zeros((3 * n, 6))
+    for c in range(3):
+        modes[c::3, c] = 1.0
+    centered = x - x.mean(axis=0)  # rotations about the centroid: better conditioned
+    for k, (a, b) in enumerate(((0, 1), (1, 2), (2, 0))):
+        modes[a::3, 3 + k] = -centered[:, b]
+        modes[b::3, 3 + k] = centered[:, a]
+    return modes[free]
+
+
+def amg_preconditioner(A, near_null):
+    """r -> M^-1 r for the symmetric positive definite sparse A: one smoothed-aggregation
+    V-cycle with near_null (k, m) as the near-null space."""
+    import pyamg
+    hierarchy = pyamg.smoothed_aggregation_solver(sp.csr_matrix(A), B=near_null,
+                                                  symmetry="symmetric", max_coarse=500)
+    return hierarchy.aspreconditioner(cycle="V").matvec
 
 
 NAMES = ("auto", "banded", "dense", "superlu", "superlu-colamd", "cholmod")

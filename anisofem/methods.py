@@ -272,15 +272,19 @@ class NewtonCG(_KeptFactor):
     docstring). cg_iter: most CG iterations per Newton iteration. forcing: largest relative
     CG tolerance (with a small budget of iterations, a small forcing such as 0.01 keeps each
     iteration close to a Newton step). preconditioner: "jacobi" (the Hessian's diagonal: no
-    factorization at all) or "factor" (a kept factorization of an earlier Hessian, renewed at
-    the current state when a CG solve needs more than refactor_after iterations).
-    linear_solver: for "factor".
+    factorization at all), "factor" (a kept factorization of an earlier Hessian) or "amg"
+    (a kept smoothed-aggregation multigrid hierarchy of an earlier Hessian, with the
+    rigid-body modes at the current positions: no factorization, memory linear in the mesh,
+    the rung for large meshes; anisofem.linsolve.amg_preconditioner). A kept factor or
+    hierarchy is renewed at the current state when a CG solve needs more than refactor_after
+    iterations (default 10 with "factor", 20 with "amg"). linear_solver: for "factor".
     """
 
     name = "cg"
-    PRECONDITIONERS = ("jacobi", "factor")
+    PRECONDITIONERS = ("jacobi", "factor", "amg")
+    _RENEW_AFTER = {"jacobi": 10, "factor": 10, "amg": 20}
 
-    def __init__(self, cg_iter=1000, forcing=0.1, preconditioner="jacobi", refactor_after=10,
+    def __init__(self, cg_iter=1000, forcing=0.1, preconditioner="jacobi", refactor_after=None,
                  **newton):
         super().__init__(**newton)
         if int(cg_iter) < 1:
@@ -290,6 +294,8 @@ class NewtonCG(_KeptFactor):
         if preconditioner not in self.PRECONDITIONERS:
             raise ValueError(f"preconditioner: expected one of {self.PRECONDITIONERS}, got "
                              f"{preconditioner!r}")
+        if refactor_after is None:
+            refactor_after = self._RENEW_AFTER[preconditioner]
         if int(refactor_after) < 1:
             raise ValueError(f"refactor_after: must be >= 1, got {refactor_after}")
         self.cg_iter, self.forcing = int(cg_iter), float(forcing)
@@ -309,7 +315,7 @@ class NewtonCG(_KeptFactor):
                 continue
             p, its = truncated_cg(self.csr.matrix(data), g, precondition, eta, self.cg_iter)
             self.counts["linear_iterations"] += its
-            if self.preconditioner == "factor" and its > self.refactor_after:
+            if self.preconditioner != "jacobi" and its > self.refactor_after:
                 self._solve = None
             if p is not None:
                 self.counts["projected"] += projected
@@ -320,7 +326,14 @@ class NewtonCG(_KeptFactor):
         if self.preconditioner == "jacobi":
             diagonal = data[self.csr.diag]
             return (lambda r: r / diagonal) if (diagonal > 0).all() else None
-        if self._solve is None:
+        if self._solve is None and self.preconditioner == "amg":
+            if not projected:  # multigrid wants a positive definite matrix: the projected one
+                data = self.potential.hessian_data(x, self.csr, project=True,
+                                                   want_grad=False)[2]
+            self.counts["factorizations"] += 1  # hierarchies built
+            modes = linsolve.rigid_body_modes(x, self.potential.scene.free_dofs)
+            self._solve = linsolve.amg_preconditioner(self.csr.matrix(data), modes)
+        elif self._solve is None:
             # the factorization may overwrite its input
             same = self.layout is self.csr
             if not self.refresh(x, projected, data.copy() if same else None):

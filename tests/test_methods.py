@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem import methods
+from anisofem import linsolve, methods
 from anisofem.potential import Potential
 from anisofem.ladder import fem_rungs
 
 TO_TOLERANCE = [("newton", {}), ("reuse", {}), ("lbfgs", {}), ("cg", {}),
-                ("cg", {"preconditioner": "factor"})]
+                ("cg", {"preconditioner": "factor"}), ("cg", {"preconditioner": "amg"})]
 
 
 def cantilever(mesh, kappa=1e5, nu=0.48):
@@ -91,7 +91,8 @@ def test_warm_start_follows_the_budget():
 
 
 @pytest.mark.parametrize("method, options", [("reuse", {}), ("lbfgs", {}),
-                                             ("cg", {"preconditioner": "factor"})])
+                                             ("cg", {"preconditioner": "factor"}),
+                                             ("cg", {"preconditioner": "amg"})])
 def test_factorizations_are_kept_across_steps(scene, method, options):
     roll = af.simulate(scene, 30, method=method, rtol=1e-6, **options)
     exact = af.simulate(scene, 30, rtol=1e-6)
@@ -104,6 +105,26 @@ def test_factorizations_are_kept_across_steps(scene, method, options):
 def test_cg_with_the_jacobi_preconditioner_factors_nothing(scene):
     res = af.solve(scene, method="cg", rtol=1e-8)
     assert res.converged and res.factorizations == 0 and res.linear_iterations > 0
+
+
+def test_rigid_body_modes_span_the_rest_hessians_null_space():
+    mesh = af.box_beam(cells=(4, 2, 2))
+    mesh = af.TetMesh(mesh.vertices + (0.3, -0.2, 0.5), mesh.tets)  # away from the origin
+    scene = af.Scene(mesh, af.Material(1e5, 0.45, 1000.0, (0.6, 0.8, 0.0), 1e5))
+    H = af.hessian(scene, mesh.vertices)
+    modes = linsolve.rigid_body_modes(mesh.vertices, scene.free_dofs)
+    assert np.linalg.matrix_rank(modes) == 6
+    assert np.abs(H @ modes).max() <= 1e-9 * abs(H).max() * np.abs(modes).max()
+
+
+def test_multigrid_with_rigid_modes_beats_the_diagonal():
+    scene = af.default_scene(af.box_beam(cells=(20, 4, 4)))
+    jacobi = af.solve(scene, method="cg", rtol=1e-8)
+    amg = af.solve(scene, method="cg", preconditioner="amg", rtol=1e-8)
+    print("CG iterations: jacobi", jacobi.linear_iterations, "amg", amg.linear_iterations)
+    assert jacobi.converged and amg.converged
+    assert amg.linear_iterations < jacobi.linear_iterations / 5
+    assert amg.factorizations <= 3  # hierarchies built, kept across iterations
 
 
 def test_options_are_checked_by_name():
