@@ -2,6 +2,7 @@
 and set of unknowns, so that assembly is a scatter-add into a preallocated array."""
 import numpy as np
 import scipy.sparse as sp
+from numba import njit, prange
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 
@@ -31,27 +32,41 @@ def _entry_dofs(tets, dof_map):
 class CsrLayout:
     """CSR pattern of the Hessian restricted to the unknowns of dof_map.
 
-    Attributes: map (m, 144) int64 position of element entry (r, c) in the CSR data, -1 where
-    r or c is not unknown; diag (k,) position of each diagonal entry; dofs (k,) flat DOF of
-    each unknown; shape (k, k).
+    Attributes: map (m, 144) position of element entry (r, c) in the CSR data, -1 where r or
+    c is not unknown (int32 while the pattern has fewer than 2^31 entries, else int64); diag
+    (k,) position of each diagonal entry; dofs (k,) flat DOF of each unknown; shape (k, k).
+
+    Built from the vertex adjacency (the unique vertex pairs of the tets, m * 16 of them) and
+    expanded to DOFs in numba, then each element entry is found by binary search in its row:
+    linear in the mesh up to the sort of the vertex pairs (10^6 tets: seconds and about the
+    memory of the map itself, where sorting the m * 144 DOF pairs took 39 s and 10 GB).
     """
 
     kind = "csr"
 
     def __init__(self, tets, dof_map):
-        k, rows, cols = _entry_dofs(tets, dof_map)
-        valid = (rows >= 0) & (cols >= 0)
-        keys = rows.astype(np.int64) * k + cols
-        unique, inverse = np.unique(keys[valid], return_inverse=True)
-        self.map = np.full(keys.shape, -1, np.int64)
-        self.map[valid] = inverse.ravel()
-        self.indices = (unique % k).astype(np.int32)
-        row_of = unique // k
-        self.indptr = np.searchsorted(row_of, np.arange(k + 1)).astype(np.int32)
-        self.diag = np.searchsorted(unique, np.arange(k, dtype=np.int64) * (k + 1))
+        tets = np.ascontiguousarray(tets, dtype=np.int64)
+        dof_map = np.ascontiguousarray(dof_map, dtype=np.int64)
+        n = dof_map.shape[0]
+        k = int(dof_map.max()) + 1 if dof_map.size else 0
+        pairs = np.unique((tets[:, :, None] * n + tets[:, None, :]).ravel())
+        vertex_ptr = np.searchsorted(pairs // n, np.arange(n + 1)).astype(np.int64)
+        neighbors = (pairs % n).astype(np.int64)
+        del pairs
+        row_length = _dof_row_lengths(vertex_ptr, neighbors, dof_map, k)
+        nnz = int(row_length.sum())
+        index = np.int32 if nnz < 2 ** 31 - 1 else np.int64
+        self.indptr = np.zeros(k + 1, index)
+        np.cumsum(row_length, out=self.indptr[1:])
+        self.indices = np.empty(nnz, index)
+        _fill_dof_rows(vertex_ptr, neighbors, dof_map, self.indptr, self.indices)
+        self.map = np.empty((tets.shape[0], 144), index)
+        _element_positions(tets, dof_map, self.indptr, self.indices, self.map)
+        self.diag = np.empty(k, np.int64)
+        _diagonal_positions(self.indptr, self.indices, self.diag)
         self.shape = (k, k)
         self.dofs = unknown_dofs(dof_map)
-        self.nnz = unique.size
+        self.nnz = nnz
 
     def zeros(self):
         return np.zeros(self.nnz)
@@ -59,6 +74,74 @@ class CsrLayout:
     def matrix(self, data):
         """scipy.sparse.csr_matrix sharing data."""
         return sp.csr_matrix((data, self.indices, self.indptr), shape=self.shape, copy=False)
+
+
+@njit(cache=True)
+def _dof_row_lengths(vertex_ptr, neighbors, dof_map, k):
+    """(k,) entries of each unknown's row: the unknowns of its vertex's neighbors."""
+    out = np.zeros(k, np.int64)
+    for p in range(dof_map.shape[0]):
+        count = 0
+        for j in range(vertex_ptr[p], vertex_ptr[p + 1]):
+            for c in range(3):
+                count += dof_map[neighbors[j], c] >= 0
+        for i in range(3):
+            if dof_map[p, i] >= 0:
+                out[dof_map[p, i]] = count
+    return out
+
+
+@njit(cache=True)
+def _fill_dof_rows(vertex_ptr, neighbors, dof_map, indptr, indices):
+    """The column indices of each unknown's row, ascending (unknowns are numbered in vertex
+    order and neighbors are sorted)."""
+    for p in range(dof_map.shape[0]):
+        for i in range(3):
+            r = dof_map[p, i]
+            if r < 0:
+                continue
+            pos = indptr[r]
+            for j in range(vertex_ptr[p], vertex_ptr[p + 1]):
+                for c in range(3):
+                    col = dof_map[neighbors[j], c]
+                    if col >= 0:
+                        indices[pos] = col
+                        pos += 1
+
+
+@njit(cache=True, inline="always")
+def _find(indptr, indices, r, c):
+    """Position of column c in row r (binary search; the entry exists)."""
+    lo, hi = indptr[r], indptr[r + 1]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if indices[mid] < c:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, parallel=True)
+def _element_positions(tets, dof_map, indptr, indices, out):
+    """out[e, 12 r + c]: position of element entry (r, c) (r, c = 3 a + i) in the CSR data, or
+    -1 where its row or column is not unknown."""
+    for e in prange(tets.shape[0]):
+        for a in range(4):
+            for i in range(3):
+                row = dof_map[tets[e, a], i]
+                for b in range(4):
+                    for kk in range(3):
+                        col = dof_map[tets[e, b], kk]
+                        slot = 12 * (3 * a + i) + 3 * b + kk
+                        out[e, slot] = -1 if row < 0 or col < 0 else _find(indptr, indices,
+                                                                           row, col)
+
+
+@njit(cache=True)
+def _diagonal_positions(indptr, indices, out):
+    for r in range(out.shape[0]):
+        out[r] = _find(indptr, indices, r, r)
 
 
 class DenseLayout:
