@@ -6,6 +6,7 @@
   python -m anisofem trade beam.msh --fiber 0.766 0 0.643 --kappa 1e5 --steps 100 \\
       --json trade.json --png trade.png
   python -m anisofem bench --json bench_anisofem.json
+  python -m anisofem bench --large --huge
 """
 import argparse
 import os
@@ -13,7 +14,7 @@ import sys
 
 import numpy as np
 
-from . import bench, ladder, meshgen, methods
+from . import bench, bench_large, ladder, meshgen, methods
 from .io import check_output_path, read_mesh, write_mesh
 from .inversion import inversion
 from .material import MODELS, Material
@@ -108,7 +109,12 @@ def _parser():
     t.add_argument("--png", help="write the Pareto plot here")
     b = sub.add_parser("bench", help="speed of the kernels and solvers (table + JSON)")
     b.add_argument("--sizes", nargs="+", default=list(bench.SIZES), choices=list(bench.SIZES))
-    b.add_argument("--json", default="bench_anisofem.json")
+    b.add_argument("--large", action="store_true",
+                   help="static solves at 10^4 and 10^5 tets by each large-mesh path, peak "
+                        "memory included (writes bench_large.json unless --json)")
+    b.add_argument("--huge", action="store_true", help="with --large: 10^6 tets too (minutes)")
+    b.add_argument("--json", default=None,
+                   help="where to write the results (bench_anisofem.json, bench_large.json)")
     return p
 
 
@@ -177,7 +183,12 @@ def _trade(args):
 
 
 def _bench(args):
-    bench.run(tuple(args.sizes), args.json)
+    if args.huge and not args.large:
+        raise ValueError("--huge: goes with --large")
+    if args.large:
+        bench_large.run(args.huge, args.json or "bench_large.json")
+    else:
+        bench.run(tuple(args.sizes), args.json or "bench_anisofem.json")
     return 0
 
 

@@ -1,0 +1,116 @@
+"""`python -m anisofem bench --large [--huge]`: static solves of the box cantilever at 10^4 and
+10^5 tets (10^6 with --huge) by each large-mesh path, each in a fresh process so that its peak
+memory is its own: the time to build the scene (mesh, per-element data, sparsity pattern),
+the static solve, Newton and CG iterations, peak memory, the linear solver, and how far the
+answer is from exact Newton's (at the sizes where exact Newton runs). Prints a table, writes
+JSON (atomically)."""
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+#: cells (nx, ny, nz) of the 0.1 x 0.02 x 0.02 m box cantilever (5 tets per cell)
+SIZES = {"1e4": (25, 8, 10), "1e5": (50, 20, 20), "1e6": (100, 40, 50)}
+#: the paths: label -> solve options; exact Newton runs up to EXACT_MAX tets
+PATHS = {"newton": {}, "cg amg": {"method": "cg", "preconditioner": "amg"}}
+EXACT_MAX = 100_000
+
+
+def measure(cells, path):
+    """One static solve of the box cantilever of cells (nx, ny, nz) by path (a key of PATHS)
+    in this process: a dict of the quantities in the module docstring, and the solution
+    (n, 3)."""
+    from . import linsolve
+    from .meshgen import box_beam
+    from .solve import default_scene, solve
+
+    t0 = time.perf_counter()
+    mesh = box_beam(cells=cells)
+    scene = default_scene(mesh)
+    scene.layout("csr")
+    build_s = time.perf_counter() - t0
+    options = PATHS[path]
+    t0 = time.perf_counter()
+    result = solve(scene, warn=False, **options)
+    solve_s = time.perf_counter() - t0
+    solver = ("none (multigrid-preconditioned CG)" if options.get("preconditioner") == "amg"
+              else type(linsolve.make("auto", scene.n_free)).__name__)
+    row = {"path": path, "tets": mesh.n_tets, "unknowns": scene.n_free,
+           "build_s": build_s, "solve_s": solve_s, "newton_iterations": result.iterations,
+           "cg_iterations": result.linear_iterations,
+           "factorizations": result.factorizations, "converged": result.converged,
+           "linear_solver": solver,
+           "peak_memory_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20,
+           "tip_sag_m": float(-(result.x - mesh.vertices)[:, 2].min())}
+    return row, result.x
+
+
+def run(huge=False, out="bench_large.json", sizes=None):
+    """Measure every (size, path) in its own process, compare each answer with exact
+    Newton's where that ran (max vertex difference over the largest displacement), print the
+    table and write JSON. sizes: {label: cells} (default SIZES, 1e6 only if huge)."""
+    if sizes is None:
+        sizes = {k: v for k, v in SIZES.items() if huge or k != "1e6"}
+    rows = []
+    for size, cells in sizes.items():
+        answers, size_rows = {}, []
+        for path in PATHS:
+            if path == "newton" and 5 * int(np.prod(cells)) > EXACT_MAX:
+                continue
+            print(f"  {size} tets, {path} ...", file=sys.stderr, flush=True)
+            row, answers[path] = _in_fresh_process(cells, path)
+            row["size"] = size
+            size_rows.append(row)
+        if "newton" in answers:
+            ref = answers["newton"]
+            scale = float(np.abs(ref - _rest(cells)).max())
+            for row in size_rows:
+                row["difference_to_newton"] = float(
+                    np.abs(answers[row["path"]] - ref).max()) / scale
+        rows += size_rows
+    report = {"rows": rows}
+    print_report(report)
+    if out:
+        from .bench import write_json_atomic
+        write_json_atomic(out, report)
+        print(f"\nwrote {out}")
+    return report
+
+
+def _rest(cells):
+    from .meshgen import box_beam
+    return box_beam(cells=cells).vertices
+
+
+def _in_fresh_process(cells, path):
+    """measure(cells, path) in a new Python process: (row, solution)."""
+    with tempfile.TemporaryDirectory() as folder:
+        target = os.path.join(folder, "x.npy")
+        done = subprocess.run([sys.executable, "-m", "anisofem.bench_large",
+                               "x".join(map(str, cells)), path, target],
+                              check=True, capture_output=True, text=True)
+        return json.loads(done.stdout.strip().splitlines()[-1]), np.load(target)
+
+
+def print_report(report):
+    print("Static solve of the box cantilever under gravity, one process per row (2 threads)")
+    print(f"{'tets':>9} {'unknowns':>9} {'path':<8} | {'build s':>7} {'solve s':>8} "
+          f"{'Newton':>6} {'CG its':>6} {'peak GB':>7} | {'vs newton':>9}  linear solver")
+    for r in report["rows"]:
+        diff = r.get("difference_to_newton")
+        print(f"{r['tets']:9,d} {r['unknowns']:9,d} {r['path']:<8} | {r['build_s']:7.1f} "
+              f"{r['solve_s']:8.1f} {r['newton_iterations']:6d} {r['cg_iterations']:6d} "
+              f"{r['peak_memory_gb']:7.2f} | {'-' if diff is None else f'{diff:.1e}':>9}  "
+              f"{r['linear_solver']}" + ("" if r["converged"] else "  NOT CONVERGED"))
+
+
+if __name__ == "__main__":
+    cells, path, target = sys.argv[1:4]
+    row, x = measure(tuple(int(c) for c in cells.split("x")), path)
+    np.save(target, x)
+    print(json.dumps(row))
