@@ -24,6 +24,7 @@ test: $(VENV)/.installed
 
 bench: $(VENV)/.installed
 	$(PY) -m anisofem bench
+	$(PY) -m anisofem bench --large
 	$(PY) -m anisognn bench
 	$(PY) -m export bench
 
