@@ -184,7 +184,13 @@ def run(sizes=tuple(SIZES), out="bench_anisofem.json"):
               "small_factorization": bench_small_factorizations(),
               "factorization_s": factorization, "materials_1e4": bench_materials(),
               "threads": numba.get_num_threads()}
-    print_report(report)
+    return publish(report, print_report, out)
+
+
+def publish(report, printer, out):
+    """printer(report), then report written to out as JSON (atomically) unless out is None;
+    returns report."""
+    printer(report)
     if out:
         write_json_atomic(out, report)
         print(f"\nwrote {out}")

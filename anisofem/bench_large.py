@@ -73,13 +73,8 @@ def run(huge=False, out="bench_large.json", sizes=None):
                 row["difference_to_newton"] = float(
                     np.abs(answers[row["path"]] - ref).max()) / scale
         rows += size_rows
-    report = {"rows": rows}
-    print_report(report)
-    if out:
-        from .bench import write_json_atomic
-        write_json_atomic(out, report)
-        print(f"\nwrote {out}")
-    return report
+    from .bench import publish
+    return publish({"rows": rows}, print_report, out)
 
 
 def _rest(cells):
