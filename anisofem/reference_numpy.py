@@ -4,11 +4,15 @@ Hessian, assembled the usual numpy way (COO triplets summed into CSR). It is the
 import numpy as np
 import scipy.sparse as sp
 
+from .kernels import STVK
 from .potential import Potential
 
 
 def _deformation(scene, x):
     el = scene.elements
+    if (el.model != STVK).any():
+        raise ValueError("scene: anisofem.reference_numpy implements the StVK base material "
+                         "only, and this scene has Neo-Hookean elements")
     F = np.einsum("eai,eaj->eij", x[el.tets], el.grads)
     C = np.einsum("eki,ekj->eij", F, F)
     E = 0.5 * (C - np.eye(3))

@@ -1,5 +1,6 @@
 """The numba kernels and the independent numpy implementation agree."""
 import numpy as np
+import pytest
 
 import anisofem as af
 from anisofem import reference_numpy as ref
@@ -21,3 +22,10 @@ def test_numba_and_numpy_agree_with_per_element_fibers():
         H = af.hessian(scene, x, project=project).toarray()
         H_ref = ref.elastic_hessian(scene, x, project=project).toarray()
         assert np.abs(H - H_ref).max() < 1e-10 * np.abs(H_ref).max()
+
+
+def test_the_numpy_reference_refuses_what_it_does_not_implement():
+    mesh = af.box_beam(cells=(2, 2, 2))
+    scene = af.Scene(mesh, af.Material(model="neohookean"))
+    with pytest.raises(ValueError, match="StVK base material only"):
+        ref.elastic_energy_gradient(scene, mesh.vertices)
