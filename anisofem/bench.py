@@ -61,8 +61,8 @@ def bench_size(label, cells, with_numpy_solve):
            "assembly_numba_s": numba_s, "assembly_numpy_s": numpy_s,
            "assembly_speedup": numpy_s / numba_s, "elements_per_s": mesh.n_tets / numba_s,
            "solve_s": solve_s, "newton_iterations": res.iterations,
-           "converged": res.converged,
-           "linear_solver": type(linsolve.for_scene("auto", scene)).__name__}
+           "converged": res.converged, "linear_solver": type(linsolve.make(
+               "auto", scene.n_free)).__name__}
     if with_numpy_solve:
         x0 = scene.initial_positions()
         refs = []

@@ -39,7 +39,7 @@ def measure(cells, path):
     result = solve(scene, warn=False, **options)
     solve_s = time.perf_counter() - t0
     solver = ("none (multigrid-preconditioned CG)" if options.get("preconditioner") == "amg"
-              else type(linsolve.for_scene("auto", scene)).__name__)
+              else type(linsolve.make("auto", scene.n_free)).__name__)
     row = {"path": path, "tets": mesh.n_tets, "unknowns": scene.n_free,
            "build_s": build_s, "solve_s": solve_s, "newton_iterations": result.iterations,
            "cg_iterations": result.linear_iterations,

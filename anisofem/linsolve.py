@@ -21,12 +21,7 @@ a Newton solve runs its factorizations in.
              scipy's default (COLAMD ordering, partial pivoting, no definiteness check) is kept
              as "superlu-colamd" for comparison.
 - "cholmod": CHOLMOD sparse Cholesky from scikit-sparse, used only if it is installed.
-- "auto":    banded up to BANDED_MAX unknowns, and beyond while its work n kd^2 (kd the
-             subdiagonals in reverse Cuthill-McKee order) stays below BANDED_WORK_MAX; then
-             cholmod if importable, else superlu. Measured (one factorization of the
-             cantilever's Hessian, this 2-core machine): banded took 0.24-0.65 of SuperLU's
-             time on every box beam from 400 to 28,800 tets, slender or not (n kd^2 from 1e6
-             to 2.6e10; at 28,800 tets 0.34 s against 0.56 s); the ratio grows with kd.
+- "auto":    banded up to BANDED_MAX unknowns, then cholmod if importable, else superlu.
 
 amg_preconditioner is no factorization: a smoothed-aggregation algebraic multigrid V-cycle
 (pyamg) whose coarse spaces are built from the six rigid-body modes, the near-null space of
@@ -42,11 +37,8 @@ import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-#: "auto" uses the banded Cholesky up to this many unknowns,
+#: "auto" uses the banded Cholesky up to this many unknowns.
 BANDED_MAX = 450
-#: and beyond, up to BANDED_PROBE_MAX unknowns, while n kd^2 is at most BANDED_WORK_MAX.
-BANDED_PROBE_MAX = 100_000
-BANDED_WORK_MAX = 3e10
 
 
 class FactorizationError(RuntimeError):
@@ -173,11 +165,6 @@ def cholmod_available():
     return True
 
 
-def for_scene(name, scene):
-    """make(name, ...) for the Hessian of scene's unknowns."""
-    return make(name, scene.n_free, lambda: scene.layout("banded").kd)
-
-
 def rigid_body_modes(x, free):
     """(k, 6) translations and infinitesimal rotations (about the origin) of positions x
     (n, 3), restricted to the free DOFs free (k,) (flat indices 3 i + c)."""
@@ -204,13 +191,10 @@ def amg_preconditioner(A, near_null):
 NAMES = ("auto", "banded", "dense", "superlu", "superlu-colamd", "cholmod")
 
 
-def make(name, n_unknowns, bandwidth=None):
-    """The solver called `name` (see NAMES) for a system of n_unknowns; bandwidth() -> the
-    subdiagonals of its banded layout, asked by "auto" only where it decides."""
+def make(name, n_unknowns):
+    """The solver called `name` (see NAMES) for a system of n_unknowns."""
     if name == "auto":
-        if n_unknowns <= BANDED_MAX or (
-                bandwidth is not None and n_unknowns <= BANDED_PROBE_MAX
-                and n_unknowns * bandwidth() ** 2 <= BANDED_WORK_MAX):
+        if n_unknowns <= BANDED_MAX:
             name = "banded"
         else:
             name = "cholmod" if cholmod_available() else "superlu"

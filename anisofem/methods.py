@@ -139,7 +139,7 @@ class Newton(Method):
 
     def start(self, potential):
         super().start(potential)
-        self.solver = linsolve.for_scene(self.linear_solver, potential.scene)
+        self.solver = linsolve.make(self.linear_solver, potential.scene.n_free)
         self.layout = potential.scene.layout(self.solver.layout)
 
     def threads(self):

@@ -80,7 +80,7 @@ class BatchPotential:
 def _newton_step(pot, x):
     """(G in J, dG/dx (n, 3) in N, free DOF indices, H^-1 dG/dx on them in m) of one scene's
     Potential at x (n, 3); H is the projected Hessian over the free components."""
-    solver = linsolve.for_scene("auto", pot.scene)
+    solver = linsolve.make("auto", pot.scene.n_free)
     layout = pot.scene.layout(solver.layout)
     with solver.threads():
         e, g, data = pot.hessian_data(x, layout, project=True)
