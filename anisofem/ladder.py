@@ -147,16 +147,17 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, surrogates=True
     if deflection == 0:
         raise ValueError("scene: the static solution does not move; nothing to compare")
     static_energy = abs(Potential(scene).energy(static.x))
-    runs = [_roll(rungs[0], scene, dt, steps, "exact" if progress else None)]
-    rungs = _physical_reference_only(rungs, scene, runs[0], notes)
+    exact = _roll(rungs[0], scene, dt, steps, "exact" if progress else None)
+    ref = exact["positions"]
+
+    def row(rung, run):
+        return _row(rung, run, ref, check, tip, deflection, size.max(), static_energy, scene,
+                    dt)
+    rows = [row(rungs[0], exact)]
+    rungs = _physical_reference_only(rungs, rows[0]["inverted"], notes)
     for i, rung in enumerate(rungs[1:], 2):
         label = f"[{i}/{len(rungs)}] {rung.name}"
-        runs.append(_roll(rung, scene, dt, steps, label if progress else None))
-    ref = runs[0]["positions"]
-    rows = []
-    for rung, run in zip(rungs, runs):
-        rows.append(_row(rung, run, ref, check, tip, deflection, size.max(), static_energy,
-                         scene, dt))
+        rows.append(row(rung, _roll(rung, scene, dt, steps, label if progress else None)))
     mark_front(rows)
     good = [r for r in rows if r["stable"] and r["max_error"] <= tolerance]
     recommended = min(good, key=lambda r: r["ms_per_step"])["name"] if good else None
@@ -179,11 +180,9 @@ def mark_front(rows):
             for o in stable)
 
 
-def _physical_reference_only(rungs, scene, exact, notes):
-    """rungs without the surrogate's when the exact rollout turns elements inside out: a
-    network is scored against the FEM's answer, and that answer is not physical."""
-    inverted = max(int((volume_change(scene.mesh, x) <= -1.0).sum())
-                   for x, _ in exact["positions"].values())
+def _physical_reference_only(rungs, inverted, notes):
+    """rungs without the surrogate's when the exact rollout turns `inverted` elements inside
+    out: a network is scored against the FEM's answer, and that answer is not physical."""
     if not inverted or all(r.kind == "fem" for r in rungs):
         return rungs
     notes.append(f"surrogate rungs not scored: the exact rollout turns {inverted} elements "

@@ -166,13 +166,14 @@ def cholmod_available():
 
 
 def rigid_body_modes(x, free):
-    """(k, 6) translations and infinitesimal rotations (about the origin) of positions x
-    (n, 3), restricted to the free DOFs free (k,) (flat indices 3 i + c)."""
+    """(k, 6) translations and infinitesimal rotations (about the centroid, which conditions
+    them better than the origin) of positions x (n, 3), restricted to the free DOFs free (k,)
+    (flat indices 3 i + c)."""
     n = x.shape[0]
     modes = np.zeros((3 * n, 6))
     for c in range(3):
         modes[c::3, c] = 1.0
-    centered = x - x.mean(axis=0)  # rotations about the centroid: better conditioned
+    centered = x - x.mean(axis=0)
     for k, (a, b) in enumerate(((0, 1), (1, 2), (2, 0))):
         modes[a::3, 3 + k] = -centered[:, b]
         modes[b::3, 3 + k] = centered[:, a]

@@ -282,7 +282,6 @@ class NewtonCG(_KeptFactor):
 
     name = "cg"
     PRECONDITIONERS = ("jacobi", "factor", "amg")
-    _RENEW_AFTER = {"jacobi": 10, "factor": 10, "amg": 20}
 
     def __init__(self, cg_iter=1000, forcing=0.1, preconditioner="jacobi", refactor_after=None,
                  **newton):
@@ -295,7 +294,7 @@ class NewtonCG(_KeptFactor):
             raise ValueError(f"preconditioner: expected one of {self.PRECONDITIONERS}, got "
                              f"{preconditioner!r}")
         if refactor_after is None:
-            refactor_after = self._RENEW_AFTER[preconditioner]
+            refactor_after = 20 if preconditioner == "amg" else 10
         if int(refactor_after) < 1:
             raise ValueError(f"refactor_after: must be >= 1, got {refactor_after}")
         self.cg_iter, self.forcing = int(cg_iter), float(forcing)

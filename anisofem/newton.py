@@ -5,11 +5,12 @@ Converged means |dG/dx|_free <= max(rtol * scale, atol), with scale the problem'
 in N (Potential.force_scale: external, elastic and inertial forces at the problem's start, not
 at the solve's first iterate, so a poor first guess cannot loosen the test). The default
 atol is Scene.gradient_roundoff, a few times the level below which float64 cannot resolve the
-gradient; pass atol=0 to insist on rtol alone. Each iteration line-searches the method's directions in turn (backtracking to the
-Armijo condition on G) until one makes progress; a trial point where G is +inf (a
-Neo-Hookean element with det F <= 0) is rejected like any other that does not descend, so
-no iterate ever leaves the material's domain. The result is never NaN: a failure returns
-the last iterate, converged=False, failed=True and a message saying why.
+gradient; pass atol=0 to insist on rtol alone. Each iteration line-searches the method's
+directions in turn (backtracking to the Armijo condition on G) until one makes progress; a
+trial point where G is +inf (a Neo-Hookean element with det F <= 0) is rejected like any
+other that does not descend, so no iterate ever leaves the material's domain. The result is
+never NaN: a failure returns the last iterate, converged=False, failed=True and a message
+saying why.
 
 Newton's Hessian choice (`projection`, see anisofem.methods.Newton): "adaptive" (default)
 first tries the true Hessian; it is used when it is positive definite (the Cholesky-type

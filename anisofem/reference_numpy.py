@@ -4,13 +4,12 @@ Hessian, assembled the usual numpy way (COO triplets summed into CSR). It is the
 import numpy as np
 import scipy.sparse as sp
 
-from .kernels import STVK
 from .potential import Potential
 
 
 def _deformation(scene, x):
     el = scene.elements
-    if (el.model != STVK).any():
+    if scene.neohookean.any():
         raise ValueError("scene: anisofem.reference_numpy implements the StVK base material "
                          "only, and this scene has Neo-Hookean elements")
     F = np.einsum("eai,eaj->eij", x[el.tets], el.grads)

@@ -235,7 +235,8 @@ class Scene:
         patterns and the loads, so it costs a copy of the positions."""
         pos = as_float_array(fixed_positions, "fixed_positions",
                              shape=(self.mesh.n_vertices, 3))
-        self.elements, self.dof_map, self.free_dofs  # computed once, shared by the copies
+        for shared in ("elements", "dof_map", "free_dofs", "neohookean"):
+            getattr(self, shared)  # computed once here, so that the copies share them
         moved = copy.copy(self)
         x = self.fixed_positions.copy()
         x[self.fixed_mask] = pos[self.fixed_mask]
@@ -243,13 +244,17 @@ class Scene:
         moved.fixed_positions = x
         return moved
 
+    @cached_property
+    def neohookean(self):
+        """(m,) bool: the elements with the Neo-Hookean base (the others are StVK)."""
+        return self.elements.model != STVK
+
     def outside_domain(self, x):
         """How many elements have infinite energy at positions x (n, 3): Neo-Hookean ones with
         det F <= 0 (StVK is defined everywhere). A solve cannot start there."""
-        barrier = self.elements.model != STVK
-        if not barrier.any():
+        if not self.neohookean.any():
             return 0
-        return int((volume_change(self.mesh, x)[barrier] <= -1.0).sum())
+        return int((volume_change(self.mesh, x)[self.neohookean] <= -1.0).sum())
 
 
 def _to_vertices(mesh, per_tet):

@@ -6,7 +6,6 @@ import os
 import numpy as np
 
 from anisofem import Material, Scene
-from anisofem.kernels import STVK
 from anisofem.solve import Stepper
 from anisofem.ladder import Rung
 
@@ -94,7 +93,7 @@ def surrogate_rungs(scene, dt, notes):
         notes.append(f"surrogate rungs skipped: the shipped models step dt = {trained_dt} s, "
                      f"the trade runs dt = {dt} s")
         return []
-    if (scene.elements.model != STVK).any():
+    if scene.neohookean.any():
         notes.append("surrogate rungs skipped: the shipped models were trained on the StVK "
                      "base material, and this scene uses Neo-Hookean elements")
         return []

@@ -129,7 +129,7 @@ def test_converged_means_small_against_a_scale_the_start_cannot_change(beam, mod
     """A far-off first guess or a violent step must not loosen the test: whenever a result says
     converged, its free-gradient norm is within rtol of the problem's own force scale (the
     load, the elastic force at the start and, in a step, the inertial force), or at the
-    round-off floor."""
+    round-off level."""
     scene = af.Scene(beam, af.Material(1e5, nu, 1000.0, (1, 0, 0), kappa, model=model),
                      fixed=af.metrics.end_vertices(beam, 0, "min"), gravity=(0, 0, -9.81))
     free = scene.free_dofs
@@ -163,7 +163,7 @@ def test_converged_means_small_against_a_scale_the_start_cannot_change(beam, mod
 
 @pytest.mark.parametrize("cells,offset", [((10, 2, 2), 0.0), ((10, 2, 2), 1.0),
                                           ((20, 4, 4), 0.0), ((20, 4, 4), 1.0)])
-def test_default_atol_sits_a_few_times_above_the_reachable_floor(cells, offset):
+def test_default_atol_sits_a_few_times_above_the_reachable_residual(cells, offset):
     # nearly incompressible with stiff fibers: where a constant atol was 35-80x too loose
     mesh = af.box_beam(cells=cells)
     mesh = af.TetMesh(mesh.vertices + offset, mesh.tets)
@@ -174,8 +174,8 @@ def test_default_atol_sits_a_few_times_above_the_reachable_floor(cells, offset):
     scale = Potential(scene).force_scale()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", af.ConvergenceWarning)
-        floor = min(af.solve(scene, rtol=1e-30, atol=0, max_iter=60).residuals) * scale
-    print(f"atol / reachable floor: {scene.gradient_roundoff / floor:.1f}")
-    assert 2 * floor <= scene.gradient_roundoff <= 40 * floor
+        reachable = min(af.solve(scene, rtol=1e-30, atol=0, max_iter=60).residuals) * scale
+    print(f"atol / smallest reachable residual: {scene.gradient_roundoff / reachable:.1f}")
+    assert 2 * reachable <= scene.gradient_roundoff <= 40 * reachable
     result = af.solve(scene, rtol=1e-14)  # asks for more than float64 holds: atol decides
     assert result.converged and result.residuals[-1] * scale <= scene.gradient_roundoff
