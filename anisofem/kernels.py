@@ -193,11 +193,10 @@ STVK, NEOHOOKEAN = 0, 1
 
 
 @njit(cache=True, inline="always")
-def _stress(e, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber, F, S, Fd, cof):
+def _stress(e, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber, F, S, Fd):
     """Fill F (deformation gradient) and S (total 2nd Piola-Kirchhoff stress, Pa) of element e,
     and Fd = F d when it has fibers. Returns (isotropic energy, fiber energy, kappa) in J, J, Pa;
-    a Neo-Hookean element with det F <= 0 has isotropic energy +inf (and S = 0). cof: (3, 3)
-    scratch."""
+    a Neo-Hookean element with det F <= 0 has isotropic energy +inf (and S = 0)."""
     G = grads[e]
     t = tets[e]
     for i in range(3):
@@ -209,7 +208,7 @@ def _stress(e, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber, F, S
     m_e = mu[e]
     l_e = lam[e]
     if model[e] == NEOHOOKEAN:
-        e_iso = _neohookean_stress(F, m_e, l_e, S, cof) * vol[e]
+        e_iso = _neohookean_stress(F, m_e, l_e, S) * vol[e]
     else:
         e_iso = _stvk_stress(F, m_e, l_e, S) * vol[e]
     k_e = kappa[e] if has_fiber else 0.0
@@ -252,25 +251,37 @@ def _stvk_stress(F, m_e, l_e, S):
 
 
 @njit(cache=True, inline="always")
-def _neohookean_stress(F, m_e, l_e, S, cof):
+def _neohookean_stress(F, m_e, l_e, S):
     """S = mu (I - C^-1) + lam ln J C^-1 of Neo-Hookean; returns psi (J/m^3), +inf (S = 0)
-    where J = det F <= 0. C^-1 = cof(F)^T cof(F) / J^2. cof: (3, 3) scratch."""
-    J = _cofactor(F, cof)
+    where J = det F <= 0. C^-1 = cof(F)^T cof(F) / J^2."""
+    c00 = F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]
+    c01 = F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2]
+    c02 = F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]
+    J = F[0, 0] * c00 + F[0, 1] * c01 + F[0, 2] * c02
     if not J > 0.0:
         for i in range(3):
             for j in range(3):
                 S[i, j] = 0.0
         return math.inf
+    c10 = F[0, 2] * F[2, 1] - F[0, 1] * F[2, 2]
+    c11 = F[0, 0] * F[2, 2] - F[0, 2] * F[2, 0]
+    c12 = F[0, 1] * F[2, 0] - F[0, 0] * F[2, 1]
+    c20 = F[0, 1] * F[1, 2] - F[0, 2] * F[1, 1]
+    c21 = F[0, 2] * F[1, 0] - F[0, 0] * F[1, 2]
+    c22 = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
     log_j = math.log(J)
     coef = (l_e * log_j - m_e) / (J * J)
+    # S_ij = mu delta_ij + coef sum_k cof_ki cof_kj
+    S[0, 0] = coef * (c00 * c00 + c10 * c10 + c20 * c20) + m_e
+    S[1, 1] = coef * (c01 * c01 + c11 * c11 + c21 * c21) + m_e
+    S[2, 2] = coef * (c02 * c02 + c12 * c12 + c22 * c22) + m_e
+    S[0, 1] = S[1, 0] = coef * (c00 * c01 + c10 * c11 + c20 * c21)
+    S[0, 2] = S[2, 0] = coef * (c00 * c02 + c10 * c12 + c20 * c22)
+    S[1, 2] = S[2, 1] = coef * (c01 * c02 + c11 * c12 + c21 * c22)
     trC = 0.0
     for i in range(3):
         for j in range(3):
-            # S_ij = mu delta_ij + coef sum_k cof_ki cof_kj
-            S[i, j] = coef * (cof[0, i] * cof[0, j] + cof[1, i] * cof[1, j]
-                              + cof[2, i] * cof[2, j])
             trC += F[i, j] * F[i, j]
-        S[i, i] += m_e
     return 0.5 * m_e * (trC - 3.0) - m_e * log_j + 0.5 * l_e * log_j * log_j
 
 
@@ -288,24 +299,27 @@ def _scatter_gradient(e, tets, G, v, F, S, grad):
 @njit(cache=True, inline="always")
 def _element_hessian(G, v, model, m_e, l_e, k_e, d, F, S, Fd, project, Sg, B, q, work, He):
     """Fill He (12, 12), the element Hessian in N/m (projected: see the module docstring)."""
-    fiber_geometric = 0.0  # StVK carries it in S, so in its own geometric part
     if model == NEOHOOKEAN:
         _neohookean_hessian(G, v, m_e, l_e, F, project, work, He)
         if k_e != 0.0:
-            fiber_geometric = 4.0 * k_e * (Fd[0] * Fd[0] + Fd[1] * Fd[1] + Fd[2] * Fd[2] - 1.0)
-            if project and fiber_geometric < 0.0:
-                fiber_geometric = 0.0
+            c = 4.0 * k_e * (Fd[0] * Fd[0] + Fd[1] * Fd[1] + Fd[2] * Fd[2] - 1.0)
+            if not (project and c < 0.0):
+                for a in range(4):
+                    sa = v * c * (d[0] * G[a, 0] + d[1] * G[a, 1] + d[2] * G[a, 2])
+                    for b in range(a, 4):
+                        sab = sa * (d[0] * G[b, 0] + d[1] * G[b, 1] + d[2] * G[b, 2])
+                        for i in range(3):
+                            He[3 * a + i, 3 * b + i] += sab
     else:
         _stvk_hessian(G, v, m_e, l_e, F, S, project, Sg, B, q, work, He)
     if k_e != 0.0:
         for a in range(4):
-            sa = v * (d[0] * G[a, 0] + d[1] * G[a, 1] + d[2] * G[a, 2])
+            sa = 8.0 * k_e * v * (d[0] * G[a, 0] + d[1] * G[a, 1] + d[2] * G[a, 2])
             for b in range(a, 4):
                 sab = sa * (d[0] * G[b, 0] + d[1] * G[b, 1] + d[2] * G[b, 2])
                 for i in range(3):
                     for k in range(3):
-                        He[3 * a + i, 3 * b + k] += 8.0 * k_e * sab * Fd[i] * Fd[k]
-                    He[3 * a + i, 3 * b + i] += fiber_geometric * sab
+                        He[3 * a + i, 3 * b + k] += sab * Fd[i] * Fd[k]
     for a in range(4):
         for b in range(a + 1, 4):
             for i in range(3):
@@ -356,12 +370,13 @@ def _neohookean_hessian(G, v, m_e, l_e, F, project, work, He):
     r_a = F^-T G_a, c = mu - lam ln J; projected: minus its modes with negative eigenvalues
     (see the module docstring). work: WORK_SHAPE scratch. Zero where det F <= 0 (outside the
     energy's domain)."""
+    for r in range(12):
+        for col in range(12):
+            He[r, col] = 0.0
     cof = work[0, :3]
-    J = _cofactor(F, cof)
+    _cofactor(F, cof)
+    J = F[0, 0] * cof[0, 0] + F[0, 1] * cof[0, 1] + F[0, 2] * cof[0, 2]
     if not J > 0.0:
-        for r in range(12):
-            for col in range(12):
-                He[r, col] = 0.0
         return
     r = work[1]
     for a in range(4):
@@ -383,7 +398,7 @@ def _neohookean_hessian(G, v, m_e, l_e, F, project, work, He):
 
 @njit(cache=True, inline="always")
 def _cofactor(F, cof):
-    """cof = the cofactor matrix of the 3x3 F; returns det F = F[0] . cof[0]."""
+    """cof = the cofactor matrix of the 3x3 F (det F = F[0] . cof[0])."""
     cof[0, 0] = F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]
     cof[0, 1] = F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2]
     cof[0, 2] = F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]
@@ -393,7 +408,6 @@ def _cofactor(F, cof):
     cof[2, 0] = F[0, 1] * F[1, 2] - F[0, 2] * F[1, 1]
     cof[2, 1] = F[0, 2] * F[1, 0] - F[0, 0] * F[1, 2]
     cof[2, 2] = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
-    return F[0, 0] * cof[0, 0] + F[0, 1] * cof[0, 1] + F[0, 2] * cof[0, 2]
 
 
 @njit(cache=True, inline="always")
@@ -468,11 +482,10 @@ def _run_gradient(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdi
     F = np.empty((3, 3))
     S = np.empty((3, 3))
     Fd = np.empty(3)
-    cof = np.empty((3, 3))
     for idx in range(lo, hi):
         e = order[idx]
         e_iso[e], e_fib[e], _ = _stress(e, x, tets, grads, vol, model, mu, lam, kappa, fdir,
-                                        has_fiber, F, S, Fd, cof)
+                                        has_fiber, F, S, Fd)
         if want_grad:
             _scatter_gradient(e, tets, grads[e], vol[e], F, S, grad)
 
@@ -493,7 +506,7 @@ def _run_hessian(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir
     for idx in range(lo, hi):
         e = order[idx]
         ei, ef, k_e = _stress(e, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber, F,
-                              S, Fd, work[0, :3])
+                              S, Fd)
         e_iso[e] = ei
         e_fib[e] = ef
         if want_grad:
