@@ -1,9 +1,11 @@
 """`python -m anisofem bench --large [--huge]`: static solves of the box cantilever at 10^4 and
 10^5 tets (10^6 with --huge) by each large-mesh path, each in a fresh process so that its peak
 memory is its own: the time to build the scene (mesh, per-element data, sparsity pattern),
-the static solve, Newton and CG iterations, peak memory, the linear solver, and how far the
-answer is from exact Newton's (at the sizes where exact Newton runs). Prints a table, writes
-JSON (atomically)."""
+the static solve, Newton and CG iterations, peak memory, the linear solver, how far the
+answer is from exact Newton's (at the sizes where exact Newton runs), and the mean time of
+the first STEPS backward-Euler steps of the cantilever falling from rest (one method for the
+rollout, so kept hierarchies and factors carry over). Prints a table, writes JSON
+(atomically)."""
 import json
 import os
 import resource
@@ -19,6 +21,8 @@ SIZES = {"1e4": (25, 8, 10), "1e5": (50, 20, 20), "1e6": (100, 40, 50)}
 #: the paths: label -> solve options; exact Newton runs up to EXACT_MAX tets
 PATHS = {"newton": {}, "cg amg": {"method": "cg", "preconditioner": "amg"}}
 EXACT_MAX = 100_000
+#: backward-Euler steps timed per row, and their dt (s)
+STEPS, STEP_DT = 3, 0.02
 
 
 def measure(cells, path):
@@ -27,7 +31,7 @@ def measure(cells, path):
     (n, 3)."""
     from . import linsolve
     from .meshgen import box_beam
-    from .solve import default_scene, solve
+    from .solve import default_scene, simulate, solve
 
     t0 = time.perf_counter()
     mesh = box_beam(cells=cells)
@@ -38,12 +42,18 @@ def measure(cells, path):
     t0 = time.perf_counter()
     result = solve(scene, warn=False, **options)
     solve_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rollout = simulate(scene, STEPS, STEP_DT, warn=False, **options)
+    step_s = (time.perf_counter() - t0) / STEPS
     solver = ("none (multigrid-preconditioned CG)" if options.get("preconditioner") == "amg"
               else type(linsolve.make("auto", scene.n_free)).__name__)
     row = {"path": path, "tets": mesh.n_tets, "unknowns": scene.n_free,
            "build_s": build_s, "solve_s": solve_s, "newton_iterations": result.iterations,
            "cg_iterations": result.linear_iterations,
            "factorizations": result.factorizations, "converged": result.converged,
+           "step_s": step_s, "step_newton_iterations": float(np.mean(
+               [r.newton.iterations for r in rollout.steps])),
+           "steps_converged": rollout.converged,
            "linear_solver": solver,
            "peak_memory_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20,
            "tip_sag_m": float(-(result.x - mesh.vertices)[:, 2].min())}
@@ -93,15 +103,18 @@ def _in_fresh_process(cells, path):
 
 
 def print_report(report):
-    print("Static solve of the box cantilever under gravity, one process per row (2 threads)")
+    print("Static solve of the box cantilever under gravity, and its first backward-Euler steps "
+          f"falling from rest (dt {STEP_DT} s), one process per row (2 threads)")
     print(f"{'tets':>9} {'unknowns':>9} {'path':<8} | {'build s':>7} {'solve s':>8} "
-          f"{'Newton':>6} {'CG its':>6} {'peak GB':>7} | {'vs newton':>9}  linear solver")
+          f"{'Newton':>6} {'CG its':>6} {'peak GB':>7} | {'vs newton':>9} | {'step s':>6} "
+          f"{'Newton':>6} | linear solver")
     for r in report["rows"]:
         diff = r.get("difference_to_newton")
         print(f"{r['tets']:9,d} {r['unknowns']:9,d} {r['path']:<8} | {r['build_s']:7.1f} "
               f"{r['solve_s']:8.1f} {r['newton_iterations']:6d} {r['cg_iterations']:6d} "
-              f"{r['peak_memory_gb']:7.2f} | {'-' if diff is None else f'{diff:.1e}':>9}  "
-              f"{r['linear_solver']}" + ("" if r["converged"] else "  NOT CONVERGED"))
+              f"{r['peak_memory_gb']:7.2f} | {'-' if diff is None else f'{diff:.1e}':>9} | "
+              f"{r['step_s']:6.1f} {r['step_newton_iterations']:6.1f} | {r['linear_solver']}"
+              + ("" if r["converged"] and r["steps_converged"] else "  NOT CONVERGED"))
 
 
 if __name__ == "__main__":

@@ -110,8 +110,9 @@ def _parser():
     b = sub.add_parser("bench", help="speed of the kernels and solvers (table + JSON)")
     b.add_argument("--sizes", nargs="+", default=list(bench.SIZES), choices=list(bench.SIZES))
     b.add_argument("--large", action="store_true",
-                   help="static solves at 10^4 and 10^5 tets by each large-mesh path, peak "
-                        "memory included (writes bench_large.json unless --json)")
+                   help="static solves and backward-Euler steps at 10^4 and 10^5 tets by "
+                        "each large-mesh path, peak memory included (writes bench_large.json "
+                        "unless --json)")
     b.add_argument("--huge", action="store_true", help="with --large: 10^6 tets too (minutes)")
     b.add_argument("--json", default=None,
                    help="where to write the results (bench_anisofem.json, bench_large.json)")

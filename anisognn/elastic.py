@@ -17,27 +17,31 @@ transposes per call, which are fast (export/README.md, Latency).
 import torch
 
 
-def elastic_force(x, graph):
-    """(n, 3) N: minus the gradient of the elastic energy at positions x (n, 3) m, on
-    anisognn.graph.Graph graph (its tets, tet_gradients, tet_material, tet_fiber, corners)."""
-    return elastic_force_and_differential(x, graph)[0]
+def elastic_force(u, graph):
+    """(n, 3) N: minus the gradient of the elastic energy at displacements u (n, 3) m from the
+    rest shape, on anisognn.graph.Graph graph (its tets, tet_gradients, tet_material,
+    tet_fiber, corners)."""
+    return elastic_force_and_differential(u, graph)[0]
 
 
-def elastic_force_and_differential(x, graph):
-    """((n, 3) N, function): elastic_force at positions x (n, 3) m, and the function that maps
-    k displacements p (n, k, 3) m to the force's derivatives along them (n, k, 3) N, i.e.
-    minus the elastic energy's Hessian at x times each (the exact Hessian, not its PSD
-    projection). F and S are computed once for both."""
+def elastic_force_and_differential(u, graph):
+    """((n, 3) N, function): elastic_force at displacements u (n, 3) m, and the function that
+    maps k directions p (n, k, 3) m to the force's derivatives along them (n, k, 3) N, i.e.
+    minus the elastic energy's Hessian at u times each (the exact Hessian, not its PSD
+    projection). The strain is formed from the displacement gradient H = F - I, as
+    2 E = H + H^T + H^T H, never as F^T F - I (which cancels to 2-3 digits in float32 at
+    strains of 1e-3). F and S are computed once for both."""
     gradients = _tets_last(graph.tet_gradients).reshape(4, 3, -1)   # (4 corners, 3, m) 1/m
     volume, mu, lam, kappa = _tets_last(graph.tet_material).unbind(dim=0)  # (m,) m^3, Pa
     fiber = _tets_last(graph.tet_fiber)                             # (3, m)
     dd = fiber[:, None] * fiber[None]                               # (3, 3, m)
-    eye = torch.eye(3, dtype=x.dtype, device=x.device)[:, :, None]
-    F = _deformation_gradient(x.unsqueeze(1), gradients, graph)     # (1, 3, 3, m)
-    S = _second_piola(F, mu, lam, kappa, dd)
+    eye = torch.eye(3, dtype=u.dtype, device=u.device)[:, :, None]
+    H = _gradient(u.unsqueeze(1), gradients, graph)                 # (1, 3, 3, m)
+    F = eye + H
+    S = _second_piola(H, mu, lam, kappa, dd)
 
     def differential(p):
-        dF = _deformation_gradient(p, gradients, graph)             # (k, 3, 3, m)
+        dF = _gradient(p, gradients, graph)                         # (k, 3, 3, m)
         half = _product(dF.transpose(1, 2), F)
         dC = half + half.transpose(1, 2)
         d_stretch = (dC * dd).sum(dim=(1, 2), keepdim=True)         # d^T dC d
@@ -59,25 +63,26 @@ def _product(a, b):
     return (a.unsqueeze(3) * b.unsqueeze(1)).sum(dim=2)
 
 
-def _deformation_gradient(x, gradients, graph):
-    """(k, 3, 3, m) sum_a (x_a - x_0) grad N_a^T for k sets of positions x (n, k, 3): F, or
-    for displacements their differentials dF (the gradients sum to zero, so the edge-sized
-    terms give the same F and keep the strains of small deformations in float32); gradients
-    (4, 3, m) the shape-function gradients grad N_a."""
-    n, k = x.shape[:2]
-    corner = _tets_last(x.reshape(n, 3 * k)[graph.tets]).reshape(4, k, 3, -1)
+def _gradient(w, gradients, graph):
+    """(k, 3, 3, m) sum_a (w_a - w_0) grad N_a^T for k vector fields w (n, k, 3): the
+    displacement gradient H = F - I of displacements, or dF of directions (the shape-function
+    gradients sum to zero, so the edge differences give the same sum with smaller terms);
+    gradients (4, 3, m) the shape-function gradients grad N_a."""
+    n, k = w.shape[:2]
+    corner = _tets_last(w.reshape(n, 3 * k)[graph.tets]).reshape(4, k, 3, -1)
     edges = corner[1:] - corner[:1]                                 # (3 corners, k, 3, m)
     return (edges.unsqueeze(3) * gradients[1:, None, None]).sum(dim=0)
 
 
-def _second_piola(F, mu, lam, kappa, dd):
-    """(k, 3, 3, m) Pa: S of the deformation gradients F (k, 3, 3, m), for the per-tet Lame
-    constants and fiber stiffness mu, lam, kappa (m,) Pa and fiber outer products dd (3, 3, m)."""
-    C = _product(F.transpose(1, 2), F)
-    eye = torch.eye(3, dtype=F.dtype, device=F.device)[:, :, None]
-    stretch = (C * dd).sum(dim=(1, 2), keepdim=True)                # d^T C d
-    trace = 0.5 * ((C * eye).sum(dim=(1, 2), keepdim=True) - 3.0)
-    return mu * (C - eye) + lam * trace * eye + 4.0 * kappa * (stretch - 1.0) * dd
+def _second_piola(H, mu, lam, kappa, dd):
+    """(k, 3, 3, m) Pa: S of the displacement gradients H = F - I (k, 3, 3, m), for the
+    per-tet Lame constants and fiber stiffness mu, lam, kappa (m,) Pa and fiber outer products
+    dd (3, 3, m)."""
+    strain2 = H + H.transpose(1, 2) + _product(H.transpose(1, 2), H)  # 2 E = C - I
+    eye = torch.eye(3, dtype=H.dtype, device=H.device)[:, :, None]
+    stretch = (strain2 * dd).sum(dim=(1, 2), keepdim=True)          # d^T C d - 1
+    trace = 0.5 * (strain2 * eye).sum(dim=(1, 2), keepdim=True)      # tr E
+    return mu * strain2 + lam * trace * eye + 4.0 * kappa * stretch * dd
 
 
 def _vertex_forces(P, volume, gradients, graph):

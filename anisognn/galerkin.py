@@ -11,8 +11,7 @@ is minimized here over s in the span of four directions on the free components:
     a_net  the network's acceleration,
     r / m  the force acceleration at the predictor (a gradient step's direction),
     v      the velocity, and
-    x - X  the displacement from the rest shape (X: the graph's fixed_positions, the rest
-           positions of the free components).
+    u      the displacement from the rest shape, x - X.
 The step is then dt^2 a = sum_i c_i p_i over the A-conjugate directions p_i (Gram-Schmidt in
 A's inner product on the 4 x 4 Gram matrix, no linear solve: ONNX has none), c_i = (p_i . r)
 / (p_i . A p_i); a direction whose curvature is not positive, or that the previous ones
@@ -37,10 +36,11 @@ REDUNDANT = 1e-4
 FLOOR = 1e-15
 
 
-def galerkin_acceleration(a_net, x, v, f_ext, graph, dt, passes=1):
+def galerkin_acceleration(a_net, u, v, f_ext, graph, dt, passes=1):
     """(n, 3) m/s^2: the Galerkin step over dt^2 (module docstring) for the network's
-    acceleration a_net (n, 3) m/s^2 at positions x (n, 3) m, velocities v (n, 3) m/s and
-    external force f_ext (n, 3) N on graph; one system per batch member (graph.sample).
+    acceleration a_net (n, 3) m/s^2 at displacements u (n, 3) m from the rest shape,
+    velocities v (n, 3) m/s and external force f_ext (n, 3) N on graph; one system per batch
+    member (graph.sample).
     passes > 1 solves again from the point the previous pass reached, over its residual
     acceleration, the step so far, v and the displacement (the same model of G, now at that
     point: its inertia term no longer vanishes). The step so far enters as its part along the
@@ -48,15 +48,13 @@ def galerkin_acceleration(a_net, x, v, f_ext, graph, dt, passes=1):
     displacement, and with it among the directions the Gram matrix was near singular (float32
     then moved the step by up to 1e-3 of itself; tests/test_gnn_galerkin.py)."""
     free = 1.0 - graph.fixed
-    x_hat = x + dt * v
-    # fixed_positions is float64 where the exported step reads it, x float32
-    displacement = (x - graph.fixed_positions).to(x.dtype)
+    u_hat = u + dt * v
     inertia = graph.mass / (dt * dt)
-    step, first = torch.zeros_like(x), a_net
+    step, first = torch.zeros_like(u), a_net
     for k in range(passes):
-        force, differential = elastic_force_and_differential(x_hat + step, graph)
+        force, differential = elastic_force_and_differential(u_hat + step, graph)
         residual = (force + f_ext - inertia * step) * free
-        basis = torch.stack([first, residual / graph.mass, v, displacement], dim=1) * free[:, None]
+        basis = torch.stack([first, residual / graph.mass, v, u], dim=1) * free[:, None]
         parts = _subspace_parts(basis, residual, differential, inertia, graph)
         step = step + parts.sum(dim=1)
         if k + 1 < passes:

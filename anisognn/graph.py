@@ -22,6 +22,8 @@ class Graph:
     in_weights: (n, K, 3) directional weights of the incoming edges (0 at padding).
     mass: (n, 1) kg. fixed: (n, 3) 1.0 where a component is held (Dirichlet), else 0.0.
     fixed_positions: (n, 3) m, where held components are held.
+    rest_positions: (n, 3) m, the rest shape, always float64 (displacement: the state the
+    network and the elastic force read).
     tets (m, 4) int64, tet_gradients (m, 4, 3) 1/m, tet_material (m, 4) volume m^3 and mu, lam,
     kappa Pa, tet_fiber (m, 3) unit, corners (n, C) int64 corner slots padded with 4 m: the
     per-tet constants of the elastic force (export/runtime.py).
@@ -37,6 +39,7 @@ class Graph:
     mass: torch.Tensor
     fixed: torch.Tensor
     fixed_positions: torch.Tensor
+    rest_positions: torch.Tensor
     tets: torch.Tensor
     tet_gradients: torch.Tensor
     tet_material: torch.Tensor
@@ -61,14 +64,22 @@ class Graph:
         return self.senders.shape[0]
 
     def to(self, device=None, dtype=None):
-        """A copy on device; floating tensors cast to dtype (if given)."""
+        """A copy on device; floating tensors cast to dtype (if given), rest_positions kept in
+        float64."""
         out = {}
         for f in fields(self):
             t = getattr(self, f.name)
             if t is None:
                 continue
-            out[f.name] = t.to(device=device, dtype=dtype if t.is_floating_point() else None)
+            cast = dtype if t.is_floating_point() and f.name != "rest_positions" else None
+            out[f.name] = t.to(device=device, dtype=cast)
         return Graph(**out)
+
+    def displacement(self, x, dtype):
+        """(n, 3) m in dtype: positions x (n, 3) minus the rest shape, subtracted in float64
+        (pass x in float64: what the cast to dtype rounds is then the displacement, not the
+        position)."""
+        return (x.to(torch.float64) - self.rest_positions).to(dtype)
 
 
 def from_scene(scene, dtype=torch.float32):
@@ -80,7 +91,8 @@ def from_scene(scene, dtype=torch.float32):
     t = runtime.mesh_tensors(mesh.vertices, mesh.tets, scene.masses, scene.fixed_mask,
                              scene.fixed_positions, el.fiber, el.kappa, el.mu, el.lam)
     return Graph.from_inputs({name: torch.tensor(value, dtype=torch.int64)
-                              if np.issubdtype(value.dtype, np.integer) else _real(value, dtype)
+                              if np.issubdtype(value.dtype, np.integer) else
+                              _real(value, torch.float64 if name == "rest_positions" else dtype)
                               for name, value in t.items()})
 
 
@@ -111,8 +123,8 @@ def batch(graphs):
         e_off += g.n_edges
         s_off += 4 * g.tets.shape[0]
     joined = {name: torch.cat([getattr(g, name) for g in graphs])
-              for name in ("rest", "fiber", "mass", "fixed", "fixed_positions", "tet_gradients",
-                           "tet_material", "tet_fiber")}
+              for name in ("rest", "fiber", "mass", "fixed", "fixed_positions", "rest_positions",
+                           "tet_gradients", "tet_material", "tet_fiber")}
     sample = torch.cat([torch.full((g.n_vertices,), k, dtype=torch.int64)
                         for k, g in enumerate(graphs)])
     return Graph(senders=torch.cat(senders), receivers=torch.cat(receivers),

@@ -180,20 +180,26 @@ class GraphNet(nn.Module):
             nn.init.zeros_(self.decoder[-1].weight)
             nn.init.zeros_(self.decoder[-1].bias)
 
-    def edge_features(self, x, graph):
-        """(E, 15) raw edge inputs: rest unit + length (m), current unit + length (m), fiber,
-        and the edge's deformation: stretch - 1 and (x_ij - X_ij) / |X_ij|.
+    def edge_features(self, u, graph):
+        """(E, 15) raw edge inputs at displacements u (n, 3) m: rest unit + length (m), current
+        unit + length (m), fiber, and the edge's deformation: stretch - 1 and (u_s - u_r) /
+        |X_sr|.
 
         The deformation channels are not in the paper (which gives rest and current vectors
         only): strains of 1e-3 are the signal of the stiff modes, and recovering them as the
-        difference of two normalized lengths costs the network most of its training."""
-        vec = x[graph.senders] - x[graph.receivers]
+        difference of two normalized lengths costs the network most of its training. Both are
+        formed from the displacement difference du, stretch - 1 as (2 X_sr . du + du . du) /
+        (L (l + L)), so float32 keeps their digits."""
+        rest_length = graph.rest[:, 3:]
+        rest_vec = graph.rest[:, :3] * rest_length
+        du = u[graph.senders] - u[graph.receivers]
+        vec = rest_vec + du
         length = torch.linalg.vector_norm(vec, dim=1, keepdim=True)
         unit = vec / torch.clamp(length, min=1e-12)
-        rest_length = graph.rest[:, 3:]
-        relative = (vec - graph.rest[:, :3] * rest_length) / rest_length
-        return torch.cat([graph.rest, unit, length, graph.fiber, length / rest_length - 1.0,
-                          relative], dim=1)
+        grown = (2.0 * rest_vec + du).mul(du).sum(dim=1, keepdim=True)  # l^2 - L^2
+        stretch = grown / (rest_length * (length + rest_length))
+        return torch.cat([graph.rest, unit, length, graph.fiber, stretch, du / rest_length],
+                         dim=1)
 
     def vertex_features(self, v, f_ext, graph):
         """(n, 7) raw vertex inputs: velocity, mass, external force."""
@@ -207,17 +213,21 @@ class GraphNet(nn.Module):
 
     def forward(self, x, v, f_ext, graph):
         """Accelerations (n, 3) in m/s^2 for positions x (n, 3) m, velocities v (n, 3) m/s and
-        external forces f_ext (n, 3) N on graph (anisognn.graph.Graph)."""
-        a = self.network_acceleration(x, v, f_ext, graph)
+        external forces f_ext (n, 3) N on graph (anisognn.graph.Graph). The network reads the
+        displacement x - rest in the graph's dtype, subtracted in float64: give x in float64
+        and a float32 model keeps the strains' digits (Graph.displacement)."""
+        u = graph.displacement(x, graph.mass.dtype)
+        a = self.network_acceleration(u, v, f_ext, graph)
         if self.config.galerkin:
-            return galerkin_acceleration(a, x, v, f_ext, graph, self.config.dt,
+            return galerkin_acceleration(a, u, v, f_ext, graph, self.config.dt,
                                          self.config.galerkin_passes)
         return a
 
-    def network_acceleration(self, x, v, f_ext, graph):
-        """(n, 3) m/s^2: the network's own acceleration (forward without galerkin)."""
+    def network_acceleration(self, u, v, f_ext, graph):
+        """(n, 3) m/s^2: the network's own acceleration (forward without galerkin) at
+        displacements u (n, 3) m."""
         vertex_in = self.vertex_norm(self.vertex_features(v, f_ext, graph))
-        edge = self.edge_encoder(self.edge_norm(self.edge_features(x, graph)))
+        edge = self.edge_encoder(self.edge_norm(self.edge_features(u, graph)))
         weights = self.aggregation_weights(graph).transpose(1, 2)  # (n, C, K)
         incoming = incoming_slots(graph)[0]
         vert = self.vertex_encoder(torch.cat([graph.fixed, vertex_in], dim=1))

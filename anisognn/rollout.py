@@ -52,8 +52,9 @@ def rollout(model, scene, steps, dt=None, x0=None, v0=None):
 
 def network_step(model, scene):
     """advance(x, v) -> (x_next, v_next, a): one step of the model's dt on scene, the network
-    in its own dtype and device, the state (n, 3) in float64 m and m/s; a (n, 3) m/s^2 is the
-    model's acceleration; held components stay at the scene's fixed positions."""
+    in its own dtype and device (given the positions in float64: GraphNet.forward), the state
+    (n, 3) in float64 m and m/s; a (n, 3) m/s^2 is the model's acceleration; held components
+    stay at the scene's fixed positions."""
     param = next(model.parameters())
     graph = from_scene(scene).to(param.device, param.dtype)
     f_ext = torch.tensor(scene.external_force, dtype=param.dtype, device=param.device)
@@ -61,7 +62,7 @@ def network_step(model, scene):
 
     def advance(x, v):
         with torch.no_grad():
-            a = model(torch.as_tensor(x, dtype=param.dtype, device=param.device),
+            a = model(torch.as_tensor(x, dtype=torch.float64, device=param.device),
                       torch.as_tensor(v, dtype=param.dtype, device=param.device), f_ext, graph)
         a = a.to("cpu", torch.float64).numpy()
         x_next = x + dt * v + dt * dt * a

@@ -156,7 +156,8 @@ def make_config(raw, source="config", **overrides):
 
 @dataclass
 class Batch:
-    """Network inputs of a batch of samples (tensors on the model's device) and its loss."""
+    """Network inputs of a batch of samples (tensors on the model's device; x in float64,
+    v and f_ext in the model's dtype) and its loss."""
     graph: object
     x: torch.Tensor
     v: torch.Tensor
@@ -182,8 +183,9 @@ def make_batch(samples, dt, device, dtype=torch.float32, weights=None, normalize
     f = np.concatenate([s.scene.external_force for s in samples])
     pot = BatchPotential.backward_euler([s.scene for s in samples], x, v, dt, weights,
                                         normalize)
-    return Batch(graph, *(torch.as_tensor(a, dtype=dtype, device=device) for a in (x, v, f)),
-                 pot)
+    # positions stay float64: the model subtracts the rest shape before its own cast
+    return Batch(graph, torch.as_tensor(x, dtype=torch.float64, device=device),
+                 *(torch.as_tensor(a, dtype=dtype, device=device) for a in (v, f)), pot)
 
 
 def own_rollout(model, samples, graph, steps, dt):
@@ -201,7 +203,7 @@ def own_rollout(model, samples, graph, steps, dt):
         np.concatenate([s.scene.fixed_positions for s in samples]), device=device))
     with torch.no_grad():
         for _ in range(steps):
-            a = model(x.to(dtype), v.to(dtype), f, graph)
+            a = model(x, v.to(dtype), f, graph)
             x, v = integrate(x, v, a.double(), dt, held)
     x, v = x.cpu().numpy(), v.cpu().numpy()
     out, advanced, lo = [], 0, 0
@@ -233,7 +235,7 @@ def fit_normalization(model, samples):
     v = torch.as_tensor(np.concatenate([s.v for s in samples]))
     f = torch.as_tensor(np.concatenate([s.scene.external_force for s in samples]))
     model.vertex_norm.fit(model.vertex_features(v, f, g))
-    model.edge_norm.fit(model.edge_features(x, g))
+    model.edge_norm.fit(model.edge_features(g.displacement(x, torch.float64), g))
     accel = f / g.mass
     model.accel_scale.fill_(float(torch.sqrt((accel ** 2).sum(dim=1).mean())))
 

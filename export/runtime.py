@@ -32,6 +32,10 @@ Graph of a tet mesh with n vertices (all arrays are numpy; float32 unless said):
 - mass (n, 1) kg: lumped, density * volume / 4 of every tet to each of its vertices.
 - fixed (n, 3): 1.0 where a component is held (Dirichlet), else 0.0; fixed_positions (n, 3)
   float64 m: where held components are held (here: their rest positions).
+- rest_positions (n, 3) float64 m: the rest shape. The model reads the state as displacements
+  from it, formed in float64 before the cast to float32: a strain of 1e-3 computed from float32
+  positions 10 edge lengths from the origin keeps only 2-3 digits, from float32 displacements
+  all of float32's.
 - per-tet constants of the elastic force (read only by models with the Galerkin step): tets (m, 4)
   int64; tet_gradients (m, 4, 3) 1/m, the gradients of the four linear shape functions (row a
   is grad N_a, so F = sum_a x_a grad N_a^T); tet_material (m, 4): rest volume (m^3), mu, lam,
@@ -117,7 +121,7 @@ def incoming_weights(table, weights):
 
 
 #: version of the model's input/output contract (the ONNX file's "format" metadata)
-FORMAT = "anisognn-step-1"
+FORMAT = "anisognn-step-2"
 #: (name, dtype, shape) of the model's inputs; n vertices, E directed edges, K max in-degree
 INPUTS = (
     ("positions", "float64", ("n", 3)),
@@ -132,6 +136,7 @@ INPUTS = (
     ("mass", "float32", ("n", 1)),
     ("fixed", "float32", ("n", 3)),
     ("fixed_positions", "float64", ("n", 3)),
+    ("rest_positions", "float64", ("n", 3)),
     ("tets", "int64", ("m", 4)),
     ("tet_gradients", "float32", ("m", 4, 3)),
     ("tet_material", "float32", ("m", 4)),
@@ -203,6 +208,7 @@ def mesh_tensors(vertices, tets, masses, fixed, fixed_positions, fiber_direction
             "mass": np.asarray(masses, dtype=real).reshape(-1, 1),
             "fixed": np.asarray(fixed, dtype=real),
             "fixed_positions": np.asarray(fixed_positions, dtype=real),
+            "rest_positions": np.asarray(vertices, dtype=real),
             **tet_tensors(vertices, tets, mu, lam, fiber_direction, fiber_stiffness)}
 
 

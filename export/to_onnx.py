@@ -39,7 +39,8 @@ UNITS = ("SI: positions m, velocities m/s, external_force N per vertex, mass kg,
 class Step(nn.Module):
     """One step of a GraphNet as a module of plain tensors (the exported graph).
 
-    The network runs in float32 on float32 casts of the state; the integration
+    The network runs in float32 on float32 casts of the state (the positions as displacements
+    from rest_positions, subtracted in float64: GraphNet.forward); the integration
     x' = x + dt v + dt^2 a (held components at fixed_positions), v' = (x' - x) / dt runs in
     float64, as anisognn.rollout does, so that long rollouts do not drift by rounding."""
 
@@ -53,7 +54,7 @@ class Step(nn.Module):
     def forward(self, positions, velocities, external_force, *constants):
         """The OUTPUTS from the state and the constant mesh tensors, in INPUTS order."""
         graph = Graph.from_inputs(dict(zip(CONSTANTS, constants)))
-        a = self.net(positions.float(), velocities.float(), external_force.float(), graph)
+        a = self.net(positions, velocities.float(), external_force.float(), graph)
         return (a,) + integrate(positions, velocities, a.double(), self.dt, graph)
 
 

@@ -206,7 +206,8 @@ def force_channel(scale, count=64):
         graph = from_scene(s.scene, torch.float64)
         f = torch.tensor(s.scene.external_force)
         predictor = torch.tensor(s.x + DT * s.v)
-        channel = (elastic_force(predictor, graph) + f) / graph.mass
+        channel = (elastic_force(graph.displacement(predictor, torch.float64), graph) + f) \
+            / graph.mass
         free = ~s.scene.fixed_mask
         force.append(channel.numpy()[free])
         external.append((s.scene.external_force / s.scene.masses[:, None])[free])

@@ -42,6 +42,7 @@ def test_bench_large_compares_each_path_with_exact_newton(tmp_path, capsys):
     for row in rows.values():
         assert row["converged"] and row["tets"] == 120 and row["peak_memory_gb"] > 0
         assert row["difference_to_newton"] < 1e-6
+        assert row["steps_converged"] and row["step_s"] > 0 and row["step_newton_iterations"] >= 1
     assert rows["cg amg"]["cg_iterations"] > 0 and rows["newton"]["cg_iterations"] == 0
     assert json.loads(out.read_text())["rows"][0]["size"] == "tiny"
     assert "cg amg" in capsys.readouterr().out
