@@ -1,6 +1,6 @@
 """The sparse solvers a pip install can have, on anisofem's own Hessian (docs/fem.md, "Large
-meshes"): one factorization or multigrid set-up (the second of two: the first loads libraries) and one
-solve of the box cantilever's Hessian at rest, each candidate in a fresh process.
+meshes"): one factorization or multigrid set-up (the second of two: the first loads libraries)
+and one solve of the box cantilever's Hessian at rest, each candidate in a fresh process.
 
     python scripts/large_linear_solvers.py [--cells 50x20x20] [--candidates superlu amg-1e-3 ...]
 

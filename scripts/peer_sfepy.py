@@ -61,8 +61,8 @@ def sfepy_solve(mesh_file, lam, mu, load, x_fixed, tol, solver):
     problem.set_bcs(ebcs=Conditions([EssentialBC("held", held, {"u.all": 0.0})]))
     status = IndexedStruct()
     linear = Solver.any_from_conf(_conf(SFEPY_SOLVERS[solver]))
-    problem.set_solver(Newton({"i_max": 100, "eps_a": tol, "eps_r": 1.0, "ls_on": LS_ON}, lin_solver=linear,
-                              status=status))
+    problem.set_solver(Newton({"i_max": 100, "eps_a": tol, "eps_r": 1.0, "ls_on": LS_ON},
+                              lin_solver=linear, status=status))
     t0 = time.perf_counter()
     state = problem.solve(save_results=False)
     seconds = time.perf_counter() - t0
@@ -140,22 +140,21 @@ def _write_problem(cells, folder):
 
     from anisofem.meshgen import box_beam
     from anisofem.methods import Method
+    from anisofem.newton import gradient_tolerance
     from anisofem.potential import Potential
     from anisofem.solve import GRAVITY, default_scene
     mesh = box_beam(cells=cells)
     scene = default_scene(mesh)
     mesh_file = os.path.join(folder, "beam.vtk")
     meshio.write(mesh_file, meshio.Mesh(mesh.vertices, [("tetra", mesh.tets)]))
-    material = scene.material
-    young, poisson = float(material.young), float(material.poisson)
-    lam = young * poisson / ((1 + poisson) * (1 - 2 * poisson))
-    mu = young / (2 * (1 + poisson))
-    tol = max(Method().rtol * Potential(scene).force_scale(), scene.gradient_roundoff)
+    tol = gradient_tolerance(Potential(scene), Method().rtol)
     spec = os.path.join(folder, "problem.json")
     with open(spec, "w") as fh:
         json.dump({"answer": os.path.join(folder, "u.npy"),
-                   "sfepy": {"mesh_file": mesh_file, "lam": lam, "mu": mu,
-                             "load": (float(material.density) * np.asarray(GRAVITY)).tolist(),
+                   "sfepy": {"mesh_file": mesh_file, "lam": float(scene.elements.lam[0]),
+                             "mu": float(scene.elements.mu[0]),
+                             "load": (float(scene.material.density)
+                                      * np.asarray(GRAVITY)).tolist(),
                              "x_fixed": float(mesh.vertices[:, 0].min() + 1e-9 * mesh.size),
                              "tol": tol}}, fh)
     return spec
