@@ -50,8 +50,8 @@ def main(argv=None):
 
 
 def add_galerkin_arguments(parser):
-    """--galerkin on|off and --galerkin-passes K on parser: how a model steps, whatever its
-    config says (read back by stepping)."""
+    """--galerkin on|off, --galerkin-passes K and --cg-iterations J on parser: how a model
+    steps, whatever its config says (read back by stepping)."""
     parser.add_argument("--galerkin", choices=("on", "off"),
                         help="take the Galerkin step (on) or the network's own acceleration "
                         "(off), whatever the model's config says (default: as it says)")
@@ -59,18 +59,26 @@ def add_galerkin_arguments(parser):
                         help="Galerkin passes per step (implies --galerkin on; default: the "
                         "model's own, 1 for a model without the step): each pass costs about "
                         "half the network's step on 100 tets")
+    parser.add_argument("--cg-iterations", type=int, metavar="J",
+                        help="conjugate-gradient iterations on the backward-Euler step after "
+                        "the model's own (float64; default: the model's own, 0 for the shipped "
+                        "models): more is closer to the FEM, each one Hessian product")
 
 
 def stepping(model, args):
-    """The GraphNet model as args' --galerkin and --galerkin-passes ask (itself if neither)."""
-    if args.galerkin is None and args.galerkin_passes is None:
+    """The GraphNet model as args' --galerkin, --galerkin-passes and --cg-iterations ask
+    (itself if none)."""
+    if args.galerkin is None and args.galerkin_passes is None and args.cg_iterations is None:
         return model
+    if args.cg_iterations is not None and args.cg_iterations < 0:
+        raise ValueError(f"--cg-iterations: expected an integer >= 0, got {args.cg_iterations}")
     if args.galerkin == "off":
         if args.galerkin_passes is not None:
             raise ValueError("--galerkin-passes: passes of the Galerkin step, which --galerkin "
                              "off leaves out")
-        return with_galerkin(model, False)
-    return with_galerkin(model, True, args.galerkin_passes)
+        return with_galerkin(model, False, cg_iterations=args.cg_iterations)
+    galerkin = model.config.galerkin or args.galerkin == "on" or args.galerkin_passes is not None
+    return with_galerkin(model, galerkin, args.galerkin_passes, args.cg_iterations)
 
 
 def _label(spec):

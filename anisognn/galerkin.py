@@ -68,14 +68,14 @@ def _subspace_parts(basis, residual, differential, inertia, graph):
     mass over dt^2), r = residual (n, 3) N, as its part along each direction (s is their
     sum)."""
     free = 1.0 - graph.fixed
-    count = _member_sum(3.0 * torch.ones_like(graph.mass), graph)            # (S, 1)
-    rms = torch.sqrt(_member_sum((basis * basis).sum(dim=2), graph) / count + FLOOR ** 2)
-    basis = basis / _per_vertex(rms, graph)[:, :, None]                      # (n, k, 3)
+    count = member_sum(3.0 * torch.ones_like(graph.mass), graph)            # (S, 1)
+    rms = torch.sqrt(member_sum((basis * basis).sum(dim=2), graph) / count + FLOOR ** 2)
+    basis = basis / per_vertex(rms, graph)[:, :, None]                      # (n, k, 3)
     products = (inertia[:, None] * basis - differential(basis)) * free[:, None]
     gram = _gram(basis, products, graph)                                     # (S, k, k)
-    rhs = _member_sum((basis * residual[:, None]).sum(dim=2), graph)          # (S, k)
+    rhs = member_sum((basis * residual[:, None]).sum(dim=2), graph)          # (S, k)
     weights = _conjugate_solve(gram, rhs)                                    # (S, k)
-    return basis * _per_vertex(weights, graph)[:, :, None]
+    return basis * per_vertex(weights, graph)[:, :, None]
 
 
 def _conjugate_solve(gram, rhs):
@@ -108,10 +108,10 @@ def _gram(a, b, graph):
         flat_a = a.transpose(0, 1).reshape(a.shape[1], -1)
         flat_b = b.transpose(0, 1).reshape(b.shape[1], -1)
         return torch.matmul(flat_a, flat_b.transpose(0, 1)).unsqueeze(0)
-    return _member_sum(torch.matmul(a, b.transpose(1, 2)), graph)
+    return member_sum(torch.matmul(a, b.transpose(1, 2)), graph)
 
 
-def _member_sum(values, graph):
+def member_sum(values, graph):
     """(S, ...) the sums of per-vertex values (n, ...) over each batch member (S = 1 for a
     single mesh)."""
     if graph.sample is None:
@@ -121,7 +121,7 @@ def _member_sum(values, graph):
     return members.index_add(0, graph.sample, values)
 
 
-def _per_vertex(values, graph):
+def per_vertex(values, graph):
     """(n, ...) each vertex's batch member's entry of values (S, ...)."""
     if graph.sample is None:
         return values.expand((graph.n_vertices,) + values.shape[1:])

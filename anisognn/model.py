@@ -26,6 +26,7 @@ import torch
 from torch import nn
 
 from .galerkin import galerkin_acceleration
+from .krylov import refine
 
 AGGREGATIONS = ("directional", "sum")
 VERTEX_FLAGS = 3   # Dirichlet flags per component
@@ -47,7 +48,11 @@ class ModelConfig:
     predictor over it, the force acceleration there, the velocity and the displacement from
     rest (anisognn.galerkin), so a rollout rests only where anisofem's forces balance. Costs
     the elastic force and four products with its derivative per step. galerkin_passes = k > 1
-    solves k times per step, each from where the previous pass ended (k times that cost)."""
+    solves k times per step, each from where the previous pass ended (k times that cost).
+    cg_iterations = k > 0 (not in the paper) follows the step with k conjugate-gradient
+    iterations in float64 on the backward-Euler Newton system linearized at its end
+    (anisognn.krylov): an accuracy knob a user turns at inference, each iteration one Hessian
+    product; trained weights do not depend on it."""
     latent: int = 128
     hidden_layers: int = 2
     steps: int = 15
@@ -55,6 +60,7 @@ class ModelConfig:
     dt: float = 0.02
     galerkin: bool = False
     galerkin_passes: int = 1
+    cg_iterations: int = 0
 
     def __post_init__(self):
         if self.aggregation not in AGGREGATIONS:
@@ -72,6 +78,10 @@ class ModelConfig:
                 and self.galerkin_passes >= 1):
             raise ValueError(f"galerkin_passes: expected an integer >= 1, got "
                              f"{self.galerkin_passes!r}")
+        if not (isinstance(self.cg_iterations, int) and not isinstance(self.cg_iterations, bool)
+                and self.cg_iterations >= 0):
+            raise ValueError(f"cg_iterations: expected an integer >= 0, got "
+                             f"{self.cg_iterations!r}")
         if self.galerkin_passes > 1 and not self.galerkin:
             raise ValueError("galerkin_passes: repeats the Galerkin step, so more than 1 needs "
                              "galerkin = true")
@@ -84,10 +94,15 @@ class ModelConfig:
 
     @property
     def stepping(self):
-        """How the model steps, in words: "K Galerkin pass(es)" or "no Galerkin step"."""
+        """How the model steps, in words: "K Galerkin pass(es)" or "no Galerkin step", and
+        ", J CG iterations" when it takes them."""
         if not self.galerkin:
-            return "no Galerkin step"
-        return f"{self.galerkin_passes} Galerkin pass{'es' * (self.galerkin_passes > 1)}"
+            words = "no Galerkin step"
+        else:
+            words = f"{self.galerkin_passes} Galerkin pass{'es' * (self.galerkin_passes > 1)}"
+        if self.cg_iterations:
+            words += f", {self.cg_iterations} CG iteration{'s' * (self.cg_iterations > 1)}"
+        return words
 
     def to_dict(self):
         return asdict(self)
@@ -216,11 +231,15 @@ class GraphNet(nn.Module):
         external forces f_ext (n, 3) N on graph (anisognn.graph.Graph). The network reads the
         displacement x - rest in the graph's dtype, subtracted in float64: give x in float64
         and a float32 model keeps the strains' digits (Graph.displacement)."""
+        c = self.config
         u = graph.displacement(x, graph.mass.dtype)
         a = self.network_acceleration(u, v, f_ext, graph)
-        if self.config.galerkin:
-            return galerkin_acceleration(a, u, v, f_ext, graph, self.config.dt,
-                                         self.config.galerkin_passes)
+        if c.galerkin:
+            a = galerkin_acceleration(a, u, v, f_ext, graph, c.dt, c.galerkin_passes)
+        if c.cg_iterations:
+            u_hat = graph.displacement(x, torch.float64) + c.dt * v.double()
+            step = refine(a * (c.dt * c.dt), u_hat, f_ext, graph, c.dt, c.cg_iterations)
+            a = (step / (c.dt * c.dt)).to(a.dtype)
         return a
 
     def network_acceleration(self, u, v, f_ext, graph):
@@ -239,15 +258,18 @@ class GraphNet(nn.Module):
         return self.decoder(vert) * self.accel_scale
 
 
-def with_galerkin(model, galerkin=True, passes=None):
+def with_galerkin(model, galerkin=True, passes=None, cg_iterations=None):
     """A copy of the GraphNet model (same weights, in eval mode) whose config has
     ModelConfig.galerkin = galerkin and galerkin_passes = passes (1 without the step; None:
-    the model's own count if it takes the step, else 1): the trained network with or without
-    the Galerkin step."""
+    the model's own count if it takes the step, else 1) and cg_iterations (None: the model's
+    own): the trained network with or without the Galerkin step and the CG iterations."""
     param = next(model.parameters())
     if passes is None:
         passes = model.config.galerkin_passes
-    config = replace(model.config, galerkin=galerkin, galerkin_passes=passes if galerkin else 1)
+    if cg_iterations is None:
+        cg_iterations = model.config.cg_iterations
+    config = replace(model.config, galerkin=galerkin, galerkin_passes=passes if galerkin else 1,
+                     cg_iterations=cg_iterations)
     out = GraphNet(config).to(param.device, param.dtype)
     out.load_state_dict(model.state_dict())
     return out.eval()

@@ -385,10 +385,11 @@ def _check_resumable(payload, config, path):
 
 
 def trained_config(config):
-    """The ModelConfig of the network a RunConfig trains: its model's, without galerkin when
-    [train] through_galerkin = false."""
-    if config.model.galerkin and not config.train.through_galerkin:
-        return dataclasses.replace(config.model, galerkin=False, galerkin_passes=1)
+    """The ModelConfig of the network a RunConfig trains: its model's, without galerkin and CG
+    iterations when [train] through_galerkin = false."""
+    c = config.model
+    if (c.galerkin or c.cg_iterations) and not config.train.through_galerkin:
+        return dataclasses.replace(c, galerkin=False, galerkin_passes=1, cg_iterations=0)
     return config.model
 
 

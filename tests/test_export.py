@@ -295,7 +295,8 @@ def test_cli_exports_a_checkpoint_and_a_shipped_name(tmp_path, capsys):
 
 def test_cli_galerkin_flags_choose_how_the_exported_model_steps(tmp_path, capsys):
     """--galerkin-passes 1 exports the shipped network with one pass (faster, less accurate),
-    --galerkin off the network alone; each file steps like the torch model it names."""
+    --galerkin off the network alone, --cg-iterations 5 its step followed by five
+    conjugate-gradient iterations; each file steps like the torch model it names."""
     shipped = anisognn.pretrained("directional")
     assert shipped.config.galerkin and shipped.config.galerkin_passes == 2
     mesh = box((5, 2, 2))
@@ -306,6 +307,8 @@ def test_cli_galerkin_flags_choose_how_the_exported_model_steps(tmp_path, capsys
                               with_galerkin(shipped, True, 1)),
                              (["--galerkin", "off"], "no Galerkin step",
                               with_galerkin(shipped, False)),
+                             (["--cg-iterations", "5"], "2 Galerkin passes, 5 CG iterations",
+                              with_galerkin(shipped, True, None, 5)),
                              ([], "2 Galerkin passes", shipped)):
         path = str(tmp_path / f"{len(steps)}.onnx")
         cli.main(["directional", "-o", path] + flags)
@@ -315,8 +318,11 @@ def test_cli_galerkin_flags_choose_how_the_exported_model_steps(tmp_path, capsys
         steps[said] = sim.run(x, v, scene.external_force)[0]
     one, two = steps["1 Galerkin pass,"], steps["2 Galerkin passes"]
     assert np.abs(one - two).max() > 1e-3 * np.abs(two).max()
+    assert np.abs(steps["2 Galerkin passes, 5 CG iterations"] - two).max() > 1e-3 * np.abs(
+        two).max()
     for flags, error in ((["--galerkin", "off", "--galerkin-passes", "2"], "--galerkin-passes"),
-                         (["--galerkin-passes", "0"], "galerkin_passes: expected an integer")):
+                         (["--galerkin-passes", "0"], "galerkin_passes: expected an integer"),
+                         (["--cg-iterations", "-1"], "--cg-iterations: expected an integer")):
         with pytest.raises(SystemExit, match=error):
             cli.main(["directional", "-o", str(tmp_path / "bad.onnx")] + flags)
 
