@@ -1,19 +1,27 @@
 """The surrogate's rungs of the speed/accuracy ladder (anisofem.trade): the shipped networks
-alone, with their Galerkin passes, exported to ONNX, and as the warm start of one Newton
-iteration."""
+alone, with their Galerkin passes, followed by conjugate-gradient iterations, exported to ONNX,
+and as the warm start of one Newton iteration; and, side by side, the same Galerkin passes and
+iterations with the previous step's acceleration in the network's place (what the network's
+direction buys)."""
 import os
 
 import numpy as np
+import torch
 
 from anisofem import Material, Scene
 from anisofem.solve import Stepper
 from anisofem.ladder import Rung
 
+from .galerkin import galerkin_acceleration
+from .graph import from_scene
+from .krylov import refine
 from .model import with_galerkin
 from .rollout import network_step
 from .sampler import DENSITY, POISSON, YOUNG
 from .shipped import NAMES, pretrained
 
+#: CG iterations after the step on the ladder, each with the network and without it
+CG_ITERATIONS = (10, 40)
 #: The deployed files `python -m export` writes for the shipped models.
 ONNX_FOLDER = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                            "export", "models")
@@ -33,6 +41,30 @@ def _network_step(model, scene):
 def network_rung(name, model):
     """The model stepping alone (its Galerkin passes, if any, included)."""
     return Rung(name, "surrogate", lambda scene, dt: _network_step(model, scene))
+
+
+def previous_acceleration_rung(name, passes, iterations):
+    """The shipped step without its network: `passes` Galerkin passes with the previous step's
+    acceleration (zero at the first) as the first direction, then `iterations` CG iterations,
+    all in float64 (anisognn.galerkin, anisognn.krylov)."""
+    def make(scene, dt):
+        graph = from_scene(scene, torch.float64)
+        rest = scene.mesh.vertices
+        f_ext = torch.tensor(scene.external_force)
+        held = scene.fixed_mask
+        previous = [torch.zeros(rest.shape, dtype=torch.float64)]
+
+        def advance(x, v):
+            u, v_t = torch.tensor(x - rest), torch.tensor(v)
+            with torch.no_grad():
+                a = galerkin_acceleration(previous[0], u, v_t, f_ext, graph, dt, passes)
+                step = refine(a * (dt * dt), u + dt * v_t, f_ext, graph, dt, iterations)
+            x_next = x + dt * v + step.numpy()
+            x_next[held] = scene.fixed_positions[held]
+            previous[0] = torch.tensor((x_next - x - dt * v) / (dt * dt))
+            return x_next, (x_next - x) / dt, {"failed": not bool(np.isfinite(x_next).all())}
+        return advance
+    return Rung(name, "surrogate", make)
 
 
 def warm_start_rung(name, model, iterations=1):
@@ -106,6 +138,10 @@ def surrogate_rungs(scene, dt, notes):
              network_rung("directional (shipped)", directional),
              network_rung("meshgraphnets (shipped)", models["meshgraphnets"]),
              warm_start_rung("directional + newton x1", directional)]
+    passes = directional.config.galerkin_passes
+    for k in CG_ITERATIONS:
+        rungs += [network_rung(f"directional + cg x{k}", with_galerkin(directional, True, None, k)),
+                  previous_acceleration_rung(f"no network + cg x{k}", passes, k)]
     path = os.path.join(ONNX_FOLDER, "directional.onnx")
     if not os.path.isfile(path):
         notes.append(f"ONNX rung skipped: {path} is missing")

@@ -72,8 +72,12 @@ def test_trade_command_on_a_mesh_file_with_the_surrogates(tmp_path):
     assert rows["exact"]["errors"] == [0.0, 0.0]
     assert rows["newton x1"]["max_error"] > 0
     surrogates = [row for row in out["rungs"] if row["kind"] == "surrogate"]
-    assert {"directional (shipped)", "directional + newton x1"} <= {s["name"] for s in surrogates}
+    assert {"directional (shipped)", "directional + newton x1", "directional + cg x40",
+            "no network + cg x40"} <= {s["name"] for s in surrogates}
     assert all(np.isfinite(s["errors"]).all() for s in surrogates)
+    # forty CG iterations after the step bring the end of the transient closer to the FEM
+    shipped, refined = rows["directional (shipped)"], rows["directional + cg x40"]
+    assert refined["errors"][-1] < 0.5 * shipped["errors"][-1]
     assert out["recommended"] in rows
     assert (tmp_path / "t.png").stat().st_size > 20_000
     assert "cheapest stable rung within 0.01" in r.stdout
