@@ -7,7 +7,7 @@ TORCH_SPEC ?= torch==2.13.0
 PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
 
-.PHONY: demo test bench pretrained clean
+.PHONY: demo test bench pretrained clean web web-assets test-web
 
 $(VENV)/.installed: setup.cfg setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -45,5 +45,27 @@ pretrained: $(VENV)/.installed
 	  $(PY) -m export $$name -o export/models/$$name.onnx || exit 1; \
 	done
 
+# The browser page (web/): onnxruntime-web and three.js from npm (web/package-lock.json), the
+# scenes baked from the shipped model (python -m export bake), served on 127.0.0.1 only.
+WEB_SCENES := cantilever cylinder t y
+WEB_PORT ?= 8000
+
+web/node_modules/.package-lock.json: web/package.json web/package-lock.json
+	cd web && npm ci --no-audit --no-fund
+
+web-assets: $(VENV)/.installed web/node_modules/.package-lock.json
+	mkdir -p web/models web/scenes
+	cp export/models/directional.onnx export/models/meshgraphnets.onnx web/models/
+	for s in $(WEB_SCENES); do $(PY) -m export bake $$s -o web/scenes/$$s || exit 1; done
+
+web: web-assets
+	@echo "serving the page at http://127.0.0.1:$(WEB_PORT)/index.html (Ctrl-C stops)"
+	$(PY) -m http.server $(WEB_PORT) --bind 127.0.0.1 --directory web
+
+# Chromium from the distribution's packages when it is missing (no browser download).
+test-web: web-assets
+	@command -v chromium > /dev/null || (apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium)
+	$(PY) web/check_page.py
+
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build *.egg-info web/node_modules web/models web/scenes web/out

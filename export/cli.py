@@ -1,12 +1,13 @@
 """`python -m export MODEL -o model.onnx` (MODEL: a model.pt / checkpoint.pt file or a shipped
-name) and `python -m export bench` (onnxruntime vs torch per step)."""
+name), `python -m export bench` (onnxruntime vs torch per step) and `python -m export bake
+SCENE -o PATH` (a scene's constant tensors for an engine)."""
 import argparse
 import sys
 
 from anisognn import shipped
 from anisognn.cli import add_galerkin_arguments, stepping
 
-from . import bench, to_onnx
+from . import bake, bench, to_onnx
 
 
 def main(argv=None):
@@ -19,6 +20,24 @@ def main(argv=None):
                             choices=list(bench.MESHES), help="mesh sizes (default: all)")
         args = parser.parse_args(argv[1:])
         bench.run(sizes=args.sizes, out=args.json)
+        return
+    if argv[:1] == ["bake"]:
+        parser = argparse.ArgumentParser(
+            prog="python -m export bake", description="write a scene's constant model inputs "
+            "as PATH.json + PATH.bin (export/README.md, Baked scenes)")
+        parser.add_argument("scene", choices=sorted(bake.SCENES))
+        parser.add_argument("-o", "--output", required=True, help="PATH (without extension)")
+        parser.add_argument("--model", default="export/models/directional.onnx",
+                            help="the .onnx file the scene is for (default %(default)s)")
+        parser.add_argument("--angles", type=float, nargs="+", default=list(bake.ANGLES),
+                            help="fiber angles in degrees from x towards z (default %(default)s)")
+        args = parser.parse_args(argv[1:])
+        try:
+            header = bake.bake(args.scene, args.output, args.model, args.angles)
+        except (ValueError, FileNotFoundError) as err:
+            sys.exit(f"error: {err}")
+        print(f"wrote {args.output}.json and .bin: {header['title']}, {header['n']} vertices, "
+              f"{header['m']} tets, fiber angles {header['fiber_angles']}")
         return
     parser = argparse.ArgumentParser(
         prog="python -m export", description="export a trained anisognn model to ONNX "

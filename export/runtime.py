@@ -212,6 +212,78 @@ def mesh_tensors(vertices, tets, masses, fixed, fixed_positions, fiber_direction
             **tet_tensors(vertices, tets, mu, lam, fiber_direction, fiber_stiffness)}
 
 
+def surface_triangles(vertices, tets):
+    """(k, 3) int64 the boundary faces of tets (m, 4) (faces of exactly one tet), each ordered
+    so that its normal (x1 - x0) x (x2 - x0) points out of its tet at vertices (n, 3)."""
+    tets = np.asarray(tets, dtype=np.int64)
+    faces = tets[:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]].reshape(-1, 3)
+    opposite = tets.ravel()
+    _, first, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True,
+                                 return_counts=True)
+    keep = first[counts == 1]
+    faces, opposite = faces[keep], opposite[keep]
+    x0, x1, x2 = (vertices[faces[:, i]] for i in range(3))
+    inward = np.einsum("ij,ij->i", np.cross(x1 - x0, x2 - x0), vertices[opposite] - x0) > 0
+    faces[inward] = faces[inward][:, [0, 2, 1]]
+    return faces
+
+
+#: the baked-scene file format (write_arrays / read_arrays)
+ARRAYS_FORMAT = "anisognn-arrays-1"
+#: numpy dtypes a baked file may hold, by the names its header uses
+ARRAY_DTYPES = {"float64": "<f8", "float32": "<f4", "int64": "<i8", "int32": "<i4",
+                "uint8": "u1"}
+
+
+def write_arrays(path, arrays, header=None):
+    """Write arrays {name: numpy array} as PATH.bin (raw little-endian, each array starting at
+    a multiple of 8 bytes) and PATH.json: {"format": ARRAYS_FORMAT, "bin": file name,
+    "arrays": {name: {"dtype", "shape", "offset" (bytes)}}} plus the entries of header (a
+    JSON-able dict). A C++/C#/JS engine reads them without numpy. Both files are written
+    atomically (a temporary file renamed)."""
+    table, chunks, offset = {}, [], 0
+    for name, value in arrays.items():
+        value = np.asarray(value)
+        kind = next((k for k, v in ARRAY_DTYPES.items() if np.dtype(v) == value.dtype), None)
+        if kind is None:
+            raise TypeError(f"arrays[{name!r}]: dtype {value.dtype} is not one of "
+                            f"{list(ARRAY_DTYPES)}")
+        raw = np.ascontiguousarray(value, dtype=ARRAY_DTYPES[kind]).tobytes()
+        table[name] = {"dtype": kind, "shape": list(value.shape), "offset": offset}
+        pad = -len(raw) % 8
+        chunks.append(raw + bytes(pad))
+        offset += len(raw) + pad
+    meta = {"format": ARRAYS_FORMAT, **(header or {}),
+            "bin": os.path.basename(str(path)) + ".bin", "arrays": table}
+    _write_atomic(str(path) + ".bin", b"".join(chunks))
+    _write_atomic(str(path) + ".json", json.dumps(meta, indent=1).encode())
+
+
+def read_arrays(path):
+    """(header dict, {name: numpy array}) of files written by write_arrays(path, ...)."""
+    with open(str(path) + ".json") as f:
+        header = json.load(f)
+    if header.get("format") != ARRAYS_FORMAT:
+        raise ValueError(f"path: {path}.json is not an {ARRAYS_FORMAT!r} header (format "
+                         f"{header.get('format')!r})")
+    data = np.fromfile(os.path.join(os.path.dirname(str(path)), header["bin"]), dtype=np.uint8)
+    arrays = {}
+    for name, spec in header["arrays"].items():
+        dtype = np.dtype(ARRAY_DTYPES[spec["dtype"]])
+        count = int(np.prod(spec["shape"], dtype=np.int64))
+        arrays[name] = np.frombuffer(data, dtype=dtype, count=count,
+                                     offset=spec["offset"]).reshape(spec["shape"])
+    return header, arrays
+
+
+def _write_atomic(path, payload):
+    """Write bytes to path through a temporary file in its folder, renamed over it."""
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "wb") as f:
+        f.write(payload)
+    os.replace(tmp, path)
+
+
 class OnnxSimulator:
     """A tet mesh stepped by an exported anisognn model (backward-Euler steps of the model's dt).
 

@@ -1,0 +1,87 @@
+"""`python -m export bake`: the constant tensors of a scene, written for an engine that steps
+model.onnx without numpy (export/runtime.py's write_arrays: a JSON header and raw
+little-endian arrays; export/README.md, Baked scenes).
+
+A baked scene holds every constant model input (runtime.INPUTS, in its dtype), for each fiber
+angle asked the two fiber-dependent ones ("fiber@A", "tet_fiber@A" for A degrees from the x
+axis towards z), and what a viewer needs: the boundary triangles ("surface", int32), the
+vertex masses ("masses", kg) and the held vertices ("held", uint8 per component). The header
+says the model's dt, the counts n (vertices), m (tets), E (directed edges), the fiber angles,
+gravity and the material the model was trained on.
+"""
+import json
+import math
+
+import numpy as np
+
+from . import runtime
+
+#: the scenes `bake` knows: name -> (title, mesh maker, held end (axis, side))
+SCENES = {
+    "cantilever": ("box cantilever, 0.1 x 0.02 x 0.02 m, 200 tets", "box", (0, "min")),
+    "cylinder": ("cylinder cantilever, 0.1 m long, 1 cm radius", "cylinder", (0, "min")),
+    "t": ("T, 0.1 m wide, standing on its stem", "t", (2, "min")),
+    "y": ("Y, arms raised 35 degrees, standing on its stem", "y", (2, "min")),
+}
+GRAVITY = (0.0, 0.0, -9.81)
+#: fiber angles baked by default, degrees (the fiber stiffness is the trained material's E)
+ANGLES = (0, 15, 30, 45, 60, 75, 90)
+
+
+def scene_mesh(name):
+    """(vertices (n, 3) m, tets (m, 4), held (n, 3) bool) of a scene of SCENES."""
+    import anisofem
+    from anisofem import metrics
+    _, shape, (axis, side) = SCENES[name]
+    mesh = {"box": lambda: anisofem.box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2)),
+            "cylinder": lambda: anisofem.cylinder_beam(0.1, 0.01, 8, 2, 0),
+            "t": lambda: anisofem.t_shape(),
+            "y": lambda: anisofem.y_shape()}[shape]()
+    held = np.zeros((mesh.n_vertices, 3), dtype=bool)
+    held[metrics.end_vertices(mesh, axis, side)] = True
+    return mesh.vertices, mesh.tets, held
+
+
+def fiber_direction(angle):
+    """(3,) unit fiber at `angle` degrees from the x axis towards z."""
+    a = math.radians(angle)
+    return np.array([math.cos(a), 0.0, math.sin(a)])
+
+
+def bake(name, out, model_path, angles=ANGLES):
+    """Write the scene `name` (a key of SCENES) for the model at model_path to out.json and
+    out.bin; returns the header."""
+    if name not in SCENES:
+        raise ValueError(f"scene: expected one of {sorted(SCENES)}, got {name!r}")
+    angles = [float(a) for a in angles]
+    if not angles:
+        raise ValueError("angles: give at least one fiber angle")
+    vertices, tets, held = scene_mesh(name)
+    arrays, header = {}, None
+    for angle in angles:
+        sim = runtime.OnnxSimulator(model_path, vertices, tets, fixed=held,
+                                    fiber_direction=fiber_direction(angle),
+                                    fiber_stiffness=_trained_young(model_path))
+        if header is None:
+            arrays.update(sim.constants)
+            arrays["surface"] = runtime.surface_triangles(vertices, tets).astype(np.int32)
+            arrays["masses"] = sim.masses
+            arrays["held"] = held.astype(np.uint8)
+            header = {"scene": name, "title": SCENES[name][0], "model_format": runtime.FORMAT,
+                      "dt": sim.dt, "n": int(vertices.shape[0]), "m": int(tets.shape[0]),
+                      "E": int(sim.constants["senders"].shape[0]), "fiber_angles": angles,
+                      "gravity": list(GRAVITY),
+                      "trained_material": json.loads(sim.metadata["trained_material"])}
+        tag = f"@{angle:g}"
+        arrays["fiber" + tag] = sim.constants["fiber"]
+        arrays["tet_fiber" + tag] = sim.constants["tet_fiber"]
+    runtime.write_arrays(out, arrays, header)
+    return header
+
+
+def _trained_young(model_path):
+    """E (Pa) of the material the model at model_path was trained on (its metadata)."""
+    import onnx
+    meta = {p.key: p.value for p in onnx.load(model_path, load_external_data=False)
+            .metadata_props}
+    return float(json.loads(meta["trained_material"])["young"])

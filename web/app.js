@@ -1,0 +1,266 @@
+// The page: a baked scene stepped by model.onnx in real time, drawn with three.js, with a
+// force applied by dragging. URL parameters: scene (cantilever, cylinder, t, y), model (the
+// .onnx file, default models/directional.onnx), angle (fiber angle, degrees), paused (1: start
+// paused; the end-to-end test steps it through window.anisognn).
+import * as THREE from "three";
+import { OrbitControls } from "three/addons/controls/OrbitControls.js";
+import { loadModel, loadScene, Simulation } from "./stepper.js";
+
+const params = new URLSearchParams(location.search);
+const ui = { scene: el("scene"), angle: el("angle"), angleValue: el("angle-value"),
+             pause: el("pause"), reset: el("reset"), stats: el("stats"),
+             message: el("message") };
+// spring constant of a drag, N/m per kg of the dragged vertices' mass (a 1 cm pull accelerates
+// them at about 5 g)
+const DRAG_STIFFNESS = 5000.0;
+// vertices within this rest distance (m) of the picked one share the pull
+const DRAG_RADIUS = 0.008;
+
+const renderer = new THREE.WebGLRenderer({ canvas: el("view"), antialias: true,
+                                           preserveDrawingBuffer: true });
+const camera = new THREE.PerspectiveCamera(40, 1, 0.001, 10);
+const controls = new OrbitControls(camera, renderer.domElement);
+const world = new THREE.Scene();
+world.background = new THREE.Color(0xf4f4f2);
+world.add(new THREE.HemisphereLight(0xffffff, 0x8899aa, 1.6));
+const sun = new THREE.DirectionalLight(0xffffff, 1.8);
+sun.position.set(0.3, -0.5, 0.8);
+world.add(sun);
+
+const state = { sim: null, session: null, sceneData: null, body: null, ghost: null,
+                paused: params.get("paused") === "1", drag: null, times: [], busy: false,
+                lastFrame: null, owed: 0 };
+
+function el(id) { return document.getElementById(id); }
+
+function say(text) { ui.message.textContent = text; }
+
+async function start() {
+  const modelUrl = params.get("model") || "models/directional.onnx";
+  ui.scene.value = params.get("scene") || "cantilever";
+  try {
+    state.session = await loadModel(modelUrl);
+    await openScene(ui.scene.value, params.get("angle"));
+  } catch (err) {
+    say(String(err.message || err));
+    window.anisognn.error = String(err.message || err);
+    return;
+  }
+  window.anisognn.ready = true;
+}
+
+async function openScene(name, angle) {
+  state.sceneData = await loadScene(`scenes/${name}`);
+  const angles = state.sceneData.header.fiber_angles;
+  ui.angle.max = String(angles.length - 1);
+  const wanted = angle === null || angle === undefined ? 45 : Number(angle);
+  const index = Math.max(0, angles.findIndex((a) => a === wanted));
+  ui.angle.value = String(index);
+  ui.angleValue.textContent = String(angles[index]);
+  state.sim = new Simulation(state.session, state.sceneData, angles[index]);
+  buildMeshes();
+  say("");
+}
+
+function buildMeshes() {
+  for (const mesh of [state.body, state.ghost]) if (mesh) world.remove(mesh);
+  const { arrays } = state.sceneData;
+  const n = state.sim.n;
+  const index = new THREE.BufferAttribute(new Uint32Array(arrays.surface.data), 1);
+  const rest = new Float32Array(arrays.rest_positions.data);
+  const geometry = new THREE.BufferGeometry();
+  geometry.setIndex(index);
+  geometry.setAttribute("position", new THREE.BufferAttribute(new Float32Array(rest), 3));
+  geometry.setAttribute("color", new THREE.BufferAttribute(new Float32Array(3 * n), 3));
+  state.body = new THREE.Mesh(geometry, new THREE.MeshStandardMaterial(
+    { vertexColors: true, roughness: 0.6, side: THREE.DoubleSide }));
+  const ghostGeometry = new THREE.BufferGeometry();
+  ghostGeometry.setIndex(index);
+  ghostGeometry.setAttribute("position", new THREE.BufferAttribute(rest, 3));
+  state.ghost = new THREE.Mesh(ghostGeometry, new THREE.MeshBasicMaterial(
+    { color: 0x556677, wireframe: true, transparent: true, opacity: 0.25 }));
+  world.add(state.body, state.ghost);
+  ghostGeometry.computeBoundingSphere();
+  const { center, radius } = ghostGeometry.boundingSphere;
+  controls.target.copy(center);
+  camera.up.set(0, 0, 1);
+  camera.position.set(center.x + 0.4 * radius, center.y - 3.2 * radius, center.z + 1.2 * radius);
+  controls.update();
+  updateBody();
+}
+
+// positions and displacement colors of the drawn body from the simulation's state
+function updateBody() {
+  const { x } = state.sim;
+  const rest = state.sceneData.arrays.rest_positions.data;
+  const position = state.body.geometry.attributes.position;
+  const color = state.body.geometry.attributes.color;
+  let largest = 1e-6;
+  for (let i = 0; i < state.sim.n; i++) {
+    const d = Math.hypot(x[3 * i] - rest[3 * i], x[3 * i + 1] - rest[3 * i + 1],
+                         x[3 * i + 2] - rest[3 * i + 2]);
+    largest = Math.max(largest, d);
+  }
+  for (let i = 0; i < state.sim.n; i++) {
+    const d = Math.hypot(x[3 * i] - rest[3 * i], x[3 * i + 1] - rest[3 * i + 1],
+                         x[3 * i + 2] - rest[3 * i + 2]) / largest;
+    position.setXYZ(i, x[3 * i], x[3 * i + 1], x[3 * i + 2]);
+    color.setXYZ(i, 0.15 + 0.8 * d, 0.35 + 0.3 * (1 - Math.abs(2 * d - 1)), 0.85 - 0.7 * d);
+  }
+  position.needsUpdate = true;
+  color.needsUpdate = true;
+  state.body.geometry.computeVertexNormals();
+  state.body.geometry.computeBoundingSphere();
+}
+
+// the drag's external force (N per vertex component), or null
+function dragForce() {
+  const drag = state.drag;
+  if (!drag || !drag.target) return null;
+  const { x } = state.sim;
+  const masses = state.sceneData.arrays.masses.data;
+  const force = new Float64Array(3 * state.sim.n);
+  const i = drag.vertex;
+  for (const j of drag.group) {
+    for (let c = 0; c < 3; c++) {
+      force[3 * j + c] = DRAG_STIFFNESS * masses[j] * (drag.target.getComponent(c) - x[3 * i + c]);
+    }
+  }
+  return force;
+}
+
+async function advance(steps) {
+  for (let k = 0; k < steps; k++) {
+    const ms = await state.sim.step(dragForce());
+    state.times.push(ms);
+    if (state.times.length > 100) state.times.shift();
+  }
+}
+
+function msPerStep() {
+  if (!state.times.length) return NaN;
+  return state.times.reduce((a, b) => a + b, 0) / state.times.length;
+}
+
+async function frame(now) {
+  requestAnimationFrame(frame);
+  if (state.sim && !state.paused && !state.busy) {
+    state.busy = true;
+    try {
+      const elapsed = state.lastFrame === null ? 0 : (now - state.lastFrame) / 1000;
+      state.owed = Math.min(state.owed + elapsed, 3 * state.sim.dt);
+      const steps = Math.max(1, Math.floor(state.owed / state.sim.dt));
+      state.owed = Math.max(0, state.owed - steps * state.sim.dt);
+      await advance(steps);
+      updateBody();
+    } catch (err) {
+      state.paused = true;
+      say(String(err.message || err));
+    }
+    state.busy = false;
+  }
+  state.lastFrame = now;
+  if (state.sim) {
+    const ms = msPerStep();
+    const speed = (1000 * state.sim.dt) / ms;
+    ui.stats.textContent = `${state.sim.steps} steps of ${state.sim.dt} s, ` +
+      `${ms.toFixed(2)} ms per step (${speed >= 1 ? "real time" : `${speed.toFixed(2)}x real time`})`;
+  }
+  resize();
+  renderer.render(world, camera);
+}
+
+function resize() {
+  const canvas = renderer.domElement;
+  const width = canvas.clientWidth, height = canvas.clientHeight;
+  if (canvas.width !== width || canvas.height !== height) {
+    renderer.setSize(width, height, false);
+    camera.aspect = width / height;
+    camera.updateProjectionMatrix();
+  }
+}
+
+// dragging: the nearest surface vertex under the pointer pulls towards the pointer, on the
+// plane through it facing the camera
+const raycaster = new THREE.Raycaster();
+function pointer(event) {
+  const rect = renderer.domElement.getBoundingClientRect();
+  return new THREE.Vector2(((event.clientX - rect.left) / rect.width) * 2 - 1,
+                           -((event.clientY - rect.top) / rect.height) * 2 + 1);
+}
+renderer.domElement.addEventListener("pointerdown", (event) => {
+  if (!state.sim) return;
+  raycaster.setFromCamera(pointer(event), camera);
+  const hit = raycaster.intersectObject(state.body)[0];
+  if (!hit) return;
+  const face = [hit.face.a, hit.face.b, hit.face.c];
+  const position = state.body.geometry.attributes.position;
+  const vertex = face.reduce((best, j) => (
+    new THREE.Vector3().fromBufferAttribute(position, j).distanceTo(hit.point) <
+    new THREE.Vector3().fromBufferAttribute(position, best).distanceTo(hit.point) ? j : best));
+  const rest = state.sceneData.arrays.rest_positions.data;
+  const held = state.sceneData.arrays.held.data;
+  const group = [];
+  for (let j = 0; j < state.sim.n; j++) {
+    const r = Math.hypot(rest[3 * j] - rest[3 * vertex], rest[3 * j + 1] - rest[3 * vertex + 1],
+                         rest[3 * j + 2] - rest[3 * vertex + 2]);
+    if (r <= DRAG_RADIUS && !held[3 * j]) group.push(j);
+  }
+  const normal = camera.getWorldDirection(new THREE.Vector3());
+  state.drag = { vertex, group, target: hit.point.clone(),
+                 plane: new THREE.Plane().setFromNormalAndCoplanarPoint(normal, hit.point) };
+  controls.enabled = false;
+});
+renderer.domElement.addEventListener("pointermove", (event) => {
+  if (!state.drag) return;
+  raycaster.setFromCamera(pointer(event), camera);
+  const target = new THREE.Vector3();
+  if (raycaster.ray.intersectPlane(state.drag.plane, target)) state.drag.target = target;
+});
+window.addEventListener("pointerup", () => { state.drag = null; controls.enabled = true; });
+
+ui.pause.addEventListener("click", () => {
+  state.paused = !state.paused;
+  ui.pause.textContent = state.paused ? "run" : "pause";
+});
+ui.reset.addEventListener("click", () => { if (state.sim) { state.sim.reset(); updateBody(); } });
+ui.angle.addEventListener("input", () => {
+  const angle = state.sceneData.header.fiber_angles[Number(ui.angle.value)];
+  ui.angleValue.textContent = String(angle);
+  state.sim.setFiberAngle(angle);
+});
+ui.scene.addEventListener("change", async () => {
+  try {
+    await openScene(ui.scene.value, state.sim ? state.sim.fiberAngle : null);
+  } catch (err) {
+    say(String(err.message || err));
+  }
+});
+ui.pause.textContent = state.paused ? "run" : "pause";
+
+// what the end-to-end test drives: run(checkpoints) from rest under gravity to the last
+// checkpoint, returning the positions (flat, float64) at each checkpoint step and the mean ms
+// per step
+window.anisognn = {
+  ready: false, error: null,
+  async run(checkpoints) {
+    state.paused = true;
+    while (state.busy) await new Promise((resolve) => setTimeout(resolve, 5));
+    state.sim.reset();
+    const positions = [];
+    let total = 0;
+    for (const step of checkpoints) {
+      state.times = [];
+      await advance(step - state.sim.steps);
+      total += state.times.reduce((a, b) => a + b, 0);
+      positions.push(Array.from(state.sim.x));
+    }
+    updateBody();
+    renderer.render(world, camera);
+    return { positions, msPerStep: total / state.sim.steps, fiberAngle: state.sim.fiberAngle,
+             n: state.sim.n };
+  },
+};
+
+requestAnimationFrame(frame);
+start();

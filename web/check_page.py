@@ -1,0 +1,114 @@
+"""`make test-web`: the page in a real headless Chromium against export/runtime.py.
+
+Serves web/ on 127.0.0.1, runs web/e2e.mjs (playwright-core driving the distribution's
+Chromium), and checks that
+- the positions of the cantilever in the page (onnxruntime-web, WASM) at each of CHECKPOINTS
+  are within BOUNDS of the largest displacement of export/runtime.py's rollout of the same
+  baked scene (onnxruntime, CPU);
+- the page drew: the screenshot (web/out/page.png, kept as an artifact) is not blank;
+- a file that is not a model and a scene the model cannot step each show a readable message.
+Prints the in-browser and the onnxruntime (CPU) ms per step.
+"""
+import functools
+import http.server
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))
+
+from export import bake, runtime  # noqa: E402
+
+#: steps at which the page's positions are compared with runtime.py's, and the largest distance
+#: allowed at each, over the largest displacement of the rollout. One step agrees to float32
+#: rounding; over the transient the shipped step amplifies the two builds' different rounding
+#: (README: float32 and float64 rollouts of the network part by up to 1e-2 of the deflection)
+CHECKPOINTS = (1, 10, 50, 100, 200)
+BOUNDS = (1e-5, 1e-3, 5e-2, 5e-2, 5e-2)
+ANGLE = 45.0
+
+
+class _Quiet(http.server.SimpleHTTPRequestHandler):
+    def log_message(self, *args):
+        pass
+
+
+def serve(folder):
+    """(server, base URL) of a thread serving folder on 127.0.0.1 (a free port)."""
+    handler = functools.partial(_Quiet, directory=folder)
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    return server, f"http://127.0.0.1:{server.server_address[1]}"
+
+
+def reference(model):
+    """(positions at CHECKPOINTS (k, n, 3), largest displacement over the rollout (m), ms per
+    step) of runtime.py's rollout of the baked cantilever at fiber angle ANGLE."""
+    header, arrays = runtime.read_arrays(os.path.join(HERE, "scenes", "cantilever"))
+    vertices, tets, held = bake.scene_mesh("cantilever")
+    sim = runtime.OnnxSimulator(model, vertices, tets, fixed=held,
+                                fiber_direction=bake.fiber_direction(ANGLE),
+                                fiber_stiffness=header["trained_material"]["young"])
+    for name, value in sim.constants.items():
+        baked = arrays[name + f"@{ANGLE:g}"] if name in ("fiber", "tet_fiber") else arrays[name]
+        assert np.array_equal(baked, value), f"baked {name} differs from runtime.py's"
+    force = sim.masses[:, None] * np.asarray(header["gravity"])
+    steps = CHECKPOINTS[-1]
+    start = time.perf_counter()
+    positions = sim.rollout(steps, force)
+    ms = 1e3 * (time.perf_counter() - start) / steps
+    largest = float(np.linalg.norm(positions - vertices, axis=2).max())
+    return positions[list(CHECKPOINTS)], largest, ms
+
+
+def drew(png):
+    """True when the screenshot png shows a drawing: more than 1% of its pixels differ from
+    the background color by more than 0.1."""
+    import matplotlib.image
+    image = matplotlib.image.imread(png)[..., :3]
+    background = np.median(image.reshape(-1, 3), axis=0)
+    return float((np.abs(image - background).max(axis=2) > 0.1).mean()) > 0.01
+
+
+def main():
+    out = os.path.join(HERE, "out")
+    server, base = serve(HERE)
+    try:
+        subprocess.run(["node", os.path.join(HERE, "e2e.mjs"), base, out,
+                        ",".join(map(str, CHECKPOINTS))], check=True, cwd=HERE, timeout=900)
+    finally:
+        server.shutdown()
+    with open(os.path.join(out, "result.json")) as f:
+        page = json.load(f)
+    expected, largest, cpu_ms = reference(os.path.join(HERE, "models", "directional.onnx"))
+    got = np.asarray(page["positions"]).reshape(expected.shape)
+    gaps = np.abs(got - expected).max(axis=(1, 2)) / largest
+    failures = [f"page against runtime.py at step {step}: {gap:.2e} of the largest "
+                f"displacement, more than {bound}"
+                for step, gap, bound in zip(CHECKPOINTS, gaps, BOUNDS) if not gap <= bound]
+    if not drew(os.path.join(out, "page.png")):
+        failures.append("the screenshot is blank")
+    if "cannot load" not in page["bad_model_message"]:
+        failures.append(f"bad model message: {page['bad_model_message']!r}")
+    if "cannot step" not in page["cut_scene_message"]:
+        failures.append(f"cut scene message: {page['cut_scene_message']!r}")
+    print(f"cantilever, {page['n']} vertices, fiber angle {page['fiberAngle']}: the page against "
+          f"runtime.py over the largest displacement ({largest * 1e3:.1f} mm), at steps "
+          + ", ".join(f"{s} {g:.1e} (bound {b:g})" for s, g, b in zip(CHECKPOINTS, gaps, BOUNDS))
+          + f"\nms per step: browser (onnxruntime-web, WASM, 1 thread) {page['msPerStep']:.2f}, "
+          f"onnxruntime CPU {cpu_ms:.2f}; screenshot {out}/page.png")
+    print(f"bad model: {page['bad_model_message']}")
+    print(f"cut scene: {page['cut_scene_message']}")
+    if failures:
+        sys.exit("FAILED: " + "; ".join(failures))
+    print("web check passed")
+
+
+if __name__ == "__main__":
+    main()

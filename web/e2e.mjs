@@ -1,0 +1,67 @@
+// Drive the page in a real headless Chromium (the distribution's, no browser download):
+//   node e2e.mjs BASE_URL OUT_DIR [CHECKPOINTS]
+// Writes OUT_DIR/page.png (the cantilever at the last checkpoint) and OUT_DIR/result.json: the
+// positions of the cantilever rolled from rest under gravity (fiber angle 45) at each
+// checkpoint step (comma-separated, default 1,10,50,100,200), the in-browser ms per step, and the messages the page shows for a file that is not a model and
+// for a scene the model cannot step.
+import fs from "node:fs";
+import path from "node:path";
+import { chromium } from "playwright-core";
+
+const [base, out, checkpointsArg] = process.argv.slice(2);
+const checkpoints = (checkpointsArg || "1,10,50,100,200").split(",").map(Number);
+const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
+fs.mkdirSync(out, { recursive: true });
+
+const browser = await chromium.launch({
+  executablePath,
+  args: ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync",
+         "--use-gl=swiftshader", "--enable-unsafe-swiftshader"],
+});
+const result = {};
+try {
+  const page = await browser.newPage({ viewport: { width: 960, height: 640 } });
+  const logs = [];
+  page.on("console", (msg) => logs.push(msg.text()));
+  page.on("pageerror", (err) => logs.push(String(err)));
+  await page.goto(`${base}/index.html?scene=cantilever&angle=45&paused=1`);
+  await page.waitForFunction(() => window.anisognn && (window.anisognn.ready ||
+                                                        window.anisognn.error), null,
+                             { timeout: 120000 });
+  const error = await page.evaluate(() => window.anisognn.error);
+  if (error) throw new Error(`the page did not start: ${error}\n${logs.join("\n")}`);
+  const run = await page.evaluate((k) => window.anisognn.run(k), checkpoints);
+  Object.assign(result, run, { checkpoints });
+  await page.screenshot({ path: path.join(out, "page.png") });
+
+  // a file that is not a model
+  const bad = await browser.newPage();
+  await bad.route("**/models/bad.onnx", (route) => route.fulfill({ body: "not a model" }));
+  await bad.goto(`${base}/index.html?model=models/bad.onnx`);
+  await bad.waitForFunction(() => document.getElementById("message").textContent.length > 0,
+                            null, { timeout: 60000 });
+  result.bad_model_message = await bad.textContent("#message");
+
+  // a scene whose arrays the model cannot take: the vertex arrays cut to half the vertices
+  const cut = await browser.newPage();
+  await cut.route("**/scenes/cantilever.json", async (route) => {
+    const response = await route.fetch();
+    const header = await response.json();
+    header.n = Math.floor(header.n / 2);
+    for (const name of ["rest_positions", "fixed", "fixed_positions", "mass", "masses",
+                        "incoming", "incoming_weights", "corners", "held"]) {
+      header.arrays[name].shape[0] = header.n;
+    }
+    await route.fulfill({ response, json: header });
+  });
+  await cut.goto(`${base}/index.html?scene=cantilever`);
+  await cut.waitForFunction(() => document.getElementById("message").textContent.length > 0,
+                            null, { timeout: 60000 });
+  result.cut_scene_message = await cut.textContent("#message");
+} finally {
+  await browser.close();
+}
+fs.writeFileSync(path.join(out, "result.json"), JSON.stringify(result));
+console.log(`in-browser step: ${result.msPerStep.toFixed(2)} ms over ` +
+            `${checkpoints[checkpoints.length - 1]} steps`);
