@@ -11,6 +11,7 @@ gravity and the material the model was trained on.
 """
 import json
 import math
+import os
 
 import numpy as np
 
@@ -53,6 +54,8 @@ def bake(name, out, model_path, angles=ANGLES):
     out.bin; returns the header."""
     if name not in SCENES:
         raise ValueError(f"scene: expected one of {sorted(SCENES)}, got {name!r}")
+    if not os.path.isfile(model_path):
+        raise FileNotFoundError(f"model: no such file {str(model_path)!r}")
     angles = [float(a) for a in angles]
     if not angles:
         raise ValueError("angles: give at least one fiber angle")
