@@ -12,10 +12,13 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ("cantilever.py", "cantilever.png", "fibers along the beam :  4 Newton iterations, "
                                         "converged True"),
     ("onnx_cantilever.py", "onnx_cantilever.png", "wrote out/onnx_cantilever.png"),
-    ("squeeze.py", "squeeze.png", "monotone under Neo-Hookean: True")])
+    ("squeeze.py", "squeeze.png", "monotone under Neo-Hookean: True"),
+    ("finger_control.py", "finger_control.png", "wrote out/finger_control.png")])
 def test_example_runs_and_draws(tmp_path, script, picture, says):
     r = subprocess.run([sys.executable, os.path.join(ROOT, "examples", script)], cwd=tmp_path,
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     assert says in r.stdout
     assert (tmp_path / "out" / picture).stat().st_size > 30_000
+    if script == "finger_control.py":  # the controller brings the tip to both targets
+        assert r.stdout.count(": reached") == 2 and "missed" not in r.stdout, r.stdout

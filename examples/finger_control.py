@@ -1,0 +1,108 @@
+"""A soft finger driven to a target by a controller, stepped by the exported network with only
+the runtime: the control loop a robot would run.
+
+The finger is the 0.1 x 0.02 x 0.02 m fiber-reinforced beam of onnx_cantilever.py (fibers at
+45 degrees in the x-z plane, kappa = 100 kPa), held at x = 0 and hanging under gravity. A
+tendon-like force on its tip face (the external force input, along z) is set every step by a
+PID controller on the mean tip height; the target steps up 3 mm above the rest height at t = 0
+and down 3 mm below it at t = 2 s, and the tip must stay within 0.3 mm of it from 1 s after
+each step on. Only export/runtime.py (numpy + onnxruntime) steps the
+model. Prints the tip error when each target is settled and the real-time factor (simulated
+over wall time), and draws the tip against the target in out/finger_control.png.
+
+    python examples/finger_control.py [MODEL.onnx]   (default export/models/directional.onnx)
+"""
+import os
+import sys
+import time
+
+import matplotlib
+import numpy as np
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, "..", "export"))  # as if runtime.py were copied here
+from runtime import OnnxSimulator  # noqa: E402
+from onnx_cantilever import box_tets  # noqa: E402
+
+#: PID gains on the tip height error: N/m, N/(m s), N s/m
+GAINS = (30.0, 300.0, 0.2)
+#: target tip height above rest (m) from each switch time (s), and the run's length (s)
+TARGETS = ((0.0, 0.003), (2.0, -0.003))
+DURATION = 4.0
+#: the tip must be within TOLERANCE (m) of the target from SETTLE (s) after each switch on
+TOLERANCE, SETTLE = 3e-4, 1.0
+
+
+def target_at(t):
+    """The target tip height above rest (m) at time t (s)."""
+    return [z for start, z in TARGETS if t >= start - 1e-12][-1]
+
+
+class PID:
+    """Force (N) from the tip height error, its integral and the tip velocity (derivative on
+    the measurement, so a target step gives no derivative kick)."""
+
+    def __init__(self, gains, dt):
+        self.kp, self.ki, self.kd = gains
+        self.dt, self.integral = dt, 0.0
+
+    def __call__(self, error, velocity):
+        self.integral += error * self.dt
+        return self.kp * error + self.ki * self.integral - self.kd * velocity
+
+
+def main(model):
+    vertices, tets = box_tets((0.1, 0.02, 0.02), (10, 2, 2))
+    sim = OnnxSimulator(model, vertices, tets, fixed=vertices[:, 0] < 1e-9, density=1000.0,
+                        fiber_direction=(1.0, 0.0, 1.0), fiber_stiffness=1e5)
+    gravity = sim.masses[:, None] * np.array([0.0, 0.0, -9.81])  # N per vertex
+    tip = vertices[:, 0] > 0.1 - 1e-9
+    share = np.where(tip, sim.masses, 0.0) / sim.masses[tip].sum()  # the tip force's split
+    rest_height = vertices[tip, 2].mean()
+    controller = PID(GAINS, sim.dt)
+    steps = int(round(DURATION / sim.dt))
+    x, v = sim.rest_positions, np.zeros_like(sim.rest_positions)
+    times, heights, targets, forces = [], [], [], []
+    wall = 0.0
+    for k in range(steps):
+        t = k * sim.dt
+        height = x[tip, 2].mean() - rest_height
+        force = controller(target_at(t) - height, v[tip, 2].mean())
+        external = gravity.copy()
+        external[:, 2] += force * share
+        start = time.perf_counter()
+        x, v = sim.step(x, v, external)
+        wall += time.perf_counter() - start
+        times.append(t + sim.dt)
+        heights.append(x[tip, 2].mean() - rest_height)
+        targets.append(target_at(t))
+        forces.append(force)
+    times, heights, targets = np.array(times), np.array(heights), np.array(targets)
+    for start, z in TARGETS:
+        settled = (times >= start + SETTLE) & (targets == z)
+        error = np.abs(heights[settled] - z).max()
+        print(f"target {1e3 * z:+.1f} mm from t = {start:g} s: largest tip error from "
+              f"{start + SETTLE:g} s on {1e3 * error:.3f} mm (tolerance "
+              f"{1e3 * TOLERANCE:.2f} mm): {'reached' if error <= TOLERANCE else 'missed'}")
+    print(f"{steps} steps of {sim.dt} s in {wall:.2f} s of stepping: real-time factor "
+          f"{steps * sim.dt / wall:.1f}")
+
+    fig, (ax, bx) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    ax.step(times, 1e3 * targets, where="post", color="0.5", label="target")
+    ax.plot(times, 1e3 * heights, color="tab:blue", label="tip (network)")
+    ax.set(ylabel="tip height above rest (mm)", title="Soft finger under PID control, stepped "
+           "by the exported network (onnxruntime only)")
+    ax.legend(loc="lower left")
+    bx.plot(times, 1e3 * np.array(forces), color="tab:red")
+    bx.set(xlabel="t (s)", ylabel="tip force (mN)")
+    os.makedirs("out", exist_ok=True)
+    fig.savefig("out/finger_control.png", dpi=150, bbox_inches="tight")
+    print("wrote out/finger_control.png")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1] if len(sys.argv) > 1 else
+         os.path.join(HERE, "..", "export", "models", "directional.onnx"))
