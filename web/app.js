@@ -260,6 +260,36 @@ window.anisognn = {
     return { positions, msPerStep: total / state.sim.steps, fiberAngle: state.sim.fiberAngle,
              n: state.sim.n };
   },
+  // the page pixel (x, y) where vertex i is drawn; the mean height (m) of the vertices
+  // farthest along x (a cantilever's tip); the vertex nearest a rest point (m)
+  screenOf(i) {
+    const p = new THREE.Vector3().fromBufferAttribute(state.body.geometry.attributes.position, i)
+      .project(camera);
+    const rect = renderer.domElement.getBoundingClientRect();
+    return { x: rect.left + ((p.x + 1) / 2) * rect.width,
+             y: rect.top + ((1 - p.y) / 2) * rect.height };
+  },
+  tip() {
+    const rest = state.sceneData.arrays.rest_positions.data;
+    let far = -Infinity;
+    for (let i = 0; i < state.sim.n; i++) far = Math.max(far, rest[3 * i]);
+    const tip = [];
+    for (let i = 0; i < state.sim.n; i++) if (rest[3 * i] > far - 1e-9) tip.push(i);
+    return { vertices: tip,
+             height: tip.reduce((sum, i) => sum + state.sim.x[3 * i + 2], 0) / tip.length };
+  },
+  nearest(point) {
+    const rest = state.sceneData.arrays.rest_positions.data;
+    let best = 0, distance = Infinity;
+    for (let i = 0; i < state.sim.n; i++) {
+      const d = Math.hypot(rest[3 * i] - point[0], rest[3 * i + 1] - point[1],
+                           rest[3 * i + 2] - point[2]);
+      if (d < distance) { best = i; distance = d; }
+    }
+    return best;
+  },
+  resume() { state.paused = false; state.lastFrame = null; },
+  pause() { state.paused = true; },
 };
 
 requestAnimationFrame(frame);

@@ -6,6 +6,7 @@ Chromium), and checks that
   are within BOUNDS of the largest displacement of export/runtime.py's rollout of the same
   baked scene (onnxruntime, CPU);
 - the page drew: the screenshot (web/out/page.png, kept as an artifact) is not blank;
+- dragging the tip upwards with the mouse raises it by more than 1 mm;
 - a file that is not a model and a scene the model cannot step each show a readable message.
 Prints the in-browser and the onnxruntime (CPU) ms per step.
 """
@@ -94,6 +95,9 @@ def main():
                 for step, gap, bound in zip(CHECKPOINTS, gaps, BOUNDS) if not gap <= bound]
     if not drew(os.path.join(out, "page.png")):
         failures.append("the screenshot is blank")
+    rise = page["drag"]["pulled"] - page["drag"]["before"]
+    if not rise > 1e-3:
+        failures.append(f"dragging the tip up moved it by {rise * 1e3:.2f} mm")
     if "cannot load" not in page["bad_model_message"]:
         failures.append(f"bad model message: {page['bad_model_message']!r}")
     if "cannot step" not in page["cut_scene_message"]:
@@ -103,6 +107,7 @@ def main():
           + ", ".join(f"{s} {g:.1e} (bound {b:g})" for s, g, b in zip(CHECKPOINTS, gaps, BOUNDS))
           + f"\nms per step: browser (onnxruntime-web, WASM, 1 thread) {page['msPerStep']:.2f}, "
           f"onnxruntime CPU {cpu_ms:.2f}; screenshot {out}/page.png")
+    print(f"drag: the tip rose {rise * 1e3:.1f} mm while pulled up")
     print(f"bad model: {page['bad_model_message']}")
     print(f"cut scene: {page['cut_scene_message']}")
     if failures:

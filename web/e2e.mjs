@@ -3,7 +3,7 @@
 // Writes OUT_DIR/page.png (the cantilever at the last checkpoint) and OUT_DIR/result.json: the
 // positions of the cantilever rolled from rest under gravity (fiber angle 45) at each
 // checkpoint step (comma-separated, default 1,10,50,100,200), the in-browser ms per step, and the messages the page shows for a file that is not a model and
-// for a scene the model cannot step.
+// for a scene the model cannot step, and the tip height before and during a drag upwards.
 import fs from "node:fs";
 import path from "node:path";
 import { chromium } from "playwright-core";
@@ -34,6 +34,22 @@ try {
   const run = await page.evaluate((k) => window.anisognn.run(k), checkpoints);
   Object.assign(result, run, { checkpoints });
   await page.screenshot({ path: path.join(out, "page.png") });
+
+  // a drag: press on the front face near the tip (the vertex at rest 1 cm from the free end,
+  // mid-height) and pull the pointer 80 pixels up for a second of real time; the tip must rise
+  // above where gravity alone holds it
+  const before = await page.evaluate(() => window.anisognn.tip());
+  const at = await page.evaluate(() => window.anisognn.screenOf(
+    window.anisognn.nearest([0.09, -0.01, 0.0])));
+  await page.evaluate(() => window.anisognn.resume());
+  await page.mouse.move(at.x, at.y);
+  await page.mouse.down();
+  await page.mouse.move(at.x, at.y - 80, { steps: 10 });
+  await page.waitForTimeout(1000);
+  const pulled = await page.evaluate(() => window.anisognn.tip());
+  await page.mouse.up();
+  await page.evaluate(() => window.anisognn.pause());
+  result.drag = { before: before.height, pulled: pulled.height };
 
   // a file that is not a model
   const bad = await browser.newPage();
