@@ -25,7 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "export"))  # as if runtime.py were copied here
 from runtime import OnnxSimulator  # noqa: E402
-from onnx_cantilever import box_tets  # noqa: E402
+from onnx_cantilever import DEFAULT_MODEL, box_tets, save  # noqa: E402
 
 #: PID gains on the tip height error: N/m, N/(m s), N s/m
 GAINS = (30.0, 300.0, 0.2)
@@ -98,11 +98,8 @@ def main(model):
     ax.legend(loc="lower left")
     bx.plot(times, 1e3 * np.array(forces), color="tab:red")
     bx.set(xlabel="t (s)", ylabel="tip force (mN)")
-    os.makedirs("out", exist_ok=True)
-    fig.savefig("out/finger_control.png", dpi=150, bbox_inches="tight")
-    print("wrote out/finger_control.png")
+    save(fig, "finger_control.png")
 
 
 if __name__ == "__main__":
-    main(sys.argv[1] if len(sys.argv) > 1 else
-         os.path.join(HERE, "..", "export", "models", "directional.onnx"))
+    main(sys.argv[1] if len(sys.argv) > 1 else DEFAULT_MODEL)

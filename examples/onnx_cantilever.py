@@ -21,6 +21,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "export"))  # as if runtime.py were copied here
 from runtime import OnnxSimulator  # noqa: E402
 
+#: the model the examples step unless given another
+DEFAULT_MODEL = os.path.join(HERE, "..", "export", "models", "directional.onnx")
+
 #: the six tets of a unit cube sharing its diagonal 0-7 (corners numbered x + 2 y + 4 z)
 KUHN = np.array([[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7],
                  [0, 4, 6, 7]])
@@ -64,11 +67,15 @@ def main(model):
     bx.set(xlabel="t (s)", ylabel="tip z displacement (mm)", title="tip under gravity")
     fig.suptitle("Cantilever, fibers at 45 deg in x-z, stepped by the exported network "
                  "(onnxruntime only)", fontsize=10, y=1.04)
+    save(fig, "onnx_cantilever.png")
+
+
+def save(fig, name):
+    """Write the matplotlib figure to out/name and say so."""
     os.makedirs("out", exist_ok=True)
-    fig.savefig("out/onnx_cantilever.png", dpi=150, bbox_inches="tight")
-    print("wrote out/onnx_cantilever.png")
+    fig.savefig(os.path.join("out", name), dpi=150, bbox_inches="tight")
+    print(f"wrote out/{name}")
 
 
 if __name__ == "__main__":
-    main(sys.argv[1] if len(sys.argv) > 1 else
-         os.path.join(HERE, "..", "export", "models", "directional.onnx"))
+    main(sys.argv[1] if len(sys.argv) > 1 else DEFAULT_MODEL)
