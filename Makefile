@@ -53,10 +53,16 @@ WEB_PORT ?= 8000
 web/node_modules/.package-lock.json: web/package.json web/package-lock.json
 	cd web && npm ci --no-audit --no-fund
 
-web-assets: $(VENV)/.installed web/node_modules/.package-lock.json
-	mkdir -p web/models web/scenes
-	cp export/models/directional.onnx export/models/meshgraphnets.onnx web/models/
-	for s in $(WEB_SCENES); do $(PY) -m export bake $$s -o web/scenes/$$s || exit 1; done
+web/models/%.onnx: export/models/%.onnx
+	mkdir -p web/models
+	cp $< $@
+
+web/scenes/%.json: export/models/directional.onnx export/bake.py export/runtime.py $(VENV)/.installed
+	mkdir -p web/scenes
+	$(PY) -m export bake $* -o web/scenes/$*
+
+web-assets: web/node_modules/.package-lock.json web/models/directional.onnx \
+            web/models/meshgraphnets.onnx $(WEB_SCENES:%=web/scenes/%.json)
 
 web: web-assets
 	@echo "serving the page at http://127.0.0.1:$(WEB_PORT)/index.html (Ctrl-C stops)"
