@@ -1,0 +1,127 @@
+"""How the exported network's step and anisofem's steps scale with the mesh, and where the
+network would be ten times faster than the exact step: the 0.1 x 0.02 x 0.02 m cantilever of
+the trade table (fibers at 40 degrees in x-z, kappa = E, gravity, dt = 0.02 s) refined 1, 2, 4
+and 8 times per direction (200 to 102,400 tets).
+
+    python scripts/crossover.py [--refinements 1 2 4 8] [--json crossover.json]
+
+Per size, ms per step (steps 2 to STEPS, the first holding set-up and compilation) of: the
+exact step (Newton with the default direct solver, up to 12,800 tets: at 10^5 one SuperLU
+factorization takes tens of seconds), the exact step by multigrid CG (the large-mesh path, the
+same tolerance), L-BFGS to rtol 1e-2 (the trade table's fastest accurate rung, up to 12,800
+tets), and the shipped directional.onnx by export/runtime.py; and the network's tip error
+against the exact rollout after STEPS steps, over the tip's static deflection. Then the
+exponents of the step times between the two largest sizes. Run alone.
+"""
+import argparse
+import math
+import os
+import time
+
+import numpy as np
+
+import anisofem
+from anisofem.bench import write_json_atomic
+from anisofem.solve import Stepper
+from export.runtime import OnnxSimulator
+
+STEPS = 10
+DT = 0.02
+MODEL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "export", "models",
+                     "directional.onnx")
+FIBER = (math.cos(math.radians(40)), 0.0, math.sin(math.radians(40)))
+#: the FEM paths: label -> (method options, largest tets it runs on)
+PATHS = {"exact": ({}, 12_800), "exact, multigrid CG": ({"method": "cg", "preconditioner": "amg"},
+                                                        10 ** 6),
+         "lbfgs rtol 1e-2": ({"method": "lbfgs", "rtol": 1e-2}, 12_800)}
+
+
+def scene_of(refinement):
+    mesh = anisofem.box_beam(size=(0.1, 0.02, 0.02), cells=(10 * refinement, 2 * refinement,
+                                                             2 * refinement))
+    material = anisofem.Material(1e5, 0.48, 1000.0, FIBER, 1e5)
+    return anisofem.Scene(mesh, material, fixed=anisofem.metrics.end_vertices(mesh, 0, "min"),
+                          gravity=(0, 0, -9.81))
+
+
+def fem_steps(scene, options):
+    """(positions after each step (STEPS + 1, n, 3), ms per step over steps 2..STEPS)."""
+    options = dict(options)
+    stepper = Stepper(scene, DT, options.pop("method", "newton"), warn=False, **options)
+    x, v = scene.initial_positions(), np.zeros((scene.mesh.n_vertices, 3))
+    out, times = [x], []
+    for _ in range(STEPS):
+        start = time.perf_counter()
+        res = stepper(x, v)
+        times.append(time.perf_counter() - start)
+        x, v = res.x, res.v
+        out.append(x)
+    return np.array(out), 1e3 * float(np.mean(times[1:]))
+
+
+def network_steps(scene):
+    mesh = scene.mesh
+    sim = OnnxSimulator(MODEL, mesh.vertices, mesh.tets, fixed=scene.fixed_mask,
+                        fiber_direction=FIBER, fiber_stiffness=1e5)
+    x, v = sim.rest_positions, np.zeros_like(sim.rest_positions)
+    out, times = [x], []
+    for _ in range(STEPS):
+        start = time.perf_counter()
+        x, v = sim.step(x, v, scene.external_force)
+        times.append(time.perf_counter() - start)
+        out.append(x)
+    return np.array(out), 1e3 * float(np.mean(times[1:]))
+
+
+def measure(refinements):
+    rows = []
+    for r in refinements:
+        scene = scene_of(r)
+        row = {"tets": scene.mesh.n_tets, "ms_per_step": {}}
+        reference = None
+        for label, (options, largest) in PATHS.items():
+            if scene.mesh.n_tets <= largest:
+                positions, row["ms_per_step"][label] = fem_steps(scene, options)
+                if reference is None:
+                    reference = positions
+        network, row["ms_per_step"]["directional.onnx"] = network_steps(scene)
+        static = np.linalg.norm(anisofem.solve(scene, warn=False, **PATHS[
+            "exact, multigrid CG"][0]).x - scene.mesh.vertices, axis=1)
+        tip = static >= 0.99 * static.max()
+        row["network_tip_error"] = float(np.linalg.norm(
+            (network[-1] - reference[-1])[tip].mean(axis=0)) / static.max())
+        rows.append(row)
+        print(" | ".join([f"{row['tets']:>7} tets"] + [f"{k} {v:.3g} ms" for k, v in
+                                                         row["ms_per_step"].items()])
+              + f" | network tip error at step {STEPS}: {row['network_tip_error']:.2f}",
+              flush=True)
+    return rows
+
+
+def exponents(rows):
+    """{path: p} with time ~ tets^p between the two largest sizes where the path ran."""
+    out = {}
+    for label in rows[-1]["ms_per_step"]:
+        ran = [r for r in rows if label in r["ms_per_step"]]
+        if len(ran) >= 2:
+            a, b = ran[-2], ran[-1]
+            out[label] = math.log(b["ms_per_step"][label] / a["ms_per_step"][label]) / math.log(
+                b["tets"] / a["tets"])
+    return out
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--refinements", type=int, nargs="+", default=[1, 2, 4, 8])
+    p.add_argument("--json", default="crossover.json")
+    args = p.parse_args()
+    rows = measure(args.refinements)
+    slopes = exponents(rows)
+    print("time ~ tets^p between the two largest sizes: " + ", ".join(
+        f"{k} p = {v:.2f}" for k, v in slopes.items()))
+    write_json_atomic(args.json, {"steps": STEPS, "dt": DT, "rows": rows, "exponents": slopes})
+    print(f"-> {args.json}")
+
+
+if __name__ == "__main__":
+    main()
