@@ -163,8 +163,9 @@ async function frame(now) {
   if (state.sim) {
     const ms = msPerStep();
     const speed = (1000 * state.sim.dt) / ms;
+    const pace = speed >= 1 ? "real time" : `${speed.toFixed(2)}x real time`;
     ui.stats.textContent = `${state.sim.steps} steps of ${state.sim.dt} s, ` +
-      `${ms.toFixed(2)} ms per step (${speed >= 1 ? "real time" : `${speed.toFixed(2)}x real time`})`;
+      `${ms.toFixed(2)} ms per step (${pace})`;
   }
   resize();
   renderer.render(world, camera);

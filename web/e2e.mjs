@@ -2,8 +2,9 @@
 //   node e2e.mjs BASE_URL OUT_DIR [CHECKPOINTS]
 // Writes OUT_DIR/page.png (the cantilever at the last checkpoint) and OUT_DIR/result.json: the
 // positions of the cantilever rolled from rest under gravity (fiber angle 45) at each
-// checkpoint step (comma-separated, default 1,10,50,100,200), the in-browser ms per step, and the messages the page shows for a file that is not a model and
-// for a scene the model cannot step, and the tip height before and during a drag upwards.
+// checkpoint step (comma-separated, default 1,10,50,100,200), the in-browser ms per step, the
+// messages the page shows for a file that is not a model and for a scene the model cannot
+// step, and the tip height before and during a drag upwards.
 import fs from "node:fs";
 import path from "node:path";
 import { chromium } from "playwright-core";

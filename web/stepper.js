@@ -70,7 +70,9 @@ export class Simulation {
     this.setFiberAngle(fiberAngle);
     this.gravity = new Float64Array(3 * this.n);
     for (let i = 0; i < this.n; i++) {
-      for (let c = 0; c < 3; c++) this.gravity[3 * i + c] = arrays.masses.data[i] * header.gravity[c];
+      for (let c = 0; c < 3; c++) {
+        this.gravity[3 * i + c] = arrays.masses.data[i] * header.gravity[c];
+      }
     }
     this.reset();
   }
