@@ -70,7 +70,8 @@ web: web-assets
 
 # Chromium from the distribution's packages when it is missing (no browser download).
 test-web: web-assets
-	@command -v chromium > /dev/null || (apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium)
+	@command -v chromium > /dev/null || { SUDO=$$([ "$$(id -u)" = 0 ] || echo sudo); \
+	  $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q chromium; }
 	$(PY) web/check_page.py
 
 clean:
