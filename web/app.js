@@ -289,6 +289,7 @@ window.anisognn = {
     }
     return best;
   },
+  scene() { return state.sceneData ? state.sceneData.header.scene : null; },
   resume() { state.paused = false; state.lastFrame = null; },
   pause() { state.paused = true; },
 };

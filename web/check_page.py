@@ -7,6 +7,7 @@ Chromium), and checks that
   baked scene (onnxruntime, CPU);
 - the page drew: the screenshot (web/out/page.png, kept as an artifact) is not blank;
 - dragging the tip upwards with the mouse raises it by more than 1 mm;
+- the other scenes (cylinder, T, Y), chosen from the menu, step without a message;
 - a file that is not a model and a scene the model cannot step each show a readable message.
 Prints the in-browser and the onnxruntime (CPU) ms per step.
 """
@@ -98,6 +99,9 @@ def main():
     rise = page["drag"]["pulled"] - page["drag"]["before"]
     if not rise > 1e-3:
         failures.append(f"dragging the tip up moved it by {rise * 1e3:.2f} mm")
+    for name, scene in page["scenes"].items():
+        if scene["message"] or not scene["finite"]:
+            failures.append(f"scene {name}: {scene['message'] or 'a non-finite state'}")
     if "cannot load" not in page["bad_model_message"]:
         failures.append(f"bad model message: {page['bad_model_message']!r}")
     if "cannot step" not in page["cut_scene_message"]:
@@ -107,7 +111,10 @@ def main():
           + ", ".join(f"{s} {g:.1e} (bound {b:g})" for s, g, b in zip(CHECKPOINTS, gaps, BOUNDS))
           + f"\nms per step: browser (onnxruntime-web, WASM, 1 thread) {page['msPerStep']:.2f}, "
           f"onnxruntime CPU {cpu_ms:.2f}; screenshot {out}/page.png")
-    print(f"drag: the tip rose {rise * 1e3:.1f} mm while pulled up")
+    scenes = [f"{k} ({v['n']} vertices) {'failed' if v['message'] or not v['finite'] else 'ok'}"
+              for k, v in page["scenes"].items()]
+    print(f"drag: the tip rose {rise * 1e3:.1f} mm while pulled up; other scenes: "
+          + ", ".join(scenes))
     print(f"bad model: {page['bad_model_message']}")
     print(f"cut scene: {page['cut_scene_message']}")
     if failures:

@@ -4,7 +4,8 @@
 // positions of the cantilever rolled from rest under gravity (fiber angle 45) at each
 // checkpoint step (comma-separated, default 1,10,50,100,200), the in-browser ms per step, the
 // messages the page shows for a file that is not a model and for a scene the model cannot
-// step, and the tip height before and during a drag upwards.
+// step, the tip height before and during a drag upwards, and whether the other scenes (chosen
+// from the menu) step.
 import fs from "node:fs";
 import path from "node:path";
 import { chromium } from "playwright-core";
@@ -51,6 +52,16 @@ try {
   await page.mouse.up();
   await page.evaluate(() => window.anisognn.pause());
   result.drag = { before: before.height, pulled: pulled.height };
+
+  // every other scene loads from the scene menu and steps without a message
+  result.scenes = {};
+  for (const name of ["cylinder", "t", "y"]) {
+    await page.selectOption("#scene", name);
+    await page.waitForFunction((n) => window.anisognn.scene() === n, name, { timeout: 60000 });
+    const run = await page.evaluate(() => window.anisognn.run([5]));
+    result.scenes[name] = { n: run.n, message: await page.textContent("#message"),
+                            finite: run.positions[0].every(Number.isFinite) };
+  }
 
   // a file that is not a model
   const bad = await browser.newPage();
