@@ -69,7 +69,7 @@ def test_a_baked_scene_holds_runtimes_constants_for_each_angle(tmp_path):
                                     fiber_direction=bake.fiber_direction(angle),
                                     fiber_stiffness=1e5)
         for name, value in sim.constants.items():
-            key = f"{name}@{angle}" if name in ("fiber", "tet_fiber") else name
+            key = f"{name}@{angle}" if name in bake.FIBER_INPUTS else name
             np.testing.assert_array_equal(arrays[key], value)
     np.testing.assert_array_equal(arrays["held"].astype(bool), held)
     assert arrays["surface"].dtype == np.int32 and arrays["surface"].max() < header["n"]

@@ -95,15 +95,15 @@ function updateBody() {
   const rest = state.sceneData.arrays.rest_positions.data;
   const position = state.body.geometry.attributes.position;
   const color = state.body.geometry.attributes.color;
+  const moved = new Float64Array(state.sim.n);
   let largest = 1e-6;
   for (let i = 0; i < state.sim.n; i++) {
-    const d = Math.hypot(x[3 * i] - rest[3 * i], x[3 * i + 1] - rest[3 * i + 1],
-                         x[3 * i + 2] - rest[3 * i + 2]);
-    largest = Math.max(largest, d);
+    moved[i] = Math.hypot(x[3 * i] - rest[3 * i], x[3 * i + 1] - rest[3 * i + 1],
+                          x[3 * i + 2] - rest[3 * i + 2]);
+    largest = Math.max(largest, moved[i]);
   }
   for (let i = 0; i < state.sim.n; i++) {
-    const d = Math.hypot(x[3 * i] - rest[3 * i], x[3 * i + 1] - rest[3 * i + 1],
-                         x[3 * i + 2] - rest[3 * i + 2]) / largest;
+    const d = moved[i] / largest;
     position.setXYZ(i, x[3 * i], x[3 * i + 1], x[3 * i + 2]);
     color.setXYZ(i, 0.15 + 0.8 * d, 0.35 + 0.3 * (1 - Math.abs(2 * d - 1)), 0.85 - 0.7 * d);
   }

@@ -58,7 +58,7 @@ def reference(model):
                                 fiber_direction=bake.fiber_direction(ANGLE),
                                 fiber_stiffness=header["trained_material"]["young"])
     for name, value in sim.constants.items():
-        baked = arrays[name + f"@{ANGLE:g}"] if name in ("fiber", "tet_fiber") else arrays[name]
+        baked = arrays[name + f"@{ANGLE:g}"] if name in bake.FIBER_INPUTS else arrays[name]
         assert np.array_equal(baked, value), f"baked {name} differs from runtime.py's"
     force = sim.masses[:, None] * np.asarray(header["gravity"])
     steps = CHECKPOINTS[-1]

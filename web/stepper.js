@@ -5,6 +5,8 @@ import * as ort from "onnxruntime-web";
 const ARRAYS = { float64: Float64Array, float32: Float32Array, int64: BigInt64Array,
                  int32: Int32Array, uint8: Uint8Array };
 const STATE = ["positions", "velocities", "external_force"];
+// the inputs that depend on the fiber, baked once per angle as NAME@ANGLE
+const FIBER_INPUTS = ["fiber", "tet_fiber"];
 
 // {header, arrays: {name: {data, dtype, shape}}} of a baked scene at url (without extension).
 export async function loadScene(url) {
@@ -61,7 +63,7 @@ export class Simulation {
     this.dt = header.dt;
     this.feeds = {};
     for (const name of session.inputNames) {
-      if (STATE.includes(name)) continue;
+      if (STATE.includes(name) || FIBER_INPUTS.includes(name)) continue;
       if (!(name in arrays)) {
         throw new Error(`scene: ${header.scene} has no input ${name} that the model reads`);
       }
@@ -81,8 +83,10 @@ export class Simulation {
     const tag = `@${angle}`;
     if (!(`fiber${tag}` in this.arrays)) throw new Error(`scene: no fiber angle ${angle}`);
     this.fiberAngle = angle;
-    for (const name of ["fiber", "tet_fiber"]) {
-      if (name in this.feeds) this.feeds[name] = tensor(this.arrays[name + tag]);
+    for (const name of FIBER_INPUTS) {
+      if (this.session.inputNames.includes(name)) {
+        this.feeds[name] = tensor(this.arrays[name + tag]);
+      }
     }
   }
 
