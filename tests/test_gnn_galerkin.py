@@ -275,8 +275,8 @@ def test_with_eight_passes_the_float32_rollout_follows_float64_for_200_steps():
     """Rounding reaches a rollout through the step's own sensitivity: with the shipped two
     passes a perturbation grows about 1.16x per step on the evaluation's box cantilever
     (float32 and float64 end 4e-3 of the deflection apart after 200 steps); from four passes on
-    its step contracts, and with eight the two rollouts stay within 1e-4. (Not yet on the
-    cylinders: 1e-2 there with eight passes, docs/experiments.md.)"""
+    its step contracts, and with eight the two rollouts stay within 1e-4. (On the cylinders
+    eight passes still drift to 1e-2, docs/experiments.md.)"""
     import copy
 
     from anisognn import evaluate, rollout, shipped
