@@ -304,6 +304,13 @@ class NewtonCG(_KeptFactor):
         super().start(potential)
         self.csr = potential.scene.layout("csr")
 
+    def threads(self):
+        """One BLAS thread unless a factorization is kept (anisofem.linsolve.one_blas_thread):
+        the iterations' vector products would otherwise slow the parallel assembly."""
+        if self.preconditioner == "factor":
+            return super().threads()
+        return linsolve.one_blas_thread()
+
     def directions(self, x, g, residual):
         eta = min(self.forcing, math.sqrt(residual))
         for projected in self._CHOICES[self.projection]:

@@ -127,6 +127,18 @@ def test_multigrid_with_rigid_modes_beats_the_diagonal():
     assert amg.factorizations <= 3  # hierarchies built, kept across iterations
 
 
+@pytest.mark.parametrize("preconditioner, one_thread", [("jacobi", True), ("amg", True),
+                                                       ("factor", False)])
+def test_cg_without_a_factorization_runs_on_one_blas_thread(preconditioner, one_thread):
+    from threadpoolctl import threadpool_info
+    method = methods.make("cg", preconditioner=preconditioner)
+    method.start(Potential(af.default_scene(af.box_beam(cells=(4, 2, 2)))))
+    with method.threads():
+        inside = {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+    outside = {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+    assert inside == ({1} if one_thread else outside)
+
+
 def test_options_are_checked_by_name():
     with pytest.raises(TypeError, match="bogus: not an option of method 'newton'"):
         methods.make("newton", bogus=3)
