@@ -220,7 +220,24 @@ def amg_preconditioner(A, near_null):
                                                   symmetry="symmetric", max_coarse=AMG_COARSEST,
                                                   strength=list(AMG_STRENGTH), presmoother=pre,
                                                   postsmoother=post)
-    return hierarchy.aspreconditioner(cycle="V").matvec
+    return functools.partial(_v_cycle, hierarchy.levels, hierarchy.coarse_solver, 0)
+
+
+def _v_cycle(levels, coarse_solver, k, b):
+    """One V-cycle from zero on level k of a pyamg hierarchy (its levels and coarse solver)
+    for right-hand side b. pyamg's own preconditioner (MultilevelSolver.aspreconditioner)
+    does the same and also two residual norms per call, 2.8 of its 18 ms at 10^5 tets."""
+    level = levels[k]
+    x = np.zeros_like(b)
+    level.presmoother(level.A, x, b)
+    coarse_b = level.R @ (b - level.A @ x)
+    if k + 2 == len(levels):
+        coarse_x = coarse_solver(levels[-1].A, coarse_b)
+    else:
+        coarse_x = _v_cycle(levels, coarse_solver, k + 1, coarse_b)
+    x += level.P @ coarse_x
+    level.postsmoother(level.A, x, b)
+    return x
 
 
 NAMES = ("auto", "banded", "dense", "superlu", "superlu-colamd", "cholmod")

@@ -139,6 +139,24 @@ def test_cg_without_a_factorization_runs_on_one_blas_thread(preconditioner, one_
     assert inside == ({1} if one_thread else outside)
 
 
+def test_multigrid_v_cycle_is_pyamgs_own():
+    import pyamg
+    scene = af.default_scene(af.box_beam(cells=(24, 8, 8)))
+    free = scene.free_dofs
+    A = af.hessian(scene, scene.mesh.vertices).tocsr()[free][:, free]
+    modes = linsolve.rigid_body_modes(scene.mesh.vertices, free)
+    r = np.random.default_rng(1).standard_normal(len(free))
+    np.random.seed(0)  # pyamg's spectral radius estimates start from random vectors
+    ours = linsolve.amg_preconditioner(A, modes)(r)
+    np.random.seed(0)
+    pre, post = linsolve.AMG_SMOOTHERS
+    hierarchy = pyamg.smoothed_aggregation_solver(
+        A, B=modes, symmetry="symmetric", max_coarse=linsolve.AMG_COARSEST,
+        strength=list(linsolve.AMG_STRENGTH), presmoother=pre, postsmoother=post)
+    assert len(hierarchy.levels) >= 3
+    assert np.array_equal(ours, hierarchy.aspreconditioner(cycle="V").matvec(r))
+
+
 def test_options_are_checked_by_name():
     with pytest.raises(TypeError, match="bogus: not an option of method 'newton'"):
         methods.make("newton", bogus=3)
