@@ -276,8 +276,9 @@ class NewtonCG(_KeptFactor):
     (a kept smoothed-aggregation multigrid hierarchy of an earlier Hessian, with the
     rigid-body modes at the current positions: no factorization, memory linear in the mesh,
     the rung for large meshes; anisofem.linsolve.amg_preconditioner). A kept factor or
-    hierarchy is renewed at the current state when a CG solve needs more than refactor_after
-    iterations (default 10 with "factor", 20 with "amg"). linear_solver: for "factor".
+    hierarchy is renewed at the current state when a CG solve with it needs more than
+    refactor_after iterations (default 10 with "factor", 20 with "amg"), unless it was built
+    for that solve. linear_solver: for "factor".
     """
 
     name = "cg"
@@ -316,12 +317,14 @@ class NewtonCG(_KeptFactor):
         for projected in self._CHOICES[self.projection]:
             data = self.potential.hessian_data(x, self.csr, project=projected,
                                                want_grad=False)[2]
+            fresh = self._solve is None
             precondition = self._preconditioner(x, data, projected)
             if precondition is None:
                 continue
             p, its = truncated_cg(self.csr.matrix(data), g, precondition, eta, self.cg_iter)
             self.counts["linear_iterations"] += its
-            if self.preconditioner != "jacobi" and its > self.refactor_after:
+            # one built at this very iterate is as fresh as a renewal would be
+            if self.preconditioner != "jacobi" and its > self.refactor_after and not fresh:
                 self._solve = None
             if p is not None:
                 self.counts["projected"] += projected

@@ -139,6 +139,15 @@ def test_cg_without_a_factorization_runs_on_one_blas_thread(preconditioner, one_
     assert inside == ({1} if one_thread else outside)
 
 
+def test_a_hierarchy_built_for_a_solve_is_kept_for_the_next():
+    # with refactor_after=1 every solve needs more than the limit; a hierarchy is renewed
+    # only after a solve with one built at an earlier iterate, so at most every other time
+    scene = af.default_scene(af.box_beam(cells=(20, 4, 4)))
+    result = af.solve(scene, method="cg", preconditioner="amg", refactor_after=1)
+    assert result.converged
+    assert result.factorizations <= (result.iterations + 1) // 2
+
+
 def test_multigrid_v_cycle_is_pyamgs_own():
     import pyamg
     scene = af.default_scene(af.box_beam(cells=(24, 8, 8)))
