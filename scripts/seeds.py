@@ -1,0 +1,166 @@
+"""Directional encodings against MeshGraphNets over seeds (docs/reproduction.md): the shipped
+recipe trained again with other seeds, and every model measured on the transient and on meshes
+and shapes neither architecture was trained on.
+
+    python scripts/seeds.py train [--seeds 1 2 3 4] [--jobs 2]
+    python scripts/seeds.py measure [--seeds 0 1 2 3 4] [--json seeds.json]
+
+train: `python -m anisognn train --config configs/shipped-NAME.toml --seed N --out
+models/seeds/seedN-NAME` for both architectures, JOBS runs at a time, each on one thread; a run
+started again resumes from its checkpoint, a finished one is skipped. Seed 0 is the shipped
+pair.
+
+measure: for each model, the tip error against anisofem's rollout at steps 10, 25, 100 and 200
+over the static tip deflection (as scripts/cg_iterations.py) on every scene of SCENES, with the
+shipped stepping and with CG_ITERATIONS conjugate-gradient iterations after it; prints each
+architecture's mean and range over the seeds per scene and step, and in how many seeds the
+directional model is the closer one; writes JSON. Run alone, with OMP_NUM_THREADS=1.
+"""
+import argparse
+import math
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+import anisofem
+from anisofem import Material, Scene, metrics
+from anisofem.bench import write_json_atomic
+from anisognn import evaluate, shipped
+from anisognn.model import with_galerkin
+from anisognn.rollout import rollout
+from anisognn.sampler import DENSITY, POISSON, YOUNG
+from cg_iterations import CHECKED, STEPS, tip_errors
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+FOLDER = os.path.join(ROOT, "models", "seeds")
+#: the CG iterations after the step measured besides the shipped stepping (0)
+CG_ITERATIONS = 20
+FIBER_40 = (math.cos(math.radians(40)), 0.0, math.sin(math.radians(40)))
+
+
+def _held(mesh, fiber, axis=0):
+    """mesh held at its minimum along axis, fibers (3,) with kappa = E, under gravity."""
+    material = Material(YOUNG, POISSON, DENSITY, np.asarray(fiber) / np.linalg.norm(fiber), YOUNG)
+    return Scene(mesh, material, fixed=metrics.end_vertices(mesh, axis, "min"),
+                 gravity=(0.0, 0.0, -evaluate.GRAVITY))
+
+
+def scenes():
+    """{label: Scene}: the four Table 1 cantilevers, the 40-degree cantilever, the evaluation box
+    cantilever refined 2x and 4x per direction, a 0.2 m beam, and the T and Y standing on their
+    stems."""
+    out = {case.label: case.scene for case in evaluate.cases()[:4]}
+    box = anisofem.box_beam
+    out["box, fibers at 40 deg, 200 tets"] = _held(box((0.1, 0.02, 0.02), (10, 2, 2)), FIBER_40)
+    for k in (2, 4):
+        out[f"box, fibers parallel to gravity, refined {k}x"] = _held(
+            box((0.1, 0.02, 0.02), (5 * k, 2 * k, 2 * k)), (0, 0, 1))
+    out["0.2 m box, fibers at 40 deg, 1,600 tets"] = _held(box((0.2, 0.02, 0.02), (20, 4, 4)),
+                                                           FIBER_40)
+    out["T, fibers at 40 deg"] = _held(anisofem.t_shape(), FIBER_40, axis=2)
+    out["Y, fibers at 40 deg"] = _held(anisofem.y_shape(), FIBER_40, axis=2)
+    return out
+
+
+def model_path(seed, name):
+    """The model of architecture name trained with seed (0: the shipped one)."""
+    if seed == 0:
+        return shipped.path(name)
+    return os.path.join(FOLDER, f"seed{seed}-{name}", "model.pt")
+
+
+def _start(seed, name):
+    """Start (or resume) the training of one model in a child process, logging to its .log:
+    (process, log file, out folder)."""
+    out = os.path.dirname(model_path(seed, name))
+    os.makedirs(out, exist_ok=True)
+    log = open(out + ".log", "a")
+    print(f"training seed {seed} {name} -> {out}", flush=True)
+    command = [sys.executable, "-m", "anisognn", "train", "--config",
+               os.path.join(ROOT, "configs", f"shipped-{name}.toml"), "--seed", str(seed),
+               "--out", out, "--no-progress"]
+    process = subprocess.Popen(command, cwd=ROOT, env=dict(os.environ, OMP_NUM_THREADS="1"),
+                               stdout=log, stderr=subprocess.STDOUT)
+    return process, log, out
+
+
+def train(seeds, jobs):
+    """Train the missing models of seeds, jobs at a time."""
+    queue = [(s, n) for s in seeds for n in shipped.NAMES if not os.path.exists(model_path(s, n))]
+    running = []
+    while queue or running:
+        while queue and len(running) < jobs:
+            running.append(_start(*queue.pop(0)))
+        time.sleep(5)
+        for process, log, out in [r for r in running if r[0].poll() is not None]:
+            running.remove((process, log, out))
+            log.close()
+            print(f"{out}: exit {process.returncode}", flush=True)
+
+
+def measure(seeds):
+    rows = []
+    for label, scene in scenes().items():
+        reference = evaluate.fem_rollout(scene, STEPS)
+        static = np.linalg.norm(anisofem.solve(scene).x - scene.mesh.vertices, axis=1)
+        tip, deflection = static >= 0.99 * static.max(), static.max()
+        for seed in seeds:
+            for name in shipped.NAMES:
+                model = shipped.model(model_path(seed, name))
+                for k in (0, CG_ITERATIONS):
+                    positions = rollout(with_galerkin(model, True, None, k), scene, STEPS)
+                    rows.append({"scene": label, "tets": scene.mesh.n_tets, "seed": seed,
+                                 "model": name, "cg_iterations": k,
+                                 "tip_errors": tip_errors(positions, reference, tip, deflection)})
+                    print(f"{label[:40]:40} {seed} {name:13} {k:3d}  " + " / ".join(
+                        f"{e:.3f}" for e in rows[-1]["tip_errors"]), flush=True)
+    return rows
+
+
+def summary(rows):
+    """Per scene, CG count and checked step: each architecture's mean (min-max) tip error over
+    the seeds, and the seeds in which the directional model's is the lower."""
+    lines = [f"{'scene':40} {'k':>3} {'step':>4}  {'directional':>20}  {'meshgraphnets':>20}  "
+             f"directional closer"]
+    keys = dict.fromkeys((r["scene"], r["cg_iterations"]) for r in rows)
+    for scene, k in keys:
+        by = {n: {r["seed"]: r["tip_errors"] for r in rows
+                  if (r["scene"], r["cg_iterations"], r["model"]) == (scene, k, n)}
+              for n in shipped.NAMES}
+        seeds = sorted(set(by["directional"]) & set(by["meshgraphnets"]))
+        for i, step in enumerate(CHECKED):
+            cells = []
+            for name in shipped.NAMES:
+                e = [by[name][s][i] for s in seeds]
+                cells.append(f"{np.mean(e):.3f} ({min(e):.3f}-{max(e):.3f})")
+            wins = sum(by["directional"][s][i] < by["meshgraphnets"][s][i] for s in seeds)
+            lines.append(f"{scene[:40]:40} {k:3d} {step:4d}  {cells[0]:>20}  {cells[1]:>20}  "
+                         f"{wins} of {len(seeds)}")
+    return "\n".join(lines)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    t = sub.add_parser("train")
+    t.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4])
+    t.add_argument("--jobs", type=int, default=2)
+    m = sub.add_parser("measure")
+    m.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    m.add_argument("--json", default="seeds.json")
+    args = p.parse_args()
+    if args.command == "train":
+        train(args.seeds, args.jobs)
+        return
+    rows = measure(args.seeds)
+    write_json_atomic(args.json, {"steps": STEPS, "checked_steps": list(CHECKED),
+                                  "rows": rows})
+    print(summary(rows))
+    print(f"-> {args.json}")
+
+
+if __name__ == "__main__":
+    main()
