@@ -228,14 +228,11 @@ def _v_cycle(levels, coarse_solver, k, b):
     for right-hand side b. pyamg's own preconditioner (MultilevelSolver.aspreconditioner)
     does the same and also two residual norms per call, 2.8 of its 18 ms at 10^5 tets."""
     level = levels[k]
+    if k + 1 == len(levels):  # the coarsest level, solved directly
+        return coarse_solver(level.A, b)
     x = np.zeros_like(b)
     level.presmoother(level.A, x, b)
-    coarse_b = level.R @ (b - level.A @ x)
-    if k + 2 == len(levels):
-        coarse_x = coarse_solver(levels[-1].A, coarse_b)
-    else:
-        coarse_x = _v_cycle(levels, coarse_solver, k + 1, coarse_b)
-    x += level.P @ coarse_x
+    x += level.P @ _v_cycle(levels, coarse_solver, k + 1, level.R @ (b - level.A @ x))
     level.postsmoother(level.A, x, b)
     return x
 

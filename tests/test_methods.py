@@ -148,6 +148,14 @@ def test_a_hierarchy_built_for_a_solve_is_kept_for_the_next():
     assert result.factorizations <= (result.iterations + 1) // 2
 
 
+def test_multigrid_on_a_matrix_too_small_to_coarsen():
+    scene = af.default_scene(af.box_beam(cells=(2, 1, 1)))  # 24 unknowns: one level
+    result = af.solve(scene, method="cg", preconditioner="amg")
+    assert result.converged
+    assert np.abs(result.x - af.solve(scene).x).max() <= 1e-9 * np.abs(
+        result.x - scene.mesh.vertices).max()
+
+
 def test_multigrid_v_cycle_is_pyamgs_own():
     import pyamg
     scene = af.default_scene(af.box_beam(cells=(24, 8, 8)))
