@@ -29,6 +29,13 @@ STEPS = 200
 CHECKED = (10, 25, 100, 200)
 
 
+def fem_reference(scene):
+    """(anisofem's rollout (STEPS + 1, n, 3), tip vertices (n,) bool, static tip deflection m):
+    the tip is the vertices whose static displacement is within 1% of the largest."""
+    static = np.linalg.norm(anisofem.solve(scene).x - scene.mesh.vertices, axis=1)
+    return evaluate.fem_rollout(scene, STEPS), static >= 0.99 * static.max(), static.max()
+
+
 def tip_errors(positions, reference, tip, deflection):
     """Tip errors at CHECKED steps: |mean tip displacement difference| / deflection."""
     return [float(np.linalg.norm((positions[s] - reference[s])[tip].mean(axis=0)) / deflection)
@@ -49,9 +56,7 @@ def measure(iterations):
     rows = []
     for case in evaluate.cases()[:4]:
         scene = case.scene
-        reference = evaluate.fem_rollout(scene, STEPS)
-        static = np.linalg.norm(anisofem.solve(scene).x - scene.mesh.vertices, axis=1)
-        tip, deflection = static >= 0.99 * static.max(), static.max()
+        reference, tip, deflection = fem_reference(scene)
         for name in shipped.NAMES:
             model = shipped.pretrained(name)
             for k in iterations:

@@ -32,7 +32,7 @@ from anisognn import evaluate, shipped
 from anisognn.model import with_galerkin
 from anisognn.rollout import rollout
 from anisognn.sampler import DENSITY, POISSON, YOUNG
-from cg_iterations import CHECKED, STEPS, tip_errors
+from cg_iterations import CHECKED, STEPS, fem_reference, tip_errors
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FOLDER = os.path.join(ROOT, "models", "seeds")
@@ -102,21 +102,20 @@ def train(seeds, jobs):
 
 
 def measure(seeds):
+    """Rows {scene, tets, seed, model, cg_iterations, tip_errors} for every model of seeds."""
     rows = []
+    models = {(seed, name): shipped.model(model_path(seed, name))
+              for seed in seeds for name in shipped.NAMES}
     for label, scene in scenes().items():
-        reference = evaluate.fem_rollout(scene, STEPS)
-        static = np.linalg.norm(anisofem.solve(scene).x - scene.mesh.vertices, axis=1)
-        tip, deflection = static >= 0.99 * static.max(), static.max()
-        for seed in seeds:
-            for name in shipped.NAMES:
-                model = shipped.model(model_path(seed, name))
-                for k in (0, CG_ITERATIONS):
-                    positions = rollout(with_galerkin(model, True, None, k), scene, STEPS)
-                    rows.append({"scene": label, "tets": scene.mesh.n_tets, "seed": seed,
-                                 "model": name, "cg_iterations": k,
-                                 "tip_errors": tip_errors(positions, reference, tip, deflection)})
-                    print(f"{label[:40]:40} {seed} {name:13} {k:3d}  " + " / ".join(
-                        f"{e:.3f}" for e in rows[-1]["tip_errors"]), flush=True)
+        reference, tip, deflection = fem_reference(scene)
+        for (seed, name), model in models.items():
+            for k in (0, CG_ITERATIONS):
+                positions = rollout(with_galerkin(model, True, None, k), scene, STEPS)
+                rows.append({"scene": label, "tets": scene.mesh.n_tets, "seed": seed,
+                             "model": name, "cg_iterations": k,
+                             "tip_errors": tip_errors(positions, reference, tip, deflection)})
+                print(f"{label[:40]:40} {seed} {name:13} {k:3d}  " + " / ".join(
+                    f"{e:.3f}" for e in rows[-1]["tip_errors"]), flush=True)
     return rows
 
 
