@@ -129,7 +129,7 @@ def _iterate(potential, x0, method, accept):
                          f"material's domain, det F <= 0 for Neo-Hookean)")
     g = grad.ravel()[free]
     scale = potential.force_scale()
-    tol = gradient_tolerance(potential, method.rtol, method.atol)
+    tol = methods.gradient_tolerance(potential, method.rtol, method.atol)
     gnorm = _norm(g)
     res = [gnorm / scale if scale > 0 else 0.0]
     it = 0
@@ -155,14 +155,6 @@ def _iterate(potential, x0, method, accept):
         method.accepted(s, g_new - g, norm_new / gnorm)
         g, gnorm = g_new, norm_new
         res.append(gnorm / scale)
-
-
-def gradient_tolerance(potential, rtol, atol=None):
-    """The free-gradient norm (N) at which a solve of potential converges:
-    max(rtol * force_scale, atol), atol defaulting to Scene.gradient_roundoff."""
-    if atol is None:
-        atol = potential.scene.gradient_roundoff
-    return max(rtol * potential.force_scale(), atol)
 
 
 def _norm(v):

@@ -139,8 +139,7 @@ def _write_problem(cells, folder):
     import meshio
 
     from anisofem.meshgen import box_beam
-    from anisofem.methods import Method
-    from anisofem.newton import gradient_tolerance
+    from anisofem.methods import Method, gradient_tolerance
     from anisofem.potential import Potential
     from anisofem.solve import GRAVITY, default_scene
     mesh = box_beam(cells=cells)

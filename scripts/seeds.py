@@ -4,6 +4,7 @@ and shapes neither architecture was trained on.
 
     python scripts/seeds.py train [--seeds 1 2 3 4] [--jobs 2]
     python scripts/seeds.py measure [--seeds 0 1 2 3 4] [--json seeds.json]
+    python scripts/seeds.py tables [--seeds 0 1 2 3 4] [--steps 1000] [--json seed_tables.json]
 
 train: `python -m anisognn train --config configs/shipped-NAME.toml --seed N --out
 models/seeds/seedN-NAME` for both architectures, JOBS runs at a time, each on one thread; a run
@@ -15,6 +16,11 @@ over the static tip deflection (as scripts/cg_iterations.py) on every scene of S
 shipped stepping and with CG_ITERATIONS conjugate-gradient iterations after it; prints each
 architecture's mean and range over the seeds per scene and step, and in how many seeds the
 directional model is the closer one; writes JSON. Run alone, with OMP_NUM_THREADS=1.
+
+tables: the paper's Table 1 (tip error at rest over the FEM deflection), Table 2 (mean
+imbalanced force) and Fig. 6 (volume change off the FEM's) from `python -m anisognn evaluate`'s
+suite after STEPS steps, each architecture's mean (min-max) over the seeds and the seeds in
+which the directional model is the closer; writes JSON.
 """
 import argparse
 import math
@@ -119,10 +125,21 @@ def measure(seeds):
     return rows
 
 
+def _compare(by, seeds):
+    """by {architecture: {seed: value}}: each architecture's "mean (min-max)" over seeds and
+    "k of n", the seeds in which the directional value is the lower."""
+    cells = []
+    for name in shipped.NAMES:
+        v = [by[name][s] for s in seeds]
+        cells.append(f"{np.mean(v):.3g} ({min(v):.3g}-{max(v):.3g})")
+    wins = sum(by["directional"][s] < by["meshgraphnets"][s] for s in seeds)
+    return cells + [f"{wins} of {len(seeds)}"]
+
+
 def summary(rows):
     """Per scene, CG count and checked step: each architecture's mean (min-max) tip error over
     the seeds, and the seeds in which the directional model's is the lower."""
-    lines = [f"{'scene':40} {'k':>3} {'step':>4}  {'directional':>20}  {'meshgraphnets':>20}  "
+    lines = [f"{'scene':40} {'k':>3} {'step':>4}  {'directional':>24}  {'meshgraphnets':>24}  "
              f"directional closer"]
     keys = dict.fromkeys((r["scene"], r["cg_iterations"]) for r in rows)
     for scene, k in keys:
@@ -131,13 +148,41 @@ def summary(rows):
               for n in shipped.NAMES}
         seeds = sorted(set(by["directional"]) & set(by["meshgraphnets"]))
         for i, step in enumerate(CHECKED):
-            cells = []
-            for name in shipped.NAMES:
-                e = [by[name][s][i] for s in seeds]
-                cells.append(f"{np.mean(e):.3f} ({min(e):.3f}-{max(e):.3f})")
-            wins = sum(by["directional"][s][i] < by["meshgraphnets"][s][i] for s in seeds)
-            lines.append(f"{scene[:40]:40} {k:3d} {step:4d}  {cells[0]:>20}  {cells[1]:>20}  "
-                         f"{wins} of {len(seeds)}")
+            cells = _compare({n: {s: e[i] for s, e in by[n].items()} for n in by}, seeds)
+            lines.append(f"{scene[:40]:40} {k:3d} {step:4d}  {cells[0]:>24}  {cells[1]:>24}  "
+                         f"{cells[2]}")
+    return "\n".join(lines)
+
+
+#: the paper's tables: evaluate's group -> (title, the metric compared)
+TABLES = {"cantilever": ("Table 1: tip error at rest over the FEM deflection", "tip_ratio"),
+          "imbalance": ("Table 2: mean imbalanced force at the final state, N", "force_mean"),
+          "tension": ("Fig. 6: max volume change off the FEM's, relative",
+                      "volume_change_error")}
+
+
+def tables(seeds, steps):
+    """evaluate's suite for every model of seeds: ({"seedN-NAME": [metrics per case]}, the
+    scored cases)."""
+    simulators = {f"seed{seed}-{name}": evaluate.model_rollout(
+        shipped.model(model_path(seed, name))) for seed in seeds for name in shipped.NAMES}
+    results, suite, _ = evaluate.evaluate(simulators, steps, progress=True)
+    return results, suite
+
+
+def format_tables(results, suite, seeds):
+    """TABLES' rows: per case, each architecture's mean (min-max) over seeds and the seeds in
+    which the directional model is the closer."""
+    lines = []
+    for group, (title, key) in TABLES.items():
+        lines += ["", title, f"{'case':52}  {'directional':>28}  {'meshgraphnets':>28}  "
+                             f"directional closer"]
+        for i, case in enumerate(suite):
+            if case.group == group:
+                cells = _compare({n: {s: results[f"seed{s}-{n}"][i].get(key, math.inf)
+                                      for s in seeds} for n in shipped.NAMES}, seeds)
+                lines.append(f"{case.label[:52]:52}  {cells[0]:>28}  {cells[1]:>28}  "
+                             f"{cells[2]}")
     return "\n".join(lines)
 
 
@@ -150,9 +195,20 @@ def main():
     m = sub.add_parser("measure")
     m.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     m.add_argument("--json", default="seeds.json")
+    b = sub.add_parser("tables")
+    b.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    b.add_argument("--steps", type=int, default=evaluate.STEPS)
+    b.add_argument("--json", default="seed_tables.json")
     args = p.parse_args()
     if args.command == "train":
         train(args.seeds, args.jobs)
+        return
+    if args.command == "tables":
+        results, suite = tables(args.seeds, args.steps)
+        write_json_atomic(args.json, {"steps": args.steps, "seeds": args.seeds,
+                                      "results": results})
+        print(format_tables(results, suite, args.seeds))
+        print(f"-> {args.json}")
         return
     rows = measure(args.seeds)
     write_json_atomic(args.json, {"steps": STEPS, "checked_steps": list(CHECKED),

@@ -148,6 +148,31 @@ def test_a_hierarchy_built_for_a_solve_is_kept_for_the_next():
     assert result.factorizations <= (result.iterations + 1) // 2
 
 
+@pytest.mark.parametrize("forcing, previous, miss, gnorm, expected", [
+    (0.1, None, 1e-6, 1e6, 0.1),        # a solve's first iteration: the largest
+    (0.1, 0.01, 1e-3, 1e6, 1e-3),       # a good model: as tight as its miss
+    (0.9, 0.5, 1e-3, 1e6, 0.5 ** 1.618034),  # but not faster than previous^1.618 above 0.1
+    (0.1, 0.01, 3.0, 1e6, 0.1),         # a poor model: capped at forcing
+    (0.1, 0.01, 1e-9, 1e3, 5e-4),       # no digits past the Newton tolerance (1 N at 1000 N)
+])
+def test_forcing_follows_the_quadratic_models_miss(forcing, previous, miss, gnorm, expected):
+    eta = methods.forcing_tolerance(forcing, previous, miss, gnorm, tolerance=1.0)
+    assert eta == pytest.approx(expected, rel=1e-5)
+
+
+def test_inexact_newton_on_a_nearly_linear_problem_takes_nearly_newtons_iterations():
+    """Under a load 10^-4 of gravity G is nearly quadratic: the first iteration's model misses
+    the new gradient by little, so the second iteration's CG runs to the tolerance at once
+    (a fixed forcing of 0.1 would gain one digit per iteration: 8 or more)."""
+    mesh = af.box_beam(cells=(10, 2, 2))
+    scene = af.Scene(mesh, af.Material.paper(), fixed=af.metrics.end_vertices(mesh, 0, "min"),
+                     gravity=(0.0, 0.0, -9.81e-4))
+    newton = af.solve(scene)
+    cg = af.solve(scene, method="cg", preconditioner="amg")
+    print("Newton iterations: exact", newton.iterations, "cg", cg.iterations)
+    assert cg.converged and cg.iterations <= newton.iterations + 1
+
+
 def test_multigrid_on_a_matrix_too_small_to_coarsen():
     scene = af.default_scene(af.box_beam(cells=(2, 1, 1)))  # 24 unknowns: one level
     result = af.solve(scene, method="cg", preconditioner="amg")
