@@ -125,13 +125,13 @@ def measure(seeds):
     return rows
 
 
-def _compare(by, seeds):
-    """by {architecture: {seed: value}}: each architecture's "mean (min-max)" over seeds and
-    "k of n", the seeds in which the directional value is the lower."""
+def _compare(by, seeds, fmt=".3g"):
+    """by {architecture: {seed: value}}: each architecture's "mean (min-max)" over seeds (in
+    format fmt) and "k of n", the seeds in which the directional value is the lower."""
     cells = []
     for name in shipped.NAMES:
         v = [by[name][s] for s in seeds]
-        cells.append(f"{np.mean(v):.3g} ({min(v):.3g}-{max(v):.3g})")
+        cells.append(f"{np.mean(v):{fmt}} ({min(v):{fmt}}-{max(v):{fmt}})")
     wins = sum(by["directional"][s] < by["meshgraphnets"][s] for s in seeds)
     return cells + [f"{wins} of {len(seeds)}"]
 
@@ -139,7 +139,7 @@ def _compare(by, seeds):
 def summary(rows):
     """Per scene, CG count and checked step: each architecture's mean (min-max) tip error over
     the seeds, and the seeds in which the directional model's is the lower."""
-    lines = [f"{'scene':40} {'k':>3} {'step':>4}  {'directional':>24}  {'meshgraphnets':>24}  "
+    lines = [f"{'scene':44} {'k':>3} {'step':>4}  {'directional':>22}  {'meshgraphnets':>22}  "
              f"directional closer"]
     keys = dict.fromkeys((r["scene"], r["cg_iterations"]) for r in rows)
     for scene, k in keys:
@@ -148,8 +148,8 @@ def summary(rows):
               for n in shipped.NAMES}
         seeds = sorted(set(by["directional"]) & set(by["meshgraphnets"]))
         for i, step in enumerate(CHECKED):
-            cells = _compare({n: {s: e[i] for s, e in by[n].items()} for n in by}, seeds)
-            lines.append(f"{scene[:40]:40} {k:3d} {step:4d}  {cells[0]:>24}  {cells[1]:>24}  "
+            cells = _compare({n: {s: e[i] for s, e in by[n].items()} for n in by}, seeds, ".3f")
+            lines.append(f"{scene[:44]:44} {k:3d} {step:4d}  {cells[0]:>22}  {cells[1]:>22}  "
                          f"{cells[2]}")
     return "\n".join(lines)
 
