@@ -381,7 +381,7 @@ _GOLDEN = (1.0 + math.sqrt(5.0)) / 2.0
 
 def forcing_tolerance(forcing, previous, miss, gnorm, tolerance):
     """The relative CG tolerance of a Newton iteration (Eisenstat and Walker 1996, choice 1,
-    with their safeguard, and Kelley's floor). forcing: the largest, a solve's first
+    with their safeguard, and Kelley's lower bound). forcing: the largest, a solve's first
     iteration's (previous None). previous: the last iteration's. miss: the relative error
     |g - g_prev - H_prev s| / |g_prev| of the last iteration's quadratic model, kept from
     falling faster than previous^1.618 while that is above 0.1. The result is no smaller than
