@@ -30,10 +30,11 @@ reports failure instead of returning NaN. The methods differ in what a direction
   quadratic model predicted the gradient it led to (Eisenstat and Walker 1996, choice 1):
   loose while the nonlinearity limits what a step can gain, tight once the model is good, so
   a solve spends its CG iterations where they buy progress (at 10^5 tets a backward-Euler
-  step took 6.3 instead of 8.3 Newton and 85 instead of 108 CG iterations). The preconditioner is the Hessian's diagonal ("jacobi": no
-  factorization, the rung that fits any memory) or a kept factorization of an earlier Hessian
-  ("factor", renewed when CG needs more than refactor_after iterations): a lagged factor is a
-  good preconditioner long after it has stopped being a good Hessian.
+  step took 6.3 instead of 8.3 Newton and 85 instead of 108 CG iterations). The
+  preconditioner is the Hessian's diagonal ("jacobi": no factorization, the rung that fits any
+  memory) or a kept factorization of an earlier Hessian ("factor", renewed when CG needs more
+  than refactor_after iterations): a lagged factor is a good preconditioner long after it has
+  stopped being a good Hessian.
 
 Each method stops either at the tolerance (rtol, atol; max_iter a safety cap whose reaching is
 a failure) or, with `iterations=k`, after a fixed budget of k iterations per solve: reaching
@@ -102,8 +103,10 @@ class Method:
         return self.iterations is not None
 
     def start(self, potential):
-        """Prepare to minimize potential (an anisofem.potential.Potential)."""
+        """Prepare to minimize potential (an anisofem.potential.Potential); self.tolerance is
+        the free-gradient norm (N) at which the solve converges."""
         self.potential = potential
+        self.tolerance = gradient_tolerance(potential, self.rtol, self.atol)
         self.counts = {"factorizations": 0, "linear_iterations": 0, "projected": 0}
 
     def threads(self):
@@ -282,11 +285,12 @@ class NewtonCG(_KeptFactor):
     """Inexact Newton by truncated, preconditioned conjugate gradients (see the module
     docstring). cg_iter: most CG iterations per Newton iteration. forcing: largest relative
     CG tolerance, the first iteration's (with a small budget of iterations, a small forcing
-    such as 0.01 keeps each iteration close to a Newton step); see forcing_tolerance. preconditioner: "jacobi" (the Hessian's diagonal: no
-    factorization at all), "factor" (a kept factorization of an earlier Hessian) or "amg"
-    (a kept smoothed-aggregation multigrid hierarchy of an earlier Hessian, with the
-    rigid-body modes at the current positions: no factorization, memory linear in the mesh,
-    the rung for large meshes; anisofem.linsolve.amg_preconditioner). A kept factor or
+    such as 0.01 keeps each iteration close to a Newton step); see forcing_tolerance.
+    preconditioner: "jacobi" (the Hessian's diagonal: no factorization at all), "factor" (a
+    kept factorization of an earlier Hessian) or "amg" (a kept smoothed-aggregation
+    multigrid hierarchy of an earlier Hessian, with the rigid-body modes at the current
+    positions: no factorization, memory linear in the mesh, the rung for large meshes;
+    anisofem.linsolve.amg_preconditioner). A kept factor or
     hierarchy is renewed at the current state when a CG solve with it needs more than
     refactor_after iterations (default 10 with "factor", 20 with "amg"), unless it was built
     for that solve. linear_solver: for "factor".
@@ -315,7 +319,6 @@ class NewtonCG(_KeptFactor):
     def start(self, potential):
         super().start(potential)
         self.csr = potential.scene.layout("csr")
-        self._tolerance = gradient_tolerance(potential, self.rtol, self.atol)
         self._eta = self._miss = self._model = None
 
     def threads(self):
@@ -328,7 +331,7 @@ class NewtonCG(_KeptFactor):
     def directions(self, x, g, residual):
         gnorm = math.sqrt(float(np.dot(g, g)))
         self._eta = eta = forcing_tolerance(self.forcing, self._eta, self._miss, gnorm,
-                                            self._tolerance)
+                                            self.tolerance)
         for projected in self._CHOICES[self.projection]:
             data = self.potential.hessian_data(x, self.csr, project=projected,
                                                want_grad=False)[2]

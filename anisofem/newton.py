@@ -129,7 +129,7 @@ def _iterate(potential, x0, method, accept):
                          f"material's domain, det F <= 0 for Neo-Hookean)")
     g = grad.ravel()[free]
     scale = potential.force_scale()
-    tol = methods.gradient_tolerance(potential, method.rtol, method.atol)
+    tol = method.tolerance
     gnorm = _norm(g)
     res = [gnorm / scale if scale > 0 else 0.0]
     it = 0

@@ -4,6 +4,7 @@ and shapes neither architecture was trained on.
 
     python scripts/seeds.py train [--seeds 1 2 3 4] [--jobs 2]
     python scripts/seeds.py measure [--seeds 0 1 2 3 4] [--json seeds.json]
+    python scripts/seeds.py summary [--json seeds.json]
     python scripts/seeds.py tables [--seeds 0 1 2 3 4] [--steps 1000] [--json seed_tables.json]
 
 train: `python -m anisognn train --config configs/shipped-NAME.toml --seed N --out
@@ -15,7 +16,8 @@ measure: for each model, the tip error against anisofem's rollout at steps 10, 2
 over the static tip deflection (as scripts/cg_iterations.py) on every scene of SCENES, with the
 shipped stepping and with CG_ITERATIONS conjugate-gradient iterations after it; prints each
 architecture's mean and range over the seeds per scene and step, and in how many seeds the
-directional model is the closer one; writes JSON. Run alone, with OMP_NUM_THREADS=1.
+directional model is the closer one, then the same over the training-size scenes and over the
+others; writes JSON. Run alone, with OMP_NUM_THREADS=1. summary prints that again from the JSON.
 
 tables: the paper's Table 1 (tip error at rest over the FEM deflection), Table 2 (mean
 imbalanced force) and Fig. 6 (volume change off the FEM's) from `python -m anisognn evaluate`'s
@@ -23,6 +25,7 @@ suite after STEPS steps, each architecture's mean (min-max) over the seeds and t
 which the directional model is the closer; writes JSON.
 """
 import argparse
+import json
 import math
 import os
 import subprocess
@@ -45,6 +48,10 @@ FOLDER = os.path.join(ROOT, "models", "seeds")
 #: the CG iterations after the step measured besides the shipped stepping (0)
 CG_ITERATIONS = 20
 FIBER_40 = (math.cos(math.radians(40)), 0.0, math.sin(math.radians(40)))
+#: the first scenes of scenes() whose meshes are of the training family's size
+TRAINING_SIZE = 5
+#: the tip error (over the static deflection) counted as close to the FEM's rollout
+CLOSE = 0.05
 
 
 def _held(mesh, fiber, axis=0):
@@ -120,7 +127,7 @@ def measure(seeds):
                 rows.append({"scene": label, "tets": scene.mesh.n_tets, "seed": seed,
                              "model": name, "cg_iterations": k,
                              "tip_errors": tip_errors(positions, reference, tip, deflection)})
-                print(f"{label[:40]:40} {seed} {name:13} {k:3d}  " + " / ".join(
+                print(f"{label[:44]:44} {seed} {name:13} {k:3d}  " + " / ".join(
                     f"{e:.3f}" for e in rows[-1]["tip_errors"]), flush=True)
     return rows
 
@@ -151,7 +158,39 @@ def summary(rows):
             cells = _compare({n: {s: e[i] for s, e in by[n].items()} for n in by}, seeds, ".3f")
             lines.append(f"{scene[:44]:44} {k:3d} {step:4d}  {cells[0]:>22}  {cells[1]:>22}  "
                          f"{cells[2]}")
+    labels = list(dict.fromkeys(r["scene"] for r in rows))
+    for k in dict.fromkeys(r["cg_iterations"] for r in rows):
+        for group, chosen in (("training-size scenes", labels[:TRAINING_SIZE]),
+                              ("other scenes", labels[TRAINING_SIZE:])):
+            lines.append(_totals([r for r in rows if r["scene"] in chosen
+                                  and r["cg_iterations"] == k], f"k = {k}, {group}"))
     return "\n".join(lines)
+
+
+def _totals(rows, title):
+    """Lines over rows (one CG count, a group of scenes): the seed, scene and step
+    comparisons the directional model wins; its mean tip error over the baseline's per scene
+    and step (median, range); each seed's mean over the rows, and the seeds it wins; the
+    model and scene pairs within CLOSE of the deflection at every checked step."""
+    error = {(r["seed"], r["model"], r["scene"], i): e for r in rows
+             for i, e in enumerate(r["tip_errors"])}
+    seeds = sorted({r["seed"] for r in rows})
+    cells = sorted({(scene, i) for _, _, scene, i in error})
+    wins = sum(error[s, "directional", c, i] < error[s, "meshgraphnets", c, i]
+               for s in seeds for c, i in cells)
+    ratio = [np.mean([error[s, "directional", c, i] for s in seeds])
+             / np.mean([error[s, "meshgraphnets", c, i] for s in seeds]) for c, i in cells]
+    per_seed = {n: [np.mean([error[s, n, c, i] for c, i in cells]) for s in seeds]
+                for n in shipped.NAMES}
+    seed_wins = sum(d < m for d, m in zip(*per_seed.values()))
+    spans = "  ".join(f"{n} {min(v):.2f}-{max(v):.2f}" for n, v in per_seed.items())
+    close = sum(max(r["tip_errors"]) <= CLOSE for r in rows)
+    return (f"{title}: directional closer in {wins} of {len(seeds) * len(cells)};\n"
+            f"    its mean over the baseline's {np.median(ratio):.2f} ({min(ratio):.2f}-"
+            f"{max(ratio):.2f});\n"
+            f"    seed means {spans}, directional lower in {seed_wins} of {len(seeds)};\n"
+            f"    within {CLOSE:.0%} at every checked step: {close} of {len(rows)} models on "
+            f"scenes")
 
 
 #: the paper's tables: evaluate's group -> (title, the metric compared)
@@ -195,6 +234,8 @@ def main():
     m = sub.add_parser("measure")
     m.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     m.add_argument("--json", default="seeds.json")
+    r = sub.add_parser("summary")
+    r.add_argument("--json", default="seeds.json")
     b = sub.add_parser("tables")
     b.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     b.add_argument("--steps", type=int, default=evaluate.STEPS)
@@ -202,6 +243,10 @@ def main():
     args = p.parse_args()
     if args.command == "train":
         train(args.seeds, args.jobs)
+        return
+    if args.command == "summary":
+        with open(args.json) as fh:
+            print(summary(json.load(fh)["rows"]))
         return
     if args.command == "tables":
         results, suite = tables(args.seeds, args.steps)
