@@ -52,11 +52,11 @@ def bench_assembly(scene, x):
 def bench_size(label, cells, with_numpy_solve):
     mesh = box_beam(cells=cells)
     scene = default_scene(mesh)
-    solve(scene, max_iter=1, warn=False)  # compile and build the patterns
+    solve(scene, method="newton", max_iter=1, warn=False)  # compile and build the patterns
     x = scene.initial_positions() + 1e-4 * np.sin(mesh.vertices * 200)
     numba_s, numpy_s = bench_assembly(scene, x)
     results = []
-    solve_s = best_time(lambda: results.append(solve(scene)), 20, budget=10.0)
+    solve_s = best_time(lambda: results.append(solve(scene, method="newton")), 20, budget=10.0)
     res = results[-1]
     row = {"size": label, "tets": mesh.n_tets, "unknowns": scene.n_free,
            "assembly_numba_s": numba_s, "assembly_numpy_s": numpy_s,
@@ -86,8 +86,8 @@ def bench_materials(cells=SIZES["1e4"], rounds=10):
                           gravity=(0.0, 0.0, -9.81)) for name in MODELS}
     rows, work = {}, {}
     for name, scene in scenes.items():
-        solve(scene, max_iter=1, warn=False)  # compile and build the patterns
-        bent = solve(scene)
+        solve(scene, method="newton", max_iter=1, warn=False)  # compile and build the patterns
+        bent = solve(scene, method="newton")
         rows[name] = {"tets": mesh.n_tets, "solve_iterations": bent.iterations,
                       "converged": bent.converged}
         pot, layout = Potential(scene), scene.layout("csr")
@@ -98,7 +98,7 @@ def bench_materials(cells=SIZES["1e4"], rounds=10):
             work[name, f"hessian_{state}_s"] = functools.partial(pot.hessian_data, x, layout)
             work[name, f"projected_{state}_s"] = functools.partial(pot.hessian_data, x, layout,
                                                                    project=True)
-        work[name, "solve_s"] = functools.partial(solve, scene)
+        work[name, "solve_s"] = functools.partial(solve, scene, method="newton")
     for _ in range(rounds):
         for (name, key), fn in work.items():
             once = best_time(fn, 1 if key == "solve_s" else 5)
@@ -113,7 +113,7 @@ def bench_small_dynamics(cells=(5, 2, 2), steps=100, dt=0.02, repeats=5,
     both see the same machine load) and its least time kept. Seconds: the median and least
     over steps per solver, and the first step from rest (least, default solver)."""
     scene = default_scene(box_beam(cells=cells))
-    roll = simulate(scene, steps, dt)
+    roll = simulate(scene, steps, dt, method="newton")
     xs, vs = roll.positions, roll.velocities
     guesses = [None] + [(vs[k] - vs[k - 1]) / dt for k in range(1, steps)]  # as simulate
     best = {name: np.full(steps, np.inf) for name in solvers}
@@ -121,10 +121,10 @@ def bench_small_dynamics(cells=(5, 2, 2), steps=100, dt=0.02, repeats=5,
         for name, times in best.items():
             for k in range(steps):
                 t0 = time.perf_counter()
-                step(scene, xs[k], vs[k], dt, guesses[k], linear_solver=name)
+                step(scene, xs[k], vs[k], dt, guesses[k], method="newton", linear_solver=name)
                 times[k] = min(times[k], time.perf_counter() - t0)
     x = scene.initial_positions()
-    first_s = best_time(lambda: step(scene, x, np.zeros_like(x), dt), 20)
+    first_s = best_time(lambda: step(scene, x, np.zeros_like(x), dt, method="newton"), 20)
     iters = np.mean([s.newton.iterations for s in roll.steps])
     return {"steps": steps, "dt": dt, "newton_per_step": iters, "step_from_rest_s": first_s,
             "step_median_s": {k: float(np.median(t)) for k, t in best.items()},

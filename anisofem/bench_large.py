@@ -5,7 +5,11 @@ the static solve, Newton and CG iterations, peak memory, the linear solver, how 
 answer is from exact Newton's (at the sizes where exact Newton runs), and the mean time of
 the first STEPS backward-Euler steps of the cantilever falling from rest (one method for the
 rollout, so kept hierarchies and factors carry over). Prints a table, writes JSON
-(atomically)."""
+(atomically).
+
+`python -m anisofem bench --crossover`: the same two paths around the size where method="auto"
+switches from one to the other (anisofem.methods.AUTO_MULTIGRID_MIN), at the paper's nu = 0.48
+and at a nearly incompressible nu = 0.499, where multigrid needs the most CG iterations."""
 import json
 import os
 import resource
@@ -19,23 +23,27 @@ import numpy as np
 #: cells (nx, ny, nz) of the 0.1 x 0.02 x 0.02 m box cantilever (5 tets per cell)
 SIZES = {"1e4": (25, 8, 10), "1e5": (50, 20, 20), "1e6": (100, 40, 50)}
 #: the paths: label -> solve options; exact Newton runs up to EXACT_MAX tets
-PATHS = {"newton": {}, "cg amg": {"method": "cg", "preconditioner": "amg"}}
+PATHS = {"newton": {"method": "newton"}, "cg amg": {"method": "cg", "preconditioner": "amg"}}
 EXACT_MAX = 100_000
 #: backward-Euler steps timed per row, and their dt (s)
 STEPS, STEP_DT = 3, 0.02
+#: the crossover's cantilevers (cells) and Poisson ratios
+CROSSOVER_SIZES = {"4,800": (20, 6, 8), "1e4": SIZES["1e4"], "19,200": (32, 10, 12)}
+CROSSOVER_POISSON = (0.48, 0.499)
 
 
-def measure(cells, path):
-    """One static solve of the box cantilever of cells (nx, ny, nz) by path (a key of PATHS)
-    in this process: a dict of the quantities in the module docstring, and the solution
-    (n, 3)."""
+def measure(cells, path, poisson=0.48):
+    """One static solve of the box cantilever of cells (nx, ny, nz) (the paper's material with
+    Poisson's ratio poisson) by path (a key of PATHS) in this process: a dict of the
+    quantities in the module docstring, and the solution (n, 3)."""
     from . import linsolve
+    from .material import Material
     from .meshgen import box_beam
     from .solve import default_scene, simulate, solve
 
     t0 = time.perf_counter()
     mesh = box_beam(cells=cells)
-    scene = default_scene(mesh)
+    scene = default_scene(mesh, Material(poisson=poisson))
     scene.layout("csr")
     build_s = time.perf_counter() - t0
     options = PATHS[path]
@@ -47,7 +55,7 @@ def measure(cells, path):
     step_s = (time.perf_counter() - t0) / STEPS
     solver = ("none (multigrid-preconditioned CG)" if options.get("preconditioner") == "amg"
               else type(linsolve.make("auto", scene.n_free)).__name__)
-    row = {"path": path, "tets": mesh.n_tets, "unknowns": scene.n_free,
+    row = {"path": path, "tets": mesh.n_tets, "unknowns": scene.n_free, "poisson": poisson,
            "build_s": build_s, "solve_s": solve_s, "newton_iterations": result.iterations,
            "cg_iterations": result.linear_iterations,
            "factorizations": result.factorizations, "converged": result.converged,
@@ -68,23 +76,40 @@ def run(huge=False, out="bench_large.json", sizes=None):
         sizes = {k: v for k, v in SIZES.items() if huge or k != "1e6"}
     rows = []
     for size, cells in sizes.items():
-        answers, size_rows = {}, []
-        for path in PATHS:
-            if path == "newton" and 5 * int(np.prod(cells)) > EXACT_MAX:
-                continue
-            print(f"  {size} tets, {path} ...", file=sys.stderr, flush=True)
-            row, answers[path] = _in_fresh_process(cells, path)
-            row["size"] = size
-            size_rows.append(row)
-        if "newton" in answers:
-            ref = answers["newton"]
-            scale = float(np.abs(ref - _rest(cells)).max())
-            for row in size_rows:
-                row["difference_to_newton"] = float(
-                    np.abs(answers[row["path"]] - ref).max()) / scale
-        rows += size_rows
+        rows += _compared(size, cells, 0.48)
     from .bench import publish
     return publish({"rows": rows}, print_report, out)
+
+
+def crossover(out="bench_crossover.json", sizes=None, poissons=CROSSOVER_POISSON):
+    """Both paths on each cantilever of sizes ({label: cells}, default CROSSOVER_SIZES) at
+    each Poisson ratio of poissons, each in its own process; print the table (the times,
+    which path "auto" takes) and write JSON."""
+    rows = []
+    for size, cells in (CROSSOVER_SIZES if sizes is None else sizes).items():
+        for poisson in poissons:
+            rows += _compared(size, cells, poisson)
+    from .bench import publish
+    return publish({"rows": rows}, print_crossover, out)
+
+
+def _compared(size, cells, poisson):
+    """The rows of every path for one cantilever, each with its answer's distance to exact
+    Newton's where that ran."""
+    answers, rows = {}, []
+    for path in PATHS:
+        if path == "newton" and 5 * int(np.prod(cells)) > EXACT_MAX:
+            continue
+        print(f"  {size} tets, nu {poisson}, {path} ...", file=sys.stderr, flush=True)
+        row, answers[path] = _in_fresh_process(cells, path, poisson)
+        row["size"] = size
+        rows.append(row)
+    if "newton" in answers:
+        ref = answers["newton"]
+        scale = float(np.abs(ref - _rest(cells)).max())
+        for row in rows:
+            row["difference_to_newton"] = float(np.abs(answers[row["path"]] - ref).max()) / scale
+    return rows
 
 
 def _rest(cells):
@@ -92,12 +117,12 @@ def _rest(cells):
     return box_beam(cells=cells).vertices
 
 
-def _in_fresh_process(cells, path):
-    """measure(cells, path) in a new Python process: (row, solution)."""
+def _in_fresh_process(cells, path, poisson):
+    """measure(cells, path, poisson) in a new Python process: (row, solution)."""
     with tempfile.TemporaryDirectory() as folder:
         target = os.path.join(folder, "x.npy")
         done = subprocess.run([sys.executable, "-m", "anisofem.bench_large",
-                               "x".join(map(str, cells)), path, target],
+                               "x".join(map(str, cells)), path, str(poisson), target],
                               check=True, capture_output=True, text=True)
         return json.loads(done.stdout.strip().splitlines()[-1]), np.load(target)
 
@@ -114,11 +139,33 @@ def print_report(report):
               f"{r['solve_s']:8.1f} {r['newton_iterations']:6d} {r['cg_iterations']:6d} "
               f"{r['peak_memory_gb']:7.2f} | {'-' if diff is None else f'{diff:.1e}':>9} | "
               f"{r['step_s']:6.1f} {r['step_newton_iterations']:6.1f} | {r['linear_solver']}"
-              + ("" if r["converged"] and r["steps_converged"] else "  NOT CONVERGED"))
+              + _unconverged(r))
+
+
+def print_crossover(report):
+    from .methods import choose
+    print("Exact Newton against multigrid-preconditioned inexact Newton (cg amg) on the box "
+          f"cantilever: static solve and backward-Euler step (mean of {STEPS} from rest, dt "
+          f"{STEP_DT} s), s; one process per run")
+    print(f"{'tets':>7} {'unknowns':>8} {'nu':>5} | {'newton static':>13} {'step':>6} | "
+          f"{'cg amg static':>13} {'step':>6} | {'vs newton':>9} | auto takes")
+    pairs = {}
+    for r in report["rows"]:
+        pairs.setdefault((r["tets"], r["poisson"]), {})[r["path"]] = r
+    for (tets, poisson), pair in pairs.items():
+        exact, multigrid = pair["newton"], pair["cg amg"]
+        print(f"{tets:7,d} {exact['unknowns']:8,d} {poisson:5} | {exact['solve_s']:13.2f} "
+              f"{exact['step_s']:6.2f} | {multigrid['solve_s']:13.2f} {multigrid['step_s']:6.2f}"
+              f" | {multigrid['difference_to_newton']:9.1e} | {choose(exact['unknowns'])[0]}"
+              + _unconverged(exact) + _unconverged(multigrid))
+
+
+def _unconverged(row):
+    return "" if row["converged"] and row["steps_converged"] else f"  {row['path']} NOT CONVERGED"
 
 
 if __name__ == "__main__":
-    cells, path, target = sys.argv[1:4]
-    row, x = measure(tuple(int(c) for c in cells.split("x")), path)
+    cells, path, poisson, target = sys.argv[1:5]
+    row, x = measure(tuple(int(c) for c in cells.split("x")), path, float(poisson))
     np.save(target, x)
     print(json.dumps(row))

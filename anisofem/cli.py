@@ -87,8 +87,9 @@ def _parser():
     s.add_argument("--steps", type=int, default=0,
                    help="backward-Euler steps instead of statics (writes the last state)")
     s.add_argument("--dt", type=float, default=0.02, help="s")
-    s.add_argument("--method", default="newton", choices=list(methods.METHODS),
-                   help="how each solve is done (see anisofem.methods)")
+    s.add_argument("--method", default="auto", choices=["auto", *methods.METHODS],
+                   help="how each solve is done (see anisofem.methods; auto: exact Newton, "
+                        "multigrid-preconditioned inexact Newton on large meshes)")
     s.add_argument("--iterations", type=int, default=None,
                    help="a fixed budget of iterations per solve instead of a tolerance")
     s.add_argument("--rtol", type=float, default=1e-8)
@@ -114,8 +115,12 @@ def _parser():
                         "each large-mesh path, peak memory included (writes bench_large.json "
                         "unless --json)")
     b.add_argument("--huge", action="store_true", help="with --large: 10^6 tets too (minutes)")
+    b.add_argument("--crossover", action="store_true",
+                   help="exact Newton against multigrid CG from 4,800 to 19,200 tets, where "
+                        "method='auto' switches (writes bench_crossover.json unless --json)")
     b.add_argument("--json", default=None,
-                   help="where to write the results (bench_anisofem.json, bench_large.json)")
+                   help="where to write the results (bench_anisofem.json, bench_large.json, "
+                        "bench_crossover.json)")
     return p
 
 
@@ -143,7 +148,7 @@ def _solve(args):
     mesh = read_mesh(args.mesh)
     scene = _scene(args, mesh)
     how = {"method": args.method, "rtol": args.rtol, "iterations": args.iterations}
-    methods.make(**how)  # bad options fail here, before the solve
+    methods.make(n_unknowns=scene.n_free, **how)  # bad options fail here, before the solve
     if args.steps:
         roll = simulate(scene, args.steps, args.dt, **how)
         x, ok = roll.positions[-1], roll.completed
@@ -186,8 +191,12 @@ def _trade(args):
 def _bench(args):
     if args.huge and not args.large:
         raise ValueError("--huge: goes with --large")
+    if args.large and args.crossover:
+        raise ValueError("--crossover: runs alone, not with --large")
     if args.large:
         bench_large.run(args.huge, args.json or "bench_large.json")
+    elif args.crossover:
+        bench_large.crossover(args.json or "bench_crossover.json")
     else:
         bench.run(tuple(args.sizes), args.json or "bench_anisofem.json")
     return 0

@@ -34,7 +34,11 @@ reports failure instead of returning NaN. The methods differ in what a direction
   preconditioner is the Hessian's diagonal ("jacobi": no factorization, the rung that fits any
   memory) or a kept factorization of an earlier Hessian ("factor", renewed when CG needs more
   than refactor_after iterations): a lagged factor is a good preconditioner long after it has
-  stopped being a good Hessian.
+  stopped being a good Hessian. With "amg" (a kept smoothed-aggregation multigrid hierarchy)
+  neither time nor memory grows faster than the mesh: the large-mesh method.
+- "auto" (the default of anisofem.solve, step and simulate): "newton" up to
+  AUTO_MULTIGRID_MIN unknowns or wherever a linear_solver is named, "cg" with preconditioner
+  "amg" above (choose).
 
 Each method stops either at the tolerance (rtol, atol; max_iter a safety cap whose reaching is
 a failure) or, with `iterations=k`, after a fixed budget of k iterations per solve: reaching
@@ -438,15 +442,48 @@ def _knobs(cls):
     return names
 
 
-def make(method="newton", **options):
-    """A Method from a name (see METHODS) and its options, or a Method instance as is."""
+#: What method="auto" solves with: exact Newton up to this many unknowns, inexact Newton with
+#: the multigrid preconditioner ("cg", preconditioner "amg") above. Exact Newton's sparse
+#: factorization grows faster than the mesh. Box cantilevers at nu = 0.48 and 0.499, static
+#: solve and step (`python -m anisofem bench --crossover`): 3,780 unknowns, exact Newton
+#: 1.4-2.6x faster; 7,425, multigrid faster except the nearly incompressible step (1.4x
+#: slower); 13,728, multigrid 1.3-3.3x faster;
+#: 66,150 (10^5 tets), multigrid 20x faster (`bench --large`).
+AUTO_MULTIGRID_MIN = 10_000
+
+#: The options "auto" takes: those both of its methods read the same way, and linear_solver,
+#: which names a factorization and so makes it exact Newton at any size.
+AUTO_KNOBS = ("rtol", "atol", "max_iter", "iterations", "warm_start", "projection",
+              "linear_solver")
+
+
+def choose(n_unknowns, linear_solver=None):
+    """The method "auto" picks for a problem of n_unknowns free components, given the
+    linear_solver option or not: (name, options)."""
+    if linear_solver is None and n_unknowns > AUTO_MULTIGRID_MIN:
+        return "cg", {"preconditioner": "amg"}
+    return "newton", {}
+
+
+def make(method="auto", n_unknowns=None, **options):
+    """A Method from a name ("auto" or one of METHODS) and its options, or a Method instance as
+    is. n_unknowns: the problem's free components, which "auto" chooses by (see choose)."""
     if isinstance(method, Method):
         if options:
             raise TypeError(f"{sorted(options)}: give options to the Method's constructor, "
                             f"not beside an instance")
         return method
+    if method == "auto":
+        unknown = sorted(set(options) - set(AUTO_KNOBS))
+        if unknown:
+            raise TypeError(f"{unknown[0]}: not an option of method 'auto' (its options: "
+                            f"{', '.join(AUTO_KNOBS)}); name the method to set its own")
+        if n_unknowns is None:
+            raise ValueError("method 'auto' chooses by the problem's size: pass n_unknowns")
+        method, chosen = choose(n_unknowns, options.get("linear_solver"))
+        options = {**chosen, **options}
     if method not in METHODS:
-        raise ValueError(f"method: expected one of {tuple(METHODS)} or an "
+        raise ValueError(f"method: expected one of {('auto',) + tuple(METHODS)} or an "
                          f"anisofem.methods.Method, got {method!r}")
     cls = METHODS[method]
     unknown = sorted(set(options) - set(_knobs(cls)))

@@ -89,16 +89,17 @@ class NewtonResult:
                 + ("" if self.physical else f", inverted={self.inversion.inverted}") + ")")
 
 
-def minimize(potential, x0, method="newton", *, warn=True, accept=None, **options):
+def minimize(potential, x0, method="auto", *, warn=True, accept=None, **options):
     """Minimize potential (an anisofem.potential.Potential) from x0 (n, 3), fixed components
-    already at their prescribed positions, by `method`: a name of anisofem.methods.METHODS with
-    its options, or a Method instance (which keeps its factorizations across calls). Returns a
+    already at their prescribed positions, by `method`: "auto" or a name of
+    anisofem.methods.METHODS with its options, or a Method instance (which keeps its
+    factorizations across calls). Returns a
     NewtonResult; warns (ConvergenceWarning) when it failed.
 
     accept(x, G(x)) -> bool: with an iteration budget, the solve stops at the budget only at an
     iterate accept approves, and otherwise goes on (to the tolerance, or max_iter iterations).
     """
-    method = methods.make(method, **options)
+    method = methods.make(method, potential.scene.n_free, **options)
     t0 = time.perf_counter()
     method.start(potential)
     with method.threads():

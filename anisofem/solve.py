@@ -15,19 +15,22 @@ from .scene import Scene
 GRAVITY = (0.0, 0.0, -9.81)
 
 
-def default_scene(mesh):
+def default_scene(mesh, material=None):
     """The scene solve(mesh) uses: the paper's material (E = 100 kPa, nu = 0.48, 1000 kg/m^3,
-    no fibers), the vertices at the minimum x held fixed, gravity 9.81 m/s^2 along -z."""
+    no fibers) unless another Material is given, the vertices at the minimum x held fixed,
+    gravity 9.81 m/s^2 along -z."""
     x = mesh.vertices[:, 0]
     fixed = np.flatnonzero(x <= x.min() + 1e-9 * mesh.size)
-    return Scene(mesh, Material.paper(), fixed=fixed, gravity=GRAVITY)
+    return Scene(mesh, Material.paper() if material is None else material, fixed=fixed,
+                 gravity=GRAVITY)
 
 
-def solve(scene, x0=None, method="newton", warn=True, **options):
+def solve(scene, x0=None, method="auto", warn=True, **options):
     """Static equilibrium of a Scene (or of a TetMesh with default_scene's defaults).
 
     x0: (n, 3) start, m (default: rest positions with fixed vertices at their prescribed
-    positions). method: "newton" (default), "reuse", "lbfgs", "cg" or an
+    positions). method: "auto" (default: exact Newton, or multigrid-preconditioned inexact
+    Newton on large meshes; anisofem.methods.choose), "newton", "reuse", "lbfgs", "cg" or an
     anisofem.methods.Method; options: the method's (rtol, atol, max_iter, iterations,
     projection, linear_solver, ...; see anisofem.methods). warn: a ConvergenceWarning when the
     solve fails. Returns a NewtonResult; .x is the (n, 3) equilibrium. Raises ValueError if
@@ -62,7 +65,7 @@ class StepResult:
         return self.newton.converged
 
 
-def step(scene, x, v, dt, a_guess=None, method="newton", warn=True, **options):
+def step(scene, x, v, dt, a_guess=None, method="auto", warn=True, **options):
     """One backward-Euler step of length dt (s) from positions x and velocities v (n, 3).
 
     Minimizes G(y) = 1/(2 dt^2) |y - x - dt v|_M^2 + elastic(y) - f_ext . y, starting from
@@ -85,7 +88,7 @@ def step(scene, x, v, dt, a_guess=None, method="newton", warn=True, **options):
     start = x_hat if a_guess is None else x_hat + dt ** 2 * check_positions(scene, a_guess,
                                                                            "a_guess")
     potential = Potential(scene, x_hat, dt, x_start=x)
-    method = methods.make(method, **options)
+    method = methods.make(method, scene.n_free, **options)
     accept = _no_energy_gain(potential) if method.budget else None
     result = minimize(potential, _start_in_domain(scene, start, x), method, warn=warn,
                       accept=accept)
@@ -162,9 +165,9 @@ class Stepper:
     with a fixed iteration budget from the inertial predictor (see anisofem.methods).
     """
 
-    def __init__(self, scene, dt, method="newton", warn=True, **options):
+    def __init__(self, scene, dt, method="auto", warn=True, **options):
         self.scene, self.dt, self.warn = scene, dt, warn
-        self.method = methods.make(method, **options)
+        self.method = methods.make(method, scene.n_free, **options)
         self._a = None
 
     def __call__(self, x, v, a_guess=None):
@@ -175,7 +178,7 @@ class Stepper:
         return res
 
 
-def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, method="newton",
+def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, method="auto",
              warn=True, **options):
     """Roll out `steps` backward-Euler steps from x0 (default rest), v0 (default 0).
 

@@ -46,3 +46,19 @@ def test_bench_large_compares_each_path_with_exact_newton(tmp_path, capsys):
     assert rows["cg amg"]["cg_iterations"] > 0 and rows["newton"]["cg_iterations"] == 0
     assert json.loads(out.read_text())["rows"][0]["size"] == "tiny"
     assert "cg amg" in capsys.readouterr().out
+
+
+def test_bench_crossover_times_both_paths_per_poisson_ratio(tmp_path, capsys):
+    out = tmp_path / "crossover.json"
+    report = bench_large.crossover(out=str(out), sizes={"tiny": (6, 2, 2)},
+                                   poissons=(0.3, 0.499))
+    rows = report["rows"]
+    assert sorted((r["poisson"], r["path"]) for r in rows) == [
+        (0.3, "cg amg"), (0.3, "newton"), (0.499, "cg amg"), (0.499, "newton")]
+    assert all(r["converged"] and r["steps_converged"] for r in rows)
+    assert all(r["difference_to_newton"] < 1e-6 for r in rows)
+    sags = {(r["poisson"], r["path"]): r["tip_sag_m"] for r in rows}
+    assert sags[0.3, "newton"] != sags[0.499, "newton"]  # the ratio reached the material
+    table = capsys.readouterr().out
+    # 144 unknowns: auto takes exact Newton
+    assert sum(line.endswith("| newton") for line in table.splitlines()) == 2

@@ -199,6 +199,25 @@ def test_multigrid_v_cycle_is_pyamgs_own():
     assert np.array_equal(ours, hierarchy.aspreconditioner(cycle="V").matvec(r))
 
 
+def test_auto_is_exact_newton_on_small_meshes_and_multigrid_on_large_ones(scene, monkeypatch):
+    """The default method picks by the number of unknowns, and either pick reaches the same
+    answer; it takes only the options both of its methods read."""
+    small = af.solve(scene, rtol=1e-10)
+    assert small.method == "newton" and small.linear_iterations == 0
+    monkeypatch.setattr(methods, "AUTO_MULTIGRID_MIN", scene.n_free - 1)
+    large = af.solve(scene, rtol=1e-10)
+    assert large.method == "cg" and large.linear_iterations > 0 and large.converged
+    assert np.abs(large.x - small.x).max() < 1e-6 * np.abs(small.x - scene.mesh.vertices).max()
+    roll = af.simulate(scene, 3)
+    assert roll.converged and all(s.newton.method == "cg" for s in roll.steps)
+    assert af.Stepper(scene, 0.02).method.preconditioner == "amg"
+    assert af.Stepper(scene, 0.02, linear_solver="superlu").method.name == "newton"
+    with pytest.raises(TypeError, match="preconditioner: not an option of method 'auto'"):
+        af.solve(scene, preconditioner="jacobi")
+    with pytest.raises(ValueError, match="n_unknowns"):
+        methods.make("auto")
+
+
 def test_options_are_checked_by_name():
     with pytest.raises(TypeError, match="bogus: not an option of method 'newton'"):
         methods.make("newton", bogus=3)
@@ -210,8 +229,10 @@ def test_options_are_checked_by_name():
         methods.make("cg", preconditioner="ilu")
     with pytest.raises(ValueError, match="warm_start"):
         methods.make("reuse", warm_start="random")
-    with pytest.raises(TypeError, match="refactor: not an option of method 'newton'"):
+    with pytest.raises(TypeError, match="refactor: not an option of method 'auto'"):
         af.solve(af.box_beam(cells=(2, 1, 1)), refactor=0.5)
+    with pytest.raises(TypeError, match="refactor: not an option of method 'newton'"):
+        af.solve(af.box_beam(cells=(2, 1, 1)), method="newton", refactor=0.5)
 
 
 def _energy(scene, x, v):

@@ -172,7 +172,7 @@ def test_library_boundaries_name_the_users_input(tmp_path):
     assert not af.Scene(mesh, fixed=[]).fixed_mask[mesh.vertices[:, 0] < 1e-9].any()
     with pytest.raises(TypeError, match="steps: expected a whole number, got 2.5"):
         af.simulate(af.default_scene(mesh), steps=2.5)
-    with pytest.raises(TypeError, match="bogus: not an option of method 'newton'"):
+    with pytest.raises(TypeError, match="bogus: not an option of method 'auto'"):
         af.solve(mesh, bogus=3)
     with pytest.raises(FileNotFoundError, match="the folder of .*nowhere.* does not exist"):
         af.write_mesh(tmp_path / "nowhere" / "o.vtu", mesh)
