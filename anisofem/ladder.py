@@ -4,9 +4,10 @@ rollout (`anisofem.trade`, `python -m anisofem trade`).
     table = anisofem.trade(scene, steps=100, dt=0.02)
     print(anisofem.trade_table(table))
 
-A rung is one way of rolling the scene forward: exact Newton (the reference), Newton with a
-fixed iteration budget, factorization reuse, L-BFGS, inexact Newton (CG), exact Newton at a
-larger time step, and, where anisognn and its shipped models are installed, the surrogate
+A rung is one way of rolling the scene forward: the exact rollout (the reference: the default
+method to rtol 1e-8, exact Newton or, on large meshes, multigrid CG), Newton with a fixed
+iteration budget, factorization reuse, L-BFGS, inexact Newton (CG with the diagonal, a kept
+factorization or multigrid as preconditioner), the exact rollout at a larger time step, and, where anisognn and its shipped models are installed, the surrogate
 (alone, with its Galerkin passes, as the warm start of one Newton iteration). Each rung rolls
 the scene out from rest in the same process; what is compared:
 
@@ -62,7 +63,7 @@ class Rung:
     dt_factor: int = 1
 
 
-def fem_rung(name, method="newton", dt_factor=1, **options):
+def fem_rung(name, method="auto", dt_factor=1, **options):
     """A Rung stepping by anisofem.step with `method` and its options (anisofem.methods)."""
     def make(scene, dt):
         stepper = Stepper(scene, dt, method, **options)
@@ -75,16 +76,18 @@ def fem_rung(name, method="newton", dt_factor=1, **options):
                                   "factorizations": n.factorizations,
                                   "linear_iterations": n.linear_iterations}
         return advance
-    methods.make(method, **options)  # bad options fail here, before any rollout
+    methods.make(method, 0, **options)  # bad options fail here (at any size), before any rollout
     return Rung(name, "fem", make, dt_factor)
 
 
 def fem_rungs():
-    """The anisofem ladder, exact first: "xK" is a budget of K iterations per step, "rtol R"
-    iterates to the relative tolerance R (exact: 1e-8), "dt xK" steps K times longer."""
+    """The anisofem ladder, exact first (the default method, "auto", to rtol 1e-8: exact
+    Newton, or multigrid CG on large meshes): "xK" is a budget of K iterations per step, "rtol
+    R" iterates to the relative tolerance R (1e-8 where none is named), "dt xK" steps K times
+    longer."""
     return [fem_rung("exact"),
-            fem_rung("newton x1", iterations=1),
-            fem_rung("newton x2", iterations=2),
+            fem_rung("newton x1", "newton", iterations=1),
+            fem_rung("newton x2", "newton", iterations=2),
             fem_rung("reuse rtol 1e-2", "reuse", rtol=1e-2),
             fem_rung("reuse x3", "reuse", iterations=3),
             fem_rung("lbfgs rtol 1e-2", "lbfgs", rtol=1e-2),
@@ -92,6 +95,8 @@ def fem_rungs():
             fem_rung("cg jacobi rtol 1e-3", "cg", rtol=1e-3),
             fem_rung("cg factor x2", "cg", preconditioner="factor", forcing=0.01,
                      iterations=2),
+            fem_rung("cg amg", "cg", preconditioner="amg"),
+            fem_rung("cg amg rtol 1e-2", "cg", preconditioner="amg", rtol=1e-2),
             fem_rung("exact dt x2", dt_factor=2),
             fem_rung("exact dt x5", dt_factor=5)]
 
