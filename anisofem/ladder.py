@@ -7,8 +7,9 @@ rollout (`anisofem.trade`, `python -m anisofem trade`).
 A rung is one way of rolling the scene forward: the exact rollout (the reference: the default
 method to rtol 1e-8, exact Newton or, on large meshes, multigrid CG), Newton with a fixed
 iteration budget, factorization reuse, L-BFGS, inexact Newton (CG with the diagonal, a kept
-factorization or multigrid as preconditioner), the exact rollout at a larger time step, and, where anisognn and its shipped models are installed, the surrogate
-(alone, with its Galerkin passes, as the warm start of one Newton iteration). Each rung rolls
+factorization or multigrid as preconditioner), the exact rollout at a larger time step, and,
+where anisognn and its shipped models are installed, the surrogate (alone, with its Galerkin
+passes, as the warm start of one Newton iteration). Each rung rolls
 the scene out from rest in the same process; what is compared:
 
 - errors: at each checked time, the tip error |u(tip) - u_exact(tip)| / |u_static(tip)|, where

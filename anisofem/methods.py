@@ -447,8 +447,8 @@ def _knobs(cls):
 #: factorization grows faster than the mesh. Box cantilevers at nu = 0.48 and 0.499, static
 #: solve and step (`python -m anisofem bench --crossover`): 3,780 unknowns, exact Newton
 #: 1.4-2.6x faster; 7,425, multigrid faster except the nearly incompressible step (1.4x
-#: slower); 13,728, multigrid 1.3-3.3x faster;
-#: 66,150 (10^5 tets), multigrid 20x faster (`bench --large`).
+#: slower); 13,728, multigrid 1.3-3.3x faster; 66,150 (10^5 tets), multigrid 20x faster
+#: (`bench --large`).
 AUTO_MULTIGRID_MIN = 10_000
 
 #: The options "auto" takes: those both of its methods read the same way, and linear_solver,

@@ -114,8 +114,8 @@ def _start_in_domain(scene, start, x):
 def _no_energy_gain(potential):
     """accept(y, G(y)) for a budgeted step of potential (from its x_start = x_n): whether the
     step to y ends with no more mechanical energy H = 1/2 v^T M v + elastic - f_ext . x than it
-    started with (up to round-off). The exact backward-Euler step never gains energy where the elastic energy is
-    convex; a step cut short can, and a budget must not buy a blow-up."""
+    started with (up to round-off). The exact backward-Euler step never gains energy where the
+    elastic energy is convex; a step cut short can, and a budget must not buy a blow-up."""
     mass_over_dt2 = potential.mass_over_dt2[:, None]  # kg/s^2
 
     def kinetic(displacement):
