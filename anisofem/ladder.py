@@ -307,6 +307,29 @@ def write_json(result, path):
         json.dump(result, f, indent=1)
 
 
+def _label_positions(ax, rows, y_of, xlim, ylim):
+    """Where the plot's rung labels go, lowest rung first, each moved up while it would overlap
+    one already placed: ([(text, (x, y) of the rung, (x, y) of the label, moved)], the y of
+    the highest label's top), in data coordinates of the log-log axes ax with limits xlim,
+    ylim."""
+    # label size in decades: about 5.5 and 11 pixels per character width and line height
+    box = ax.get_window_extent()
+    char_w = 5.5 * math.log10(xlim[1] / xlim[0]) / box.width
+    line_h = 11.0 * math.log10(ylim[1] / ylim[0]) / box.height
+    placed, labels = [], []
+    for r in sorted(rows, key=y_of):
+        x, y = r["ms_per_step"], y_of(r)
+        text = r["name"] + (" (reference)" if r["name"] == "exact" else "")
+        lx, ly, w = math.log10(x) + 0.02, math.log10(y) + 0.3 * line_h, len(text) * char_w
+        while any(lx < px + pw and px < lx + w and abs(ly - py) < line_h
+                  for px, py, pw in placed):
+            ly += 0.5 * line_h
+        placed.append((lx, ly, w))
+        labels.append((text, (x, y), (10 ** lx, 10 ** ly), ly - math.log10(y) > 0.8 * line_h))
+    top = max((py for _, py, _ in placed), default=-math.inf) + 1.5 * line_h
+    return labels, 10 ** top
+
+
 def plot(result, path):
     """Save the Pareto plot of a trade result to path (PNG): ms/step against the largest tip
     error over the checked times, log-log, one marker per rung, the front joined."""
@@ -351,28 +374,23 @@ def plot(result, path):
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.text(xlim[1] / 1.1, result["tolerance"] * 1.1, f"tolerance {result['tolerance']:g}",
             color="0.4", fontsize=8, ha="right")
-    # label size in decades: about 5.5 and 11 pixels per character width and line height
-    box = ax.get_window_extent()
-    char_w = 5.5 * math.log10(xlim[1] / xlim[0]) / box.width
-    line_h = 11.0 * math.log10(ylim[1] / ylim[0]) / box.height
-    shown, placed = set(), []
-    for r in sorted(rows, key=y_of):
+    shown = set()
+    for r in rows:
         marker, color, label = styles[r["kind"]]
         if not r["stable"]:
             marker, color, label = "x", "tab:red", "unstable or failed"
-        x, y = r["ms_per_step"], y_of(r)
-        ax.scatter(x, y, marker=marker, color=color, s=50, zorder=3,
+        ax.scatter(r["ms_per_step"], y_of(r), marker=marker, color=color, s=50, zorder=3,
                    label=None if label in shown else label)
         shown.add(label)
-        text = r["name"] + (" (reference)" if r["name"] == "exact" else "")
-        # move a label up while it would overlap one already placed
-        lx, ly, w = math.log10(x) + 0.02, math.log10(y) + 0.3 * line_h, len(text) * char_w
-        while any(lx < px + pw and px < lx + w and abs(ly - py) < line_h
-                  for px, py, pw in placed):
-            ly += 0.5 * line_h
-        placed.append((lx, ly, w))
-        moved = ly - math.log10(y) > 0.8 * line_h
-        ax.annotate(text, (x, y), xytext=(10 ** lx, 10 ** ly), fontsize=7.5, va="bottom",
+    labels, top = _label_positions(ax, rows, y_of, xlim, ylim)
+    for _ in range(3):  # the axes grow to hold the highest label; the labels are placed anew
+        if top <= ylim[1]:
+            break
+        ylim = (ylim[0], top)
+        ax.set_ylim(*ylim)
+        labels, top = _label_positions(ax, rows, y_of, xlim, ylim)
+    for text, xy, xytext, moved in labels:
+        ax.annotate(text, xy, xytext=xytext, fontsize=7.5, va="bottom",
                     arrowprops={"arrowstyle": "-", "color": "0.7", "lw": 0.5} if moved else None)
     ax.set_xlabel("ms per step of dt (this machine, one process)")
     times = ", ".join(f"{t:g}" for t in result["times"])

@@ -141,3 +141,22 @@ def test_surrogates_are_not_scored_against_an_inverted_or_foreign_reference():
     notes = []
     assert surrogate_rungs(scene("neohookean"), 0.02, notes) == []
     assert "trained on the StVK base material" in notes[0]
+
+
+def test_plot_labels_of_crowded_rungs_stack_up_inside_the_axes():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    rows = [{"name": f"rung {k}", "ms_per_step": 10.0, "max_error": 1.0} for k in range(6)]
+    fig, ax = plt.subplots()
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    xlim, ylim = (1.0, 100.0), (1e-3, 2.0)
+    ax.set_xlim(*xlim)
+    ax.set_ylim(*ylim)
+    labels, top = ladder._label_positions(ax, rows, lambda r: r["max_error"], xlim, ylim)
+    ys = [xytext[1] for _, _, xytext, _ in labels]
+    plt.close(fig)
+    assert all(b > a for a, b in zip(ys, ys[1:]))  # each moved above the one before
+    assert [moved for *_, moved in labels][1:] == [True] * 5
+    assert top > ys[-1] > ylim[1]  # six labels stacked above 1 rise past 2: the plot grows
