@@ -9,8 +9,8 @@ method to rtol 1e-8, exact Newton or, on large meshes, multigrid CG), Newton wit
 iteration budget, factorization reuse, L-BFGS, inexact Newton (CG with the diagonal, a kept
 factorization or multigrid as preconditioner), the exact rollout at a larger time step, and,
 where anisognn and its shipped models are installed, the surrogate (alone, with its Galerkin
-passes, as the warm start of one Newton iteration). Each rung rolls
-the scene out from rest in the same process; what is compared:
+passes, as the warm start of one Newton iteration). Each rung rolls the scene out from rest
+in the same process; what is compared:
 
 - errors: at each checked time, the tip error |u(tip) - u_exact(tip)| / |u_static(tip)|, where
   the tip is the set of vertices whose static displacement is within 1% of the largest (for a

@@ -451,11 +451,6 @@ def _knobs(cls):
 #: (`bench --large`).
 AUTO_MULTIGRID_MIN = 10_000
 
-#: The options "auto" takes: those both of its methods read the same way, and linear_solver,
-#: which names a factorization and so makes it exact Newton at any size.
-AUTO_KNOBS = ("rtol", "atol", "max_iter", "iterations", "warm_start", "projection",
-              "linear_solver")
-
 
 def choose(n_unknowns, linear_solver=None):
     """The method "auto" picks for a problem of n_unknowns free components, given the
@@ -467,17 +462,20 @@ def choose(n_unknowns, linear_solver=None):
 
 def make(method="auto", n_unknowns=None, **options):
     """A Method from a name ("auto" or one of METHODS) and its options, or a Method instance as
-    is. n_unknowns: the problem's free components, which "auto" chooses by (see choose)."""
+    is. n_unknowns: the problem's free components, which "auto" chooses by (see choose).
+    "auto" takes Newton's options, which "cg" reads the same way; a linear_solver names a
+    factorization and so makes it exact Newton at any size."""
     if isinstance(method, Method):
         if options:
             raise TypeError(f"{sorted(options)}: give options to the Method's constructor, "
                             f"not beside an instance")
         return method
     if method == "auto":
-        unknown = sorted(set(options) - set(AUTO_KNOBS))
+        knobs = _knobs(Newton)
+        unknown = sorted(set(options) - set(knobs))
         if unknown:
             raise TypeError(f"{unknown[0]}: not an option of method 'auto' (its options: "
-                            f"{', '.join(AUTO_KNOBS)}); name the method to set its own")
+                            f"{', '.join(knobs)}); name the method to set its own")
         if n_unknowns is None:
             raise ValueError("method 'auto' chooses by the problem's size: pass n_unknowns")
         method, chosen = choose(n_unknowns, options.get("linear_solver"))

@@ -93,8 +93,8 @@ def minimize(potential, x0, method="auto", *, warn=True, accept=None, **options)
     """Minimize potential (an anisofem.potential.Potential) from x0 (n, 3), fixed components
     already at their prescribed positions, by `method`: "auto" or a name of
     anisofem.methods.METHODS with its options, or a Method instance (which keeps its
-    factorizations across calls). Returns a
-    NewtonResult; warns (ConvergenceWarning) when it failed.
+    factorizations across calls). Returns a NewtonResult; warns (ConvergenceWarning) when it
+    failed.
 
     accept(x, G(x)) -> bool: with an iteration budget, the solve stops at the budget only at an
     iterate accept approves, and otherwise goes on (to the tolerance, or max_iter iterations).
