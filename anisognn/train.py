@@ -17,6 +17,7 @@ rank 0 writes files.
 import contextlib
 import dataclasses
 import hashlib
+import importlib
 import json
 import math
 import os
@@ -312,7 +313,7 @@ def _distributed(device):
         device = torch.device("cuda", local)
     owned = not dist.is_initialized()
     if owned:
-        import torch._dynamo  # noqa: F401  (see the docstring)
+        importlib.import_module("torch._dynamo")  # see the docstring
         dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
     try:
         yield dist.get_rank(), world, device
@@ -403,19 +404,21 @@ def _train(config, progress, rank, world, device):
     torch.manual_seed(tc.seed)
     model = GraphNet(trained_config(config))
     sampler = Sampler(tc.seed, config.sampler)
-    optimizer = torch.optim.Adam(model.parameters(), lr=tc.learning_rate)
-    start = 0
-    if os.path.exists(ckpt_path):
-        payload = checkpoint.read(ckpt_path)
-        _check_resumable(payload, config, ckpt_path)
-        model.load_state_dict(payload["model"])
-        optimizer.load_state_dict(payload["optimizer"])
-        start = int(payload["iteration"])
-    else:
+    payload = checkpoint.read(ckpt_path) if os.path.exists(ckpt_path) else None
+    if payload is None:
         norm = Sampler(tc.seed + NORMALIZATION_STREAM, config.sampler)
         fit_normalization(model, [norm.sample(i) for i in range(tc.normalization_samples)])
-    log.truncate(start)  # a fresh start drops a stale log left in out
+    else:
+        _check_resumable(payload, config, ckpt_path)
+        model.load_state_dict(payload["model"])
+    # on the device before the optimizer loads its state, which it puts on its parameters' device
     model.to(device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=tc.learning_rate)
+    start = 0
+    if payload is not None:
+        optimizer.load_state_dict(payload["optimizer"])
+        start = int(payload["iteration"])
+    log.truncate(start)  # a fresh start drops a stale log left in out
     net = model
     if world > 1:
         net = torch.nn.parallel.DistributedDataParallel(model)

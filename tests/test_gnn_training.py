@@ -201,6 +201,17 @@ def test_two_process_torchrun_keeps_ranks_identical(tmp_path):
     assert done["rank_digests"][0] == done["rank_digests"][1] == done["digest"]
 
 
+def test_a_torchrun_process_without_a_gpu_of_its_own_is_told_so(monkeypatch):
+    """The GPU branch of the data-parallel set-up, reached on any machine: a process whose
+    LOCAL_RANK has no GPU gets the error that says what to do (here: no GPU at all)."""
+    monkeypatch.setenv("WORLD_SIZE", "2")
+    monkeypatch.setenv("LOCAL_RANK", "0")
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 0)
+    with pytest.raises(ValueError, match=r"torchrun process 0 has no GPU of its own \(0 found\)"):
+        with train._distributed(torch.device("cuda")):
+            pass
+
+
 def test_config_errors_name_the_problem(tmp_path):
     with pytest.raises(ValueError, match=r"\[train\] has unknown keys \['iteratons'\]"):
         train.make_config({"train": {"iteratons": 3}})
