@@ -3,15 +3,16 @@ network would be ten times faster than the exact step: the 0.1 x 0.02 x 0.02 m c
 the trade table (fibers at 40 degrees in x-z, kappa = E, gravity, dt = 0.02 s) refined 1, 2, 4
 and 8 times per direction (200 to 102,400 tets).
 
-    python scripts/crossover.py [--refinements 1 2 4 8] [--json crossover.json]
+    python scripts/crossover.py [--refinements 1 2 4 8] [--json crossover.json] [--gpu]
 
 Per size, ms per step (steps 2 to STEPS, the first holding set-up and compilation) of: the
 exact step (Newton with the default direct solver, up to 12,800 tets: at 10^5 one SuperLU
 factorization takes tens of seconds), the exact step by multigrid CG (the large-mesh path, the
 same tolerance), L-BFGS to rtol 1e-2 (the trade table's fastest accurate rung, up to 12,800
-tets), and the shipped directional.onnx by export/runtime.py; and the network's tip error
-against the exact rollout after STEPS steps, over the tip's static deflection. Then the
-exponents of the step times between the two largest sizes. Run alone.
+tets), the shipped directional.onnx by export/runtime.py (and with --gpu the same model in
+torch on the GPU, float32 and float64); and the ONNX network's tip error against the exact
+rollout after STEPS steps, over the tip's static deflection. Then the exponents of the step
+times between the two largest sizes. Run alone.
 """
 import argparse
 import math
@@ -19,8 +20,11 @@ import os
 import time
 
 import numpy as np
+import torch
 
 import anisofem
+from anisognn import pretrained
+from anisognn.rollout import network_step
 from anisofem.bench import write_json_atomic
 from anisofem.solve import Stepper
 from export.runtime import OnnxSimulator
@@ -44,36 +48,43 @@ def scene_of(refinement):
                           gravity=(0, 0, -9.81))
 
 
-def fem_steps(scene, options):
-    """(positions after each step (STEPS + 1, n, 3), ms per step over steps 2..STEPS)."""
-    options = dict(options)
-    stepper = Stepper(scene, DT, options.pop("method", "newton"), warn=False, **options)
-    x, v = scene.initial_positions(), np.zeros((scene.mesh.n_vertices, 3))
+def timed_steps(advance, x):
+    """Positions after each of STEPS calls x, v = advance(x, v) from x at rest ((STEPS + 1, n,
+    3)), and the ms per step over steps 2..STEPS."""
+    v = np.zeros_like(x)
     out, times = [x], []
     for _ in range(STEPS):
         start = time.perf_counter()
-        res = stepper(x, v)
+        x, v = advance(x, v)
         times.append(time.perf_counter() - start)
-        x, v = res.x, res.v
         out.append(x)
     return np.array(out), 1e3 * float(np.mean(times[1:]))
+
+
+def fem_steps(scene, options):
+    options = dict(options)
+    stepper = Stepper(scene, DT, options.pop("method", "newton"), warn=False, **options)
+
+    def advance(x, v):
+        res = stepper(x, v)
+        return res.x, res.v
+    return timed_steps(advance, scene.initial_positions())
 
 
 def network_steps(scene):
     mesh = scene.mesh
     sim = OnnxSimulator(MODEL, mesh.vertices, mesh.tets, fixed=scene.fixed_mask,
                         fiber_direction=FIBER, fiber_stiffness=1e5)
-    x, v = sim.rest_positions, np.zeros_like(sim.rest_positions)
-    out, times = [x], []
-    for _ in range(STEPS):
-        start = time.perf_counter()
-        x, v = sim.step(x, v, scene.external_force)
-        times.append(time.perf_counter() - start)
-        out.append(x)
-    return np.array(out), 1e3 * float(np.mean(times[1:]))
+    return timed_steps(lambda x, v: sim.step(x, v, scene.external_force), sim.rest_positions)
 
 
-def measure(refinements):
+def gpu_steps(scene, dtype):
+    """The shipped directional model in torch on the GPU, in dtype (torch.float32/float64)."""
+    advance = network_step(pretrained("directional", "cuda").to(dtype), scene)
+    return timed_steps(lambda x, v: advance(x, v)[:2], scene.initial_positions())
+
+
+def measure(refinements, gpu=False):
     rows = []
     for r in refinements:
         scene = scene_of(r)
@@ -85,6 +96,10 @@ def measure(refinements):
                 if reference is None:
                     reference = positions
         network, row["ms_per_step"]["directional.onnx"] = network_steps(scene)
+        if gpu:
+            for dtype in (torch.float32, torch.float64):
+                label = f"directional, torch {str(dtype)[6:]} on the GPU"
+                row["ms_per_step"][label] = gpu_steps(scene, dtype)[1]
         static = np.linalg.norm(anisofem.solve(scene, warn=False, **PATHS[
             "exact, multigrid CG"][0]).x - scene.mesh.vertices, axis=1)
         tip = static >= 0.99 * static.max()
@@ -114,8 +129,13 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--refinements", type=int, nargs="+", default=[1, 2, 4, 8])
     p.add_argument("--json", default="crossover.json")
+    p.add_argument("--gpu", action="store_true",
+                   help="also time the directional model in torch on the GPU (needs CUDA)")
     args = p.parse_args()
-    rows = measure(args.refinements)
+    if args.gpu:
+        if not torch.cuda.is_available():
+            p.error("--gpu: torch sees no CUDA device here")
+    rows = measure(args.refinements, args.gpu)
     slopes = exponents(rows)
     print("time ~ tets^p between the two largest sizes: " + ", ".join(
         f"{k} p = {v:.2f}" for k, v in slopes.items()))
