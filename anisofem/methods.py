@@ -56,6 +56,7 @@ import math
 import numpy as np
 
 from . import linsolve
+from .frames import VertexFrames
 
 #: Curvature pairs of L-BFGS with s.y below this times |s| |y| are skipped.
 CURVATURE_MIN = 1e-10
@@ -294,10 +295,10 @@ class NewtonCG(_KeptFactor):
     kept factorization of an earlier Hessian) or "amg" (a kept smoothed-aggregation
     multigrid hierarchy of an earlier Hessian, with the rigid-body modes at the current
     positions: no factorization, memory linear in the mesh, the rung for large meshes;
-    anisofem.linsolve.amg_preconditioner). A kept factor or
-    hierarchy is renewed at the current state when a CG solve with it needs more than
-    refactor_after iterations (default 10 with "factor", 20 with "amg"), unless it was built
-    for that solve. linear_solver: for "factor".
+    anisofem.linsolve.amg_preconditioner; applied in each vertex's frame rotated since it was
+    built, anisofem.frames). A kept factor or hierarchy is renewed at the current state when a
+    CG solve with it needs more than refactor_after iterations (default 10 with "factor", 60
+    with "amg"), unless it was built for that solve. linear_solver: for "factor".
     """
 
     name = "cg"
@@ -314,16 +315,20 @@ class NewtonCG(_KeptFactor):
             raise ValueError(f"preconditioner: expected one of {self.PRECONDITIONERS}, got "
                              f"{preconditioner!r}")
         if refactor_after is None:
-            refactor_after = 20 if preconditioner == "amg" else 10
+            refactor_after = 60 if preconditioner == "amg" else 10
         if int(refactor_after) < 1:
             raise ValueError(f"refactor_after: must be >= 1, got {refactor_after}")
         self.cg_iter, self.forcing = int(cg_iter), float(forcing)
         self.preconditioner, self.refactor_after = preconditioner, int(refactor_after)
+        self._frames_of = self._frames = self._built = None
 
     def start(self, potential):
         super().start(potential)
-        self.csr = potential.scene.layout("csr")
+        scene = potential.scene
+        self.csr = scene.layout("csr")
         self._eta = self._miss = self._model = None
+        if self.preconditioner == "amg" and self._frames_of is not scene:
+            self._frames_of, self._frames = scene, VertexFrames(scene.mesh, scene.free_dofs)
 
     def threads(self):
         """One BLAS thread unless a factorization is kept (anisofem.linsolve.one_blas_thread):
@@ -366,14 +371,17 @@ class NewtonCG(_KeptFactor):
         if self.preconditioner == "jacobi":
             diagonal = data[self.csr.diag]
             return (lambda r: r / diagonal) if (diagonal > 0).all() else None
-        if self._solve is None and self.preconditioner == "amg":
-            if not projected:  # multigrid wants a positive definite matrix: the projected one
-                data = self.potential.hessian_data(x, self.csr, project=True,
-                                                   want_grad=False)[2]
-            self.counts["factorizations"] += 1  # hierarchies built
-            modes = linsolve.rigid_body_modes(x, self.potential.scene.free_dofs)
-            self._solve = linsolve.amg_preconditioner(self.csr.matrix(data), modes)
-        elif self._solve is None:
+        if self.preconditioner == "amg":
+            if self._solve is None:
+                if not projected:  # multigrid wants a positive definite matrix: the projected
+                    data = self.potential.hessian_data(x, self.csr, project=True,
+                                                       want_grad=False)[2]
+                self.counts["factorizations"] += 1  # hierarchies built
+                modes = linsolve.rigid_body_modes(x, self.potential.scene.free_dofs)
+                self._solve = linsolve.amg_preconditioner(self.csr.matrix(data), modes)
+                self._built = self._frames.rotations(x)
+            return self._frames.carry(self._solve, self._built, self._frames.rotations(x))
+        if self._solve is None:
             # the factorization may overwrite its input
             same = self.layout is self.csr
             if not self.refresh(x, projected, data.copy() if same else None):
