@@ -29,9 +29,13 @@ class VertexFrames:
         self.first, self.second = edges[:, 0], edges[:, 1]
         self.rest_edges = mesh.vertices[self.second] - mesh.vertices[self.first]
         self.n_vertices = mesh.n_vertices
-        self.free = np.asarray(free)
-        counts = np.bincount(self.free // 3, minlength=self.n_vertices)
-        self.whole = counts == 3
+        free = np.asarray(free)
+        counts = np.bincount(free // 3, minlength=self.n_vertices)
+        self.whole = np.flatnonzero(counts == 3)
+        position = np.full(3 * self.n_vertices, -1)
+        position[free] = np.arange(free.size)
+        #: (w, 3) where the three components of each wholly free vertex sit among the free DOFs
+        self.slots = position[3 * self.whole[:, None] + np.arange(3)]
 
     def rotations(self, x):
         """(n, 3, 3) each vertex's rotation from rest at positions x (n, 3) m."""
@@ -41,17 +45,29 @@ class VertexFrames:
     def carry(self, precondition, built, now):
         """r -> W precondition(W^T r) on the free DOFs, W the block rotation now_i built_i^T
         from the rotations built (n, 3, 3) where precondition was made to those now."""
-        turn = now @ built.transpose(0, 2, 1)
-        turn[~self.whole] = np.eye(3)
-        free, n = self.free, self.n_vertices
+        turn = np.ascontiguousarray((now @ built.transpose(0, 2, 1))[self.whole])
+        slots = self.slots
+        return lambda r: _turned(turn, slots, precondition(_turned(turn, slots, r, True)), False)
 
-        def apply(r):
-            full = np.zeros(3 * n)
-            full[free] = r
-            full[free] = precondition(
-                np.einsum("nji,nj->ni", turn, full.reshape(n, 3)).reshape(-1)[free])
-            return np.einsum("nij,nj->ni", turn, full.reshape(n, 3)).reshape(-1)[free]
-        return apply
+
+@njit(cache=True)
+def _turned(turn, slots, r, transpose):
+    """A copy of the free-DOF vector r whose wholly free vertices' components (slots (w, 3))
+    are turned by turn (w, 3, 3), or by its transposes."""
+    out = r.copy()
+    for i in range(slots.shape[0]):
+        a, b, c = slots[i, 0], slots[i, 1], slots[i, 2]
+        x, y, z = r[a], r[b], r[c]
+        T = turn[i]
+        if transpose:
+            out[a] = T[0, 0] * x + T[1, 0] * y + T[2, 0] * z
+            out[b] = T[0, 1] * x + T[1, 1] * y + T[2, 1] * z
+            out[c] = T[0, 2] * x + T[1, 2] * y + T[2, 2] * z
+        else:
+            out[a] = T[0, 0] * x + T[0, 1] * y + T[0, 2] * z
+            out[b] = T[1, 0] * x + T[1, 1] * y + T[1, 2] * z
+            out[c] = T[2, 0] * x + T[2, 1] * y + T[2, 2] * z
+    return out
 
 
 @njit(cache=True)

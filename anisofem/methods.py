@@ -453,10 +453,10 @@ def _knobs(cls):
 #: What method="auto" solves with: exact Newton up to this many unknowns, inexact Newton with
 #: the multigrid preconditioner ("cg", preconditioner "amg") above. Exact Newton's sparse
 #: factorization grows faster than the mesh. Box cantilevers at nu = 0.48 and 0.499, static
-#: solve and step (`python -m anisofem bench --crossover`): 3,780 unknowns, exact Newton
-#: 1.4-2.6x faster; 7,425, multigrid faster except the nearly incompressible step (1.4x
-#: slower); 13,728, multigrid 1.3-3.3x faster; 66,150 (10^5 tets), multigrid 20x faster
-#: (`bench --large`).
+#: solve and step (`python -m anisofem bench --crossover`): 3,780 unknowns, as fast at nu =
+#: 0.48, exact Newton up to 1.8x faster at 0.499; 7,425, multigrid up to 2.4x faster except
+#: the nearly incompressible step (1.5x slower); 13,728, multigrid 1.4-4.5x faster; 66,150
+#: (10^5 tets), multigrid 24x faster (`bench --large`).
 AUTO_MULTIGRID_MIN = 10_000
 
 
