@@ -95,7 +95,7 @@ def _star_rotations(current, rest, first, second, n):
         for k in range(1, 3):
             if w[k] < w[smallest]:
                 smallest = k
-        if w[smallest] <= 1e-24 * max(w[0], w[1], w[2]) or w[smallest] <= 0.0:
+        if w[smallest] <= 1e-24 * max(w[0], w[1], w[2]):  # also all zero, or rounded below
             for k in range(3):
                 R[i, k, k] = 1.0
             continue

@@ -320,15 +320,18 @@ class NewtonCG(_KeptFactor):
             raise ValueError(f"refactor_after: must be >= 1, got {refactor_after}")
         self.cg_iter, self.forcing = int(cg_iter), float(forcing)
         self.preconditioner, self.refactor_after = preconditioner, int(refactor_after)
-        self._frames_of = self._frames = self._built = None
+        self._frames = self._built = None
 
     def start(self, potential):
         super().start(potential)
-        scene = potential.scene
-        self.csr = scene.layout("csr")
+        self.csr = potential.scene.layout("csr")
         self._eta = self._miss = self._model = None
-        if self.preconditioner == "amg" and self._frames_of is not scene:
-            self._frames_of, self._frames = scene, VertexFrames(scene.mesh, scene.free_dofs)
+
+    def first_factor(self, potential):
+        """With "amg", the vertex frames the hierarchies of this scene are carried by."""
+        if self.preconditioner == "amg":
+            scene = potential.scene
+            self._frames = VertexFrames(scene.mesh, scene.free_dofs)
 
     def threads(self):
         """One BLAS thread unless a factorization is kept (anisofem.linsolve.one_blas_thread):
@@ -380,6 +383,7 @@ class NewtonCG(_KeptFactor):
                 modes = linsolve.rigid_body_modes(x, self.potential.scene.free_dofs)
                 self._solve = linsolve.amg_preconditioner(self.csr.matrix(data), modes)
                 self._built = self._frames.rotations(x)
+                return self._solve  # made here: nothing to carry
             return self._frames.carry(self._solve, self._built, self._frames.rotations(x))
         if self._solve is None:
             # the factorization may overwrite its input

@@ -23,10 +23,10 @@ import numpy as np
 import torch
 
 import anisofem
-from anisognn import pretrained
-from anisognn.rollout import network_step
 from anisofem.bench import write_json_atomic
 from anisofem.solve import Stepper
+from anisognn import pretrained
+from anisognn.rollout import network_step
 from export.runtime import OnnxSimulator
 
 STEPS = 10
