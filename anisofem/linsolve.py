@@ -22,12 +22,6 @@ a Newton solve runs its factorizations in.
              as "superlu-colamd" for comparison.
 - "cholmod": CHOLMOD sparse Cholesky from scikit-sparse, used only if it is installed.
 - "auto":    banded up to BANDED_MAX unknowns, then cholmod if importable, else superlu.
-
-amg_preconditioner is no factorization: a smoothed-aggregation algebraic multigrid V-cycle
-(pyamg) whose coarse spaces are built from the six rigid-body modes, the near-null space of
-elasticity; the preconditioner of the "cg" method's preconditioner="amg". Without those modes
-smoothed aggregation is a poor elasticity preconditioner (350-425 CG iterations on the 10^5-tet
-cantilever, against 79 with them).
 """
 import contextlib
 import functools
@@ -168,73 +162,6 @@ def cholmod_available():
     except ImportError:
         return False
     return True
-
-
-def rigid_body_modes(x, free):
-    """(k, 6) translations and infinitesimal rotations (about the centroid, which conditions
-    them better than the origin) of positions x (n, 3), restricted to the free DOFs free (k,)
-    (flat indices 3 i + c)."""
-    n = x.shape[0]
-    modes = np.zeros((3 * n, 6))
-    for c in range(3):
-        modes[c::3, c] = 1.0
-    centered = x - x.mean(axis=0)
-    for k, (a, b) in enumerate(((0, 1), (1, 2), (2, 0))):
-        modes[a::3, 3 + k] = -centered[:, b]
-        modes[b::3, 3 + k] = centered[:, a]
-    return modes[free]
-
-
-#: The V-cycle's smoothers, finest level first (pyamg's names; the last pair serves the coarser
-#: levels). The symmetric pair per level keeps the V-cycle symmetric, as CG needs. On the
-#: finest level one forward and one backward block Gauss-Seidel sweep; below it, whose
-#: aggregated operator holds more nonzeros than the finest (six modes per aggregate), a
-#: degree-3 Chebyshev polynomial, cheaper there than Gauss-Seidel sweeps.
-AMG_SMOOTHERS = ([("block_gauss_seidel", {"sweep": "forward"}), ("chebyshev", {"degree": 3})],
-                 [("block_gauss_seidel", {"sweep": "backward"}), ("chebyshev", {"degree": 3})])
-
-
-#: Strength of connection per level (pyamg's; the last serves the coarser levels). Every
-#: connection counts on the finest level. The aggregated second level couples each node to
-#: about 50 others, and aggregating all of them made 60-node aggregates and a 156-unknown third
-#: level at 10^5 tets, which left the intermediate scales to the smoother; dropping the
-#: connections |a_ij| < 0.02 sqrt(|a_ii a_jj|) there gives a 366-unknown third level: 42
-#: against 54 CG iterations to 1e-8, backward-Euler steps 12-17% faster (docs/experiments.md).
-AMG_STRENGTH = (("symmetric", {"theta": 0.0}), ("symmetric", {"theta": 0.02}))
-
-
-#: The hierarchy coarsens until a level has at most this many nodes (pyamg's max_coarse: on
-#: the aggregated levels a node holds the six modes), whose matrix is then solved densely
-#: (pseudo-inverse). At 500 the coarsest levels had up to 2,916 unknowns (10^6 tets) and
-#: 1,128 (10^4), whose dense pseudo-inverse, on the solve's one BLAS thread, took seconds
-#: per hierarchy: static solves 0.8 against 1.8 s at 10^4 tets and 121 against 155 s at 10^6.
-AMG_COARSEST = 100
-
-
-def amg_preconditioner(A, near_null):
-    """r -> M^-1 r for the symmetric positive definite sparse A: one smoothed-aggregation
-    V-cycle with near_null (k, m) as the near-null space."""
-    import pyamg
-    pre, post = AMG_SMOOTHERS
-    hierarchy = pyamg.smoothed_aggregation_solver(sp.csr_matrix(A), B=near_null,
-                                                  symmetry="symmetric", max_coarse=AMG_COARSEST,
-                                                  strength=list(AMG_STRENGTH), presmoother=pre,
-                                                  postsmoother=post)
-    return functools.partial(_v_cycle, hierarchy.levels, hierarchy.coarse_solver, 0)
-
-
-def _v_cycle(levels, coarse_solver, k, b):
-    """One V-cycle from zero on level k of a pyamg hierarchy (its levels and coarse solver)
-    for right-hand side b. pyamg's own preconditioner (MultilevelSolver.aspreconditioner)
-    does the same and also two residual norms per call, 2.8 of its 18 ms at 10^5 tets."""
-    level = levels[k]
-    if k + 1 == len(levels):  # the coarsest level, solved directly
-        return coarse_solver(level.A, b)
-    x = np.zeros_like(b)
-    level.presmoother(level.A, x, b)
-    x += level.P @ _v_cycle(levels, coarse_solver, k + 1, level.R @ (b - level.A @ x))
-    level.postsmoother(level.A, x, b)
-    return x
 
 
 NAMES = ("auto", "banded", "dense", "superlu", "superlu-colamd", "cholmod")

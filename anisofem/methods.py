@@ -55,8 +55,9 @@ import math
 
 import numpy as np
 
-from . import linsolve
+from . import linsolve, multigrid
 from .frames import VertexFrames
+from .sparse import SparseOperator
 
 #: Curvature pairs of L-BFGS with s.y below this times |s| |y| are skipped.
 CURVATURE_MIN = 1e-10
@@ -295,7 +296,7 @@ class NewtonCG(_KeptFactor):
     kept factorization of an earlier Hessian) or "amg" (a kept smoothed-aggregation
     multigrid hierarchy of an earlier Hessian, with the rigid-body modes at the current
     positions: no factorization, memory linear in the mesh, the rung for large meshes;
-    anisofem.linsolve.amg_preconditioner; applied in each vertex's frame rotated since it was
+    anisofem.multigrid; applied in each vertex's frame rotated since it was
     built, anisofem.frames). A kept factor or hierarchy is renewed at the current state when a
     CG solve with it needs more than refactor_after iterations (default 10 with "factor", 60
     with "amg"), unless it was built for that solve. linear_solver: for "factor".
@@ -320,7 +321,7 @@ class NewtonCG(_KeptFactor):
             raise ValueError(f"refactor_after: must be >= 1, got {refactor_after}")
         self.cg_iter, self.forcing = int(cg_iter), float(forcing)
         self.preconditioner, self.refactor_after = preconditioner, int(refactor_after)
-        self._frames = self._built = None
+        self._frames = self._built = self._pattern = None
 
     def start(self, potential):
         super().start(potential)
@@ -351,7 +352,7 @@ class NewtonCG(_KeptFactor):
             precondition = self._preconditioner(x, data, projected)
             if precondition is None:
                 continue
-            hessian = self.csr.matrix(data)
+            hessian = self._hessian(data)
             p, its = truncated_cg(hessian, g, precondition, eta, self.cg_iter)
             self.counts["linear_iterations"] += its
             # one built at this very iterate is as fresh as a renewal would be
@@ -369,6 +370,13 @@ class NewtonCG(_KeptFactor):
         miss = y - hessian @ s
         self._miss = math.sqrt(float(np.dot(miss, miss))) / gnorm
 
+    def _hessian(self, data):
+        """The Hessian of entries data (in the csr layout) for products on all threads."""
+        csr = self.csr
+        if self._pattern is None or self._pattern[0] is not csr:
+            self._pattern = (csr, csr.indptr.astype(np.uint32), csr.indices.astype(np.uint32))
+        return SparseOperator(*self._pattern[1:], data.reshape(-1, 1, 1), csr.shape)
+
     def _preconditioner(self, x, data, projected):
         """r -> M^-1 r, or None when there is none for this Hessian."""
         if self.preconditioner == "jacobi":
@@ -380,8 +388,8 @@ class NewtonCG(_KeptFactor):
                     data = self.potential.hessian_data(x, self.csr, project=True,
                                                        want_grad=False)[2]
                 self.counts["factorizations"] += 1  # hierarchies built
-                modes = linsolve.rigid_body_modes(x, self.potential.scene.free_dofs)
-                self._solve = linsolve.amg_preconditioner(self.csr.matrix(data), modes)
+                modes = multigrid.rigid_body_modes(x, self.potential.scene.free_dofs)
+                self._solve = multigrid.preconditioner(self.csr.matrix(data), modes)
                 self._built = self._frames.rotations(x)
                 return self._solve  # made here: nothing to carry
             return self._frames.carry(self._solve, self._built, self._frames.rotations(x))

@@ -23,7 +23,7 @@ def measure(cells, candidate):
     import scipy.sparse.linalg as spla
 
     import anisofem as af
-    from anisofem import linsolve
+    from anisofem import linsolve, multigrid
     from anisofem.potential import Potential
 
     scene = af.default_scene(af.box_beam(cells=cells))
@@ -55,8 +55,8 @@ def measure(cells, candidate):
             pardiso.factorize(upper)
             return lambda r: pardiso.solve(upper, r)
         if candidate.startswith("amg-"):
-            precondition = linsolve.amg_preconditioner(
-                A, linsolve.rigid_body_modes(x, scene.free_dofs))
+            precondition = multigrid.preconditioner(
+                A, multigrid.rigid_body_modes(x, scene.free_dofs))
             M = spla.LinearOperator(A.shape, matvec=precondition)
 
             def solve(r):

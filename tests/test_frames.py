@@ -4,7 +4,7 @@ import pytest
 import scipy.sparse.linalg as spla
 
 import anisofem as af
-from anisofem import linsolve
+from anisofem import multigrid
 from anisofem.frames import VertexFrames
 from anisofem.potential import Potential
 
@@ -85,8 +85,8 @@ def test_the_hierarchy_built_at_rest_serves_a_bent_state_once_carried(bent):
 
     def hierarchy(y):
         data = potential.hessian_data(y, layout, project=True, want_grad=False)[2]
-        return linsolve.amg_preconditioner(layout.matrix(data),
-                                           linsolve.rigid_body_modes(y, free))
+        return multigrid.preconditioner(layout.matrix(data),
+                                        multigrid.rigid_body_modes(y, free))
     at_rest = hierarchy(rest)
     frames = VertexFrames(scene.mesh, free)
     carried = frames.carry(at_rest, frames.rotations(rest), frames.rotations(x))

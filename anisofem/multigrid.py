@@ -1,0 +1,159 @@
+"""Smoothed-aggregation algebraic multigrid: the preconditioner of the "cg" method's
+preconditioner="amg", the rung for large meshes (no factorization, memory linear in the mesh).
+
+The hierarchy is pyamg's: aggregation by strength of connection, prolongators smoothed by
+Jacobi, Galerkin coarse operators R A P, with the six rigid-body modes as the near-null space
+(without them smoothed aggregation is a poor elasticity preconditioner: 350-425 CG iterations
+on the 10^5-tet cantilever, against 79 with them). The V-cycle is this module's: numba
+kernels on every core, in float32. A preconditioner needs no more digits (conjugate
+gradients, in float64, correct what it leaves), and the V-cycle's cost is reading its
+matrices, so single precision halves what it reads; pyamg's own V-cycle runs in float64 on
+one core (`python -m anisofem bench --large` times the steps; docs/fem.md).
+"""
+import contextlib
+
+import numba as nb
+import numpy as np
+import scipy.sparse as sp
+
+from .sparse import SparseOperator
+
+#: The V-cycle's smoothers: on the finest level one forward Gauss-Seidel sweep before the
+#: coarse correction and one backward sweep after it (the pair keeps the V-cycle symmetric,
+#: as conjugate gradients need); on the coarser levels, whose aggregated operators hold more
+#: nonzeros than the finest (six modes per aggregate), a degree-3 Chebyshev polynomial in A,
+#: cheaper there than Gauss-Seidel sweeps and parallel. The polynomial targets the spectrum
+#: [rho / CHEBYSHEV_LOWER, CHEBYSHEV_UPPER rho] of each level's A (rho: its spectral radius,
+#: estimated by pyamg), pyamg's defaults.
+CHEBYSHEV_DEGREE = 3
+CHEBYSHEV_LOWER, CHEBYSHEV_UPPER = 30.0, 1.1
+
+#: Strength of connection per level (pyamg's; the last serves the coarser levels). Every
+#: connection counts on the finest level. The aggregated second level couples each node to
+#: about 50 others, and aggregating all of them made 60-node aggregates and a 156-unknown third
+#: level at 10^5 tets, which left the intermediate scales to the smoother; dropping the
+#: connections |a_ij| < 0.02 sqrt(|a_ii a_jj|) there gives a 366-unknown third level: 42
+#: against 54 CG iterations to 1e-8, backward-Euler steps 12-17% faster (docs/experiments.md).
+STRENGTH = (("symmetric", {"theta": 0.0}), ("symmetric", {"theta": 0.02}))
+
+#: The hierarchy coarsens until a level has at most this many nodes (pyamg's max_coarse: on
+#: the aggregated levels a node holds the six modes), whose matrix is then solved densely
+#: (pseudo-inverse). At 500 the coarsest levels had up to 2,916 unknowns (10^6 tets) and
+#: 1,128 (10^4), whose dense pseudo-inverse took seconds per hierarchy: static solves 0.8
+#: against 1.8 s at 10^4 tets and 121 against 155 s at 10^6.
+COARSEST = 100
+
+
+def rigid_body_modes(x, free):
+    """(k, 6) translations and infinitesimal rotations (about the centroid, which conditions
+    them better than the origin) of positions x (n, 3), restricted to the free DOFs free (k,)
+    (flat indices 3 i + c)."""
+    n = x.shape[0]
+    modes = np.zeros((3 * n, 6))
+    for c in range(3):
+        modes[c::3, c] = 1.0
+    centered = x - x.mean(axis=0)
+    for k, (a, b) in enumerate(((0, 1), (1, 2), (2, 0))):
+        modes[a::3, 3 + k] = -centered[:, b]
+        modes[b::3, 3 + k] = centered[:, a]
+    return modes[free]
+
+
+def hierarchy(A, near_null):
+    """pyamg's smoothed-aggregation hierarchy of the symmetric positive definite sparse A
+    (m, m) with near_null (m, k) as the near-null space, without smoothers (VCycle brings
+    its own)."""
+    import pyamg
+    with _seeded():
+        return pyamg.smoothed_aggregation_solver(sp.csr_matrix(A), B=near_null,
+                                                 symmetry="symmetric", max_coarse=COARSEST,
+                                                 strength=list(STRENGTH), presmoother=None,
+                                                 postsmoother=None)
+
+
+def preconditioner(A, near_null):
+    """r -> M^-1 r (float64 (m,) in and out) for the symmetric positive definite sparse A:
+    one V-cycle of its hierarchy (see hierarchy and VCycle)."""
+    return VCycle(hierarchy(A, near_null))
+
+
+@contextlib.contextmanager
+def _seeded():
+    """numpy's global random state seeded, and restored after: pyamg estimates spectral
+    radii (of the prolongator smoother and the Chebyshev polynomials) from random start
+    vectors, and seeded estimates make every solve repeat exactly."""
+    state = np.random.get_state()
+    np.random.seed(0)
+    try:
+        yield
+    finally:
+        np.random.set_state(state)
+
+
+class VCycle:
+    """One V-cycle from zero of a pyamg hierarchy (its levels' A, P, R and its coarsest
+    level), with this module's smoothers, in float32 on numba's threads: call it with a
+    right-hand side b (m,) to get the approximate solution (m,) in float64."""
+
+    def __init__(self, ml):
+        from pyamg.relaxation.chebyshev import chebyshev_polynomial_coefficients
+        from pyamg.util.linalg import approximate_spectral_radius
+        self.operators, self.prolongators, self.restrictors, self.smoothers = [], [], [], []
+        for k, level in enumerate(ml.levels[:-1]):
+            self.operators.append(SparseOperator.of(level.A))
+            self.prolongators.append(SparseOperator.of(level.P))
+            self.restrictors.append(SparseOperator.of(level.R))
+            if k == 0:
+                self.smoothers.append(None)  # Gauss-Seidel
+            else:
+                with _seeded():
+                    rho = approximate_spectral_radius(level.A)  # cached on level.A
+                self.smoothers.append(-chebyshev_polynomial_coefficients(
+                    rho / CHEBYSHEV_LOWER, rho * CHEBYSHEV_UPPER,
+                    CHEBYSHEV_DEGREE)[:-1].astype(np.float32))
+        coarsest = ml.levels[-1].A.toarray()
+        self.coarse_inverse = np.linalg.pinv(coarsest).astype(np.float32)
+        fine = sp.csr_matrix(ml.levels[0].A)
+        self._diagonal = fine.diagonal().astype(np.float32)
+
+    def __call__(self, b):
+        return self._cycle(0, np.asarray(b, dtype=np.float32)).astype(np.float64)
+
+    def _cycle(self, k, b):
+        """The V-cycle's approximate solution (float32) on level k for right-hand side b."""
+        if k == len(self.operators):
+            return self.coarse_inverse @ b
+        A = self.operators[k]
+        x = self._smooth(k, b, None, forward=True)
+        residual = A.combine(x, -1.0, b)                         # b - A x
+        correction = self._cycle(k + 1, self.restrictors[k].combine(residual))
+        x = self.prolongators[k].combine(correction, 1.0, x)    # x + P e
+        return self._smooth(k, b, x, forward=False)
+
+    def _smooth(self, k, b, x, forward):
+        """Level k's smoother for A x = b from x (None: from zero), forward (the
+        presmoother) or backward (the postsmoother): the improved x."""
+        A, coefficients = self.operators[k], self.smoothers[k]
+        if coefficients is None:
+            x = np.zeros_like(b) if x is None else x
+            _gauss_seidel(A.indptr, A.indices, A.blocks.reshape(-1), self._diagonal, x, b,
+                          forward)
+            return x
+        residual = b if x is None else A.combine(x, -1.0, b)
+        h = coefficients[0] * residual
+        for c in coefficients[1:]:
+            h = A.combine(h, 1.0, c * residual)                  # c r + A h
+        return h if x is None else x + h
+
+
+@nb.njit(cache=True)
+def _gauss_seidel(indptr, indices, data, diagonal, x, b, forward):
+    """One Gauss-Seidel sweep on A x = b in place, A in CSR with its diagonal, rows in order
+    (forward) or in reverse."""
+    n = len(x)
+    for t in range(n):
+        i = t if forward else n - 1 - t
+        s = b[i] * 1.0
+        for k in range(indptr[i], indptr[i + 1]):
+            s -= data[k] * x[indices[k]]
+        x[i] += s / diagonal[i]
