@@ -39,13 +39,12 @@ class VertexFrames:
 
     def rotations(self, x):
         """(n, 3, 3) each vertex's rotation from rest at positions x (n, 3) m."""
-        return _star_rotations(x[self.second] - x[self.first], self.rest_edges, self.first,
-                               self.second, self.n_vertices)
+        return _star_rotations(x, self.rest_edges, self.first, self.second)
 
     def carry(self, precondition, built, now):
         """r -> W precondition(W^T r) on the free DOFs, W the block rotation now_i built_i^T
         from the rotations built (n, 3, 3) where precondition was made to those now."""
-        turn = np.ascontiguousarray((now @ built.transpose(0, 2, 1))[self.whole])
+        turn = _relative(now, built, self.whole)
         slots = self.slots
         return lambda r: _turned(turn, slots, precondition(_turned(turn, slots, r, True)), False)
 
@@ -71,18 +70,34 @@ def _turned(turn, slots, r, transpose):
 
 
 @njit(cache=True)
-def _star_rotations(current, rest, first, second, n):
+def _relative(now, built, whole):
+    """(w, 3, 3) now_i built_i^T for the vertices i of whole (w,); now, built (n, 3, 3)."""
+    out = np.empty((whole.shape[0], 3, 3))
+    for k in range(whole.shape[0]):
+        i = whole[k]
+        for p in range(3):
+            for q in range(3):
+                out[k, p, q] = (now[i, p, 0] * built[i, q, 0] + now[i, p, 1] * built[i, q, 1]
+                                + now[i, p, 2] * built[i, q, 2])
+    return out
+
+
+@njit(cache=True)
+def _star_rotations(x, rest, first, second):
     """(n, 3, 3) the polar rotations of A_i = sum over the edges at vertex i of current_e
-    rest_e^T; an edge list (E,) first/second, edge vectors (E, 3). A reflection (det A_i < 0,
-    an inverted star) flips the axis of the smallest singular value; a vertex whose A_i is
-    singular keeps the identity."""
+    rest_e^T at positions x (n, 3); an edge list (E,) first/second, rest edge vectors (E, 3).
+    A reflection (det A_i < 0, an inverted star) flips the axis of the smallest singular
+    value; a vertex whose A_i is singular keeps the identity."""
+    n = x.shape[0]
     A = np.zeros((n, 3, 3))
-    for e in range(current.shape[0]):
+    for e in range(rest.shape[0]):
+        i, j = first[e], second[e]
         for a in range(3):
+            current = x[j, a] - x[i, a]
             for b in range(3):
-                value = current[e, a] * rest[e, b]
-                A[first[e], a, b] += value
-                A[second[e], a, b] += value
+                value = current * rest[e, b]
+                A[i, a, b] += value
+                A[j, a, b] += value
     R = np.zeros((n, 3, 3))
     w, V, S = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
     for i in range(n):

@@ -219,8 +219,9 @@ class _KeptFactor(Newton):
 
 class FactorReuse(_KeptFactor):
     """Newton with the factorization kept across iterations and steps (see the module
-    docstring). refactor: a step with the kept factor that leaves more than this fraction of
-    the gradient norm triggers a fresh factorization at the next iteration."""
+    docstring), applied in each vertex's frame rotated since it was made (anisofem.frames).
+    refactor: a step with the kept factor that leaves more than this fraction of the gradient
+    norm triggers a fresh factorization at the next iteration."""
 
     name = "reuse"
 
@@ -229,11 +230,27 @@ class FactorReuse(_KeptFactor):
         if not 0 < refactor < 1:
             raise ValueError(f"refactor: a fraction in (0, 1), got {refactor}")
         self.refactor = float(refactor)
+        self._frames = self._built = None
+
+    def first_factor(self, potential):
+        scene = potential.scene
+        self._frames = VertexFrames(scene.mesh, scene.free_dofs)
+
+    def refresh(self, x, projected, data=None):
+        made = super().refresh(x, projected, data)
+        if made and self._frames is not None:  # L-BFGS turns nothing
+            self._built = self._frames.rotations(x)
+        return made
+
+    def kept(self, x):
+        """g -> the kept inverse-Hessian approximation at x applied to g: the kept factor
+        turned by the vertex rotations since it was made."""
+        return self._frames.carry(self._solve, self._built, self._frames.rotations(x))
 
     def directions(self, x, g, residual):
         if self._solve is not None:
             self._fresh = False
-            yield -self.apply(g)
+            yield -self.kept(x)(g)
             self.forget()
         self._fresh = True
         yield from super().directions(x, g, residual)
@@ -262,6 +279,12 @@ class LBFGS(FactorReuse):
         with self.solver.threads():
             self.refresh(potential.scene.initial_positions(), projected=True)
         self._pairs = []
+
+    def kept(self, x):
+        """The L-BFGS inverse Hessian, on the factor as made: turned by the vertex rotations
+        it refactored more often and lost accuracy on the 200-tet trade cantilever
+        (docs/experiments.md)."""
+        return self.apply
 
     def apply(self, g):
         """H g for the L-BFGS inverse Hessian H (Nocedal and Wright, Algorithm 7.4)."""
