@@ -49,15 +49,17 @@ The exact Hessian sums all nine modes; the projected one drops those with negati
 eigenvalues. The fiber term adds 8 kappa (Fd)(Fd)^T s_a s_b (PSD) and the geometric
 4 kappa (I4 - 1) s_a s_b delta_ik, dropped when projecting with I4 < 1.
 
-Assembly runs over element colors (no two elements of a color share a vertex), so the
-elements of one color are scattered in parallel without races, and results do not depend
-on the thread count.
+Assembly runs over colored blocks of consecutive elements (anisofem.mesh.ASSEMBLY_BLOCK; no
+two blocks of a color share a vertex), so the blocks of one color are scattered in parallel
+without races, each thread reading and adding to one neighbourhood at a time, and results do
+not depend on the thread count.
 """
 import math
 
-import numba
 import numpy as np
 from numba import njit, prange
+
+from .mesh import ASSEMBLY_BLOCK
 
 #: Below this many elements the assembly runs on one thread (parallel launches cost more).
 PARALLEL_MIN_ELEMENTS = 4000
@@ -476,14 +478,13 @@ def _add_outer(He, coef, b):
 
 
 @njit(cache=True)
-def _run_gradient(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber,
+def _run_gradient(lo, hi, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber,
                   e_iso, e_fib, grad, want_grad):
-    """Energies (J) and, if want_grad, gradient contributions of elements order[lo:hi]."""
+    """Energies (J) and, if want_grad, gradient contributions of elements lo to hi - 1."""
     F = np.empty((3, 3))
     S = np.empty((3, 3))
     Fd = np.empty(3)
-    for idx in range(lo, hi):
-        e = order[idx]
+    for e in range(lo, hi):
         e_iso[e], e_fib[e], _ = _stress(e, x, tets, grads, vol, model, mu, lam, kappa, fdir,
                                         has_fiber, F, S, Fd)
         if want_grad:
@@ -491,9 +492,9 @@ def _run_gradient(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdi
 
 
 @njit(cache=True)
-def _run_hessian(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber,
+def _run_hessian(lo, hi, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber,
                  e_iso, e_fib, grad, want_grad, project, hess_map, hess_data):
-    """Energies, (gradient,) and Hessian contributions of elements order[lo:hi]; hess_map[e]
+    """Energies, (gradient,) and Hessian contributions of elements lo to hi - 1; hess_map[e]
     (144,) gives the position in hess_data of each He entry (-1: dropped)."""
     F = np.empty((3, 3))
     S = np.empty((3, 3))
@@ -503,8 +504,7 @@ def _run_hessian(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir
     q = np.empty((4, 3))
     He = np.empty((12, 12))
     work = np.empty(WORK_SHAPE)
-    for idx in range(lo, hi):
-        e = order[idx]
+    for e in range(lo, hi):
         ei, ef, k_e = _stress(e, x, tets, grads, vol, model, mu, lam, kappa, fdir, has_fiber, F,
                               S, Fd)
         e_iso[e] = ei
@@ -522,29 +522,28 @@ def _run_hessian(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir
 
 
 @njit(cache=True)
-def _run_range(mode, lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir,
+def _run_range(mode, lo, hi, x, tets, grads, vol, model, mu, lam, kappa, fdir,
                has_fiber, e_iso, e_fib, grad, want_grad, project, hess_map, hess_data):
     """mode 0: energies (+ gradient if want_grad), 2: + Hessian."""
     if mode == 0:
-        _run_gradient(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir,
+        _run_gradient(lo, hi, x, tets, grads, vol, model, mu, lam, kappa, fdir,
                       has_fiber, e_iso, e_fib, grad, want_grad)
     else:
-        _run_hessian(lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir,
+        _run_hessian(lo, hi, x, tets, grads, vol, model, mu, lam, kappa, fdir,
                      has_fiber, e_iso, e_fib, grad, want_grad, project, hess_map, hess_data)
 
 
 @njit(cache=True, parallel=True)
-def _run_colors(nthreads, order, color_ptr, mode, x, tets, grads, vol, model, mu, lam, kappa,
-                fdir, has_fiber, e_iso, e_fib, grad, want_grad, project, hess_map, hess_data):
-    """Parallel over the elements of each color, colors one after another."""
+def _run_colors(starts, color_ptr, mode, x, tets, grads, vol, model, mu, lam, kappa, fdir,
+                has_fiber, e_iso, e_fib, grad, want_grad, project, hess_map, hess_data):
+    """The assembly blocks of each color in parallel (each block's tets in order), colors one
+    after another: every sum over elements runs in the same order whatever the threads."""
+    m = tets.shape[0]
     for c in range(color_ptr.shape[0] - 1):
-        start = color_ptr[c]
-        count = color_ptr[c + 1] - start
-        nchunk = min(count, 4 * nthreads)
-        for k in prange(nchunk):
-            lo = start + (count * k) // nchunk
-            hi = start + (count * (k + 1)) // nchunk
-            _run_range(mode, lo, hi, order, x, tets, grads, vol, model, mu, lam, kappa, fdir,
+        for k in prange(color_ptr[c + 1] - color_ptr[c]):
+            lo = starts[color_ptr[c] + k]
+            hi = min(lo + ASSEMBLY_BLOCK, m)
+            _run_range(mode, lo, hi, x, tets, grads, vol, model, mu, lam, kappa, fdir,
                        has_fiber, e_iso, e_fib, grad, want_grad, project, hess_map, hess_data)
 
 
@@ -589,10 +588,10 @@ def assemble(x, elements, *, want_grad=False, want_hess=False, project=False, he
     args = (mode, x, elements.tets, elements.grads, elements.volumes, elements.model,
             elements.mu, elements.lam, elements.kappa, elements.fiber, elements.has_fiber, e_iso,
             e_fib, grad, want_grad, project, hess_map, hess_data)
-    if m < PARALLEL_MIN_ELEMENTS or numba.get_num_threads() == 1:
-        _run_range(mode, 0, m, elements.serial_order, *args[1:])
+    if m < PARALLEL_MIN_ELEMENTS:
+        _run_range(mode, 0, m, *args[1:])
     else:
-        _run_colors(numba.get_num_threads(), elements.color_order, elements.color_ptr, *args)
+        _run_colors(elements.block_starts, elements.color_ptr, *args)
     return e_iso, e_fib, (grad if want_grad else None)
 
 

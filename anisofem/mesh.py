@@ -7,6 +7,13 @@ from numba import njit
 
 from ._validate import as_float_array, as_index_array
 
+#: Tets per assembly block: the parallel assembly runs the blocks of one color on all threads
+#: at once, each block's tets in order on one thread (anisofem.kernels). Runs of consecutive
+#: tets keep what a thread reads and adds to close together: on 2 cores the 10^5-tet Hessian
+#: assembled in 40 ms this way against 100 ms with tets colored one by one (every color spread
+#: over the whole mesh) and 58 ms on one thread.
+ASSEMBLY_BLOCK = 512
+
 #: A rest tet is rejected as zero-volume when 6 |V| / l_max^3 is below this (l_max: its
 #: longest edge; 0.707 for a regular tet). Nearly flat elements above it are accepted.
 MIN_SHAPE_QUALITY = 1e-9
@@ -159,14 +166,13 @@ class TetMesh:
 
     @cached_property
     def coloring(self):
-        """(order, ptr): tets grouped by color, no two tets of a color share a vertex.
-
-        Color c holds tets order[ptr[c]:ptr[c+1]].
-        """
-        colors = _greedy_colors(self.tets, self.n_vertices)
+        """(starts, ptr): the assembly blocks (runs of ASSEMBLY_BLOCK consecutive tets, the
+        last one shorter) grouped by color, no two blocks of a color sharing a vertex. Color
+        c holds the blocks that start at tets starts[ptr[c]:ptr[c+1]]."""
+        colors = _greedy_block_colors(self.tets, self.n_vertices, ASSEMBLY_BLOCK)
         order = np.argsort(colors, kind="stable")
         ptr = np.searchsorted(colors[order], np.arange(colors.max() + 2))
-        return order.astype(np.int64), ptr.astype(np.int64)
+        return (order * ASSEMBLY_BLOCK).astype(np.int64), ptr.astype(np.int64)
 
     @property
     def size(self):
@@ -181,10 +187,12 @@ def _six_volumes(vertices, tets):
 
 
 @njit(cache=True)
-def _greedy_colors(tets, n_vertices):
-    """Color tets so that tets sharing a vertex differ: smallest color free at all 4 vertices."""
+def _greedy_block_colors(tets, n_vertices, block):
+    """Color the blocks of `block` consecutive tets so that blocks sharing a vertex differ:
+    each block takes the smallest color free at all its vertices. (blocks,) int64."""
     m = tets.shape[0]
-    # vertex -> incident tets (CSR)
+    blocks = (m + block - 1) // block
+    # vertex -> incident blocks, with repeats (CSR over the tets' vertex slots)
     count = np.zeros(n_vertices + 1, np.int64)
     for e in range(m):
         for a in range(4):
@@ -195,19 +203,20 @@ def _greedy_colors(tets, n_vertices):
     for e in range(m):
         for a in range(4):
             v = tets[e, a]
-            inc[fill[v]] = e
+            inc[fill[v]] = e // block
             fill[v] += 1
-    colors = -np.ones(m, np.int64)
-    taken = np.full(m + 1, -1, np.int64)  # taken[c] == e: color c is used by a neighbor of e
-    for e in range(m):
-        for a in range(4):
-            v = tets[e, a]
-            for k in range(ptr[v], ptr[v + 1]):
-                c = colors[inc[k]]
-                if c >= 0:
-                    taken[c] = e
+    colors = -np.ones(blocks, np.int64)
+    taken = np.full(blocks + 1, -1, np.int64)  # taken[c] == b: a neighbour of b has color c
+    for b in range(blocks):
+        for e in range(b * block, min(m, (b + 1) * block)):
+            for a in range(4):
+                v = tets[e, a]
+                for k in range(ptr[v], ptr[v + 1]):
+                    c = colors[inc[k]]
+                    if c >= 0:
+                        taken[c] = b
         c = 0
-        while taken[c] == e:
+        while taken[c] == b:
             c += 1
-        colors[e] = c
+        colors[b] = c
     return colors

@@ -30,9 +30,8 @@ class ElementData:
     kappa: np.ndarray         # (m,) Pa
     fiber: np.ndarray         # (m, 3) unit fiber directions
     has_fiber: bool           # False: the fiber term is skipped entirely
-    serial_order: np.ndarray  # (m,) int64
-    color_order: np.ndarray   # (m,) int64, tets grouped by color
-    color_ptr: np.ndarray     # (colors + 1,) int64
+    block_starts: np.ndarray  # (blocks,) int64 first tet of each assembly block, by color
+    color_ptr: np.ndarray     # (colors + 1,) int64 color c: block_starts[ptr[c]:ptr[c+1]]
 
 
 class Scene:
@@ -183,15 +182,14 @@ class Scene:
     @cached_property
     def elements(self):
         p = self._params
-        order, ptr = self.mesh.coloring
+        starts, ptr = self.mesh.coloring
         kappa = p["kappa"]
         return ElementData(
             tets=np.ascontiguousarray(self.mesh.tets, dtype=np.int64),
             grads=self.mesh.shape_gradients, volumes=self.mesh.rest_volumes, model=p["model"],
             mu=p["mu"], lam=p["lam"], kappa=kappa, fiber=p["fiber"],
             has_fiber=bool((kappa > 0).any()),
-            serial_order=np.arange(self.mesh.n_tets, dtype=np.int64),
-            color_order=order, color_ptr=ptr)
+            block_starts=starts, color_ptr=ptr)
 
     def layout(self, kind):
         """The Hessian layout over the free DOFs: kind "csr", "dense" or "banded" (cached)."""

@@ -5,6 +5,7 @@ import pytest
 from conftest import mirror_partner
 
 import anisofem as af
+from anisofem import mesh as mesh_module
 
 
 @pytest.mark.parametrize("make,volume", [
@@ -47,13 +48,19 @@ def test_alternating_split_is_mirror_symmetric(make, axes):
         assert {tuple(sorted(t)) for t in j[mesh.tets].tolist()} == tets
 
 
-def test_coloring_separates_tets_sharing_a_vertex():
+def test_coloring_separates_blocks_sharing_a_vertex(monkeypatch):
+    monkeypatch.setattr(mesh_module, "ASSEMBLY_BLOCK", 7)  # many blocks on a small mesh
     mesh = af.box_beam(cells=(6, 3, 3))
-    order, ptr = mesh.coloring
-    assert sorted(order.tolist()) == list(range(mesh.n_tets))
+    starts, ptr = mesh.coloring
+    assert sorted(starts.tolist()) == list(range(0, mesh.n_tets, 7))
+    assert len(ptr) - 1 >= 2
     for c in range(len(ptr) - 1):
-        verts = mesh.tets[order[ptr[c]:ptr[c + 1]]].ravel()
-        assert np.unique(verts).size == verts.size
+        verts = np.concatenate([mesh.tets[s:s + 7].ravel() for s in starts[ptr[c]:ptr[c + 1]]])
+        blocks = np.concatenate([np.full(mesh.tets[s:s + 7].size, s)
+                                 for s in starts[ptr[c]:ptr[c + 1]]])
+        # a vertex may repeat within a block, never across two blocks of one color
+        pairs = np.unique(np.stack([verts, blocks]), axis=1)
+        assert np.unique(pairs[0]).size == pairs.shape[1]
 
 
 def test_boundary_faces_point_outward_and_close_the_surface():
