@@ -491,11 +491,11 @@ def _knobs(cls):
 #: What method="auto" solves with: exact Newton up to this many unknowns, inexact Newton with
 #: the multigrid preconditioner ("cg", preconditioner "amg") above. Exact Newton's sparse
 #: factorization grows faster than the mesh. Box cantilevers at nu = 0.48 and 0.499, static
-#: solve and step (`python -m anisofem bench --crossover`): 3,780 unknowns, as fast at nu =
-#: 0.48, exact Newton up to 1.8x faster at 0.499; 7,425, multigrid up to 2.4x faster except
-#: the nearly incompressible step (1.5x slower); 13,728, multigrid 1.4-4.5x faster; 66,150
-#: (10^5 tets), multigrid 24x faster (`bench --large`).
-AUTO_MULTIGRID_MIN = 10_000
+#: solve and step (`python -m anisofem bench --crossover`): 3,780 unknowns, multigrid up to
+#: 3.4x faster at nu = 0.48, exact Newton 1.5x faster at the nearly incompressible step;
+#: 7,425, multigrid 1.7-5.9x faster, as fast at the nearly incompressible step; 13,728,
+#: multigrid 2.5-7.9x faster; 66,150 (10^5 tets), multigrid 49x faster (`bench --large`).
+AUTO_MULTIGRID_MIN = 5_000
 
 
 def choose(n_unknowns, linear_solver=None):
