@@ -1,9 +1,13 @@
 """Sparsity patterns: where each entry of each 12x12 element Hessian lands, built once per mesh
 and set of unknowns, so that assembly is a scatter-add into a preallocated array."""
+from functools import cached_property
+
 import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+from .sparse import SparseOperator
 
 
 def unknown_dofs(dof_map):
@@ -74,6 +78,15 @@ class CsrLayout:
     def matrix(self, data):
         """scipy.sparse.csr_matrix sharing data."""
         return sp.csr_matrix((data, self.indices, self.indptr), shape=self.shape, copy=False)
+
+    def operator(self, data):
+        """anisofem.sparse.SparseOperator sharing data: products on all threads."""
+        return SparseOperator(*self._unsigned, data.reshape(-1, 1, 1), self.shape)
+
+    @cached_property
+    def _unsigned(self):
+        """(indptr, indices) as the unsigned indices SparseOperator's kernels read fastest."""
+        return self.indptr.astype(np.uint32), self.indices.astype(np.uint32)
 
 
 @njit(cache=True)

@@ -41,10 +41,11 @@ class VertexFrames:
         """(n, 3, 3) each vertex's rotation from rest at positions x (n, 3) m."""
         return _star_rotations(x, self.rest_edges, self.first, self.second)
 
-    def carry(self, precondition, built, now):
-        """r -> W precondition(W^T r) on the free DOFs, W the block rotation now_i built_i^T
-        from the rotations built (n, 3, 3) where precondition was made to those now."""
-        turn = _relative(now, built, self.whole)
+    def carry(self, precondition, built, x):
+        """r -> W precondition(W^T r) on the free DOFs, W the block rotation R_i(x) built_i^T
+        from the rotations built (n, 3, 3) where precondition was made to those at positions
+        x (n, 3)."""
+        turn = _relative(self.rotations(x), built, self.whole)
         slots = self.slots
         return lambda r: _turned(turn, slots, precondition(_turned(turn, slots, r, True)), False)
 

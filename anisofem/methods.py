@@ -60,7 +60,6 @@ import numpy as np
 
 from . import linsolve, multigrid
 from .frames import VertexFrames
-from .sparse import SparseOperator
 
 #: Curvature pairs of L-BFGS with s.y below this times |s| |y| are skipped.
 CURVATURE_MIN = 1e-10
@@ -248,7 +247,7 @@ class FactorReuse(_KeptFactor):
     def kept(self, x):
         """g -> the kept inverse-Hessian approximation at x applied to g: the kept factor
         turned by the vertex rotations since it was made."""
-        return self._frames.carry(self._solve, self._built, self._frames.rotations(x))
+        return self._frames.carry(self._solve, self._built, x)
 
     def directions(self, x, g, residual):
         if self._solve is not None:
@@ -347,7 +346,7 @@ class NewtonCG(_KeptFactor):
             raise ValueError(f"refactor_after: must be >= 1, got {refactor_after}")
         self.cg_iter, self.forcing = int(cg_iter), float(forcing)
         self.preconditioner, self.refactor_after = preconditioner, int(refactor_after)
-        self._frames = self._built = self._pattern = None
+        self._frames = self._built = None
 
     def start(self, potential):
         super().start(potential)
@@ -378,7 +377,7 @@ class NewtonCG(_KeptFactor):
             precondition = self._preconditioner(x, data, projected)
             if precondition is None:
                 continue
-            hessian = self._hessian(data)
+            hessian = self.csr.operator(data)
             p, its = truncated_cg(hessian, g, precondition, eta, self.cg_iter)
             self.counts["linear_iterations"] += its
             # one built at this very iterate is as fresh as a renewal would be
@@ -396,13 +395,6 @@ class NewtonCG(_KeptFactor):
         miss = y - hessian @ s
         self._miss = math.sqrt(float(np.dot(miss, miss))) / gnorm
 
-    def _hessian(self, data):
-        """The Hessian of entries data (in the csr layout) for products on all threads."""
-        csr = self.csr
-        if self._pattern is None or self._pattern[0] is not csr:
-            self._pattern = (csr, csr.indptr.astype(np.uint32), csr.indices.astype(np.uint32))
-        return SparseOperator(*self._pattern[1:], data.reshape(-1, 1, 1), csr.shape)
-
     def _preconditioner(self, x, data, projected):
         """r -> M^-1 r, or None when there is none for this Hessian."""
         if self.preconditioner == "jacobi":
@@ -418,7 +410,7 @@ class NewtonCG(_KeptFactor):
                 self._solve = multigrid.preconditioner(self.csr.matrix(data), modes)
                 self._built = self._frames.rotations(x)
                 return self._solve  # made here: nothing to carry
-            return self._frames.carry(self._solve, self._built, self._frames.rotations(x))
+            return self._frames.carry(self._solve, self._built, x)
         if self._solve is None:
             # the factorization may overwrite its input
             same = self.layout is self.csr

@@ -113,8 +113,7 @@ class VCycle:
                     CHEBYSHEV_DEGREE)[:-1].astype(np.float32))
         coarsest = ml.levels[-1].A.toarray()
         self.coarse_inverse = np.linalg.pinv(coarsest).astype(np.float32)
-        fine = sp.csr_matrix(ml.levels[0].A)
-        self._diagonal = fine.diagonal().astype(np.float32)
+        self._diagonal = ml.levels[0].A.diagonal().astype(np.float32)
 
     def __call__(self, b):
         return self._cycle(0, np.asarray(b, dtype=np.float32)).astype(np.float64)

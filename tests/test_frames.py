@@ -42,10 +42,10 @@ def test_a_partly_held_vertex_keeps_the_identity():
     free = free[free != 2]  # vertex 0 held along z only: a roller
     frames = VertexFrames(mesh, free)
     Q = rotation([0, 0, 1], 0.7)
-    now = frames.rotations(mesh.vertices @ Q.T)
     calls = []
     carried = frames.carry(lambda r: calls.append(r) or r, np.tile(np.eye(3), (mesh.n_vertices,
-                                                                               1, 1)), now)
+                                                                               1, 1)),
+                           mesh.vertices @ Q.T)
     r = np.random.default_rng(0).normal(size=free.size)
     out = carried(r)
     # vertex 0's two free components pass through unrotated, the rest turn by Q^T then back
@@ -89,7 +89,7 @@ def test_the_hierarchy_built_at_rest_serves_a_bent_state_once_carried(bent):
                                         multigrid.rigid_body_modes(y, free))
     at_rest = hierarchy(rest)
     frames = VertexFrames(scene.mesh, free)
-    carried = frames.carry(at_rest, frames.rotations(rest), frames.rotations(x))
+    carried = frames.carry(at_rest, frames.rotations(rest), x)
     its = {name: cg_iterations(H, p) for name, p in
            (("stale", at_rest), ("carried", carried), ("fresh", hierarchy(x)))}
     print(its)
