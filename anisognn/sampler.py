@@ -53,7 +53,6 @@ class SamplerConfig:
     equilibrium_spread: float = 0.5    # load factor in [1 - spread, 1 + spread]
     noise_position: float = 1e-3       # in units of h
     noise_velocity: float = 5e-2       # in units of h per second
-    refinements: tuple = (1,)          # each geometry also with its cells times each factor
     dt: float = 0.02
 
     def __post_init__(self):
@@ -72,11 +71,6 @@ class SamplerConfig:
                              f"{self.deform_steps!r}")
         if not self.dt > 0:
             raise ValueError(f"[sampler] dt: must be > 0 s, got {self.dt}")
-        self.refinements = tuple(self.refinements)
-        if not self.refinements or not all(isinstance(r, int) and r >= 1
-                                           for r in self.refinements):
-            raise ValueError(f"[sampler] refinements: must be integers >= 1, got "
-                             f"{self.refinements!r}")
 
 
 @dataclass
@@ -87,18 +81,16 @@ class Sample:
     v: np.ndarray
 
 
-def geometries(refinement=1):
-    """The 36 training meshes: 18 box beams and 18 cylinder beams of 60-120 tets, their cells
-    per direction times refinement (refinement^3 times the tets)."""
-    r = refinement
+def geometries():
+    """The 36 training meshes: 18 box beams and 18 cylinder beams of 60-120 tets."""
     meshes = []
     for length in (0.08, 0.1, 0.12):
         for cells in ((6, 2, 1), (8, 2, 1), (12, 2, 1), (3, 2, 2), (5, 2, 2), (6, 2, 2)):
             nx, ny, nz = cells
-            meshes.append(box_beam(size=(length, 0.02, 0.01 * nz), cells=(r * nx, r * ny, r * nz)))
+            meshes.append(box_beam(size=(length, 0.02, 0.01 * nz), cells=cells))
         for along, section, rings in ((3, 2, 0), (6, 2, 0), (4, 1, 1), (3, 1, 1), (2, 2, 1),
                                       (5, 2, 0)):
-            meshes.append(cylinder_beam(length, 0.01, r * along, r * section, r * rings))
+            meshes.append(cylinder_beam(length, 0.01, along, section, rings))
     return meshes
 
 
@@ -108,7 +100,7 @@ class Sampler:
     def __init__(self, seed=0, config=None):
         self.seed = int(seed)
         self.config = config or SamplerConfig()
-        self.use_meshes([m for r in self.config.refinements for m in geometries(r)])
+        self.use_meshes(geometries())
 
     def use_meshes(self, meshes):
         """Draw the scenes from meshes (a list of anisofem meshes held at x = 0) instead."""

@@ -5,6 +5,7 @@ and shapes neither architecture was trained on.
     python scripts/seeds.py train [--seeds 1 2 3 4] [--jobs 2]
     python scripts/seeds.py measure [--seeds 0 1 2 3 4] [--json seeds.json]
     python scripts/seeds.py summary [--json seeds.json]
+    python scripts/seeds.py compare MODEL [MODEL ...]
     python scripts/seeds.py tables [--seeds 0 1 2 3 4] [--steps 1000] [--json seed_tables.json]
 
 train: `python -m anisognn train --config configs/shipped-NAME.toml --seed N --out
@@ -18,6 +19,10 @@ shipped stepping and with CG_ITERATIONS conjugate-gradient iterations after it; 
 architecture's mean and range over the seeds per scene and step, and in how many seeds the
 directional model is the closer one, then the same over the training-size scenes and over the
 others; writes JSON. Run alone, with OMP_NUM_THREADS=1. summary prints that again from the JSON.
+
+compare: the same tip errors, with the shipped stepping, for model files (a training run's
+model.pt or checkpoint.pt), each file's mean over the training-size scenes and over the others;
+prints them (no JSON).
 
 tables: the paper's Table 1 (tip error at rest over the FEM deflection), Table 2 (mean
 imbalanced force) and Fig. 6 (volume change off the FEM's) from `python -m anisognn evaluate`'s
@@ -114,22 +119,41 @@ def train(seeds, jobs):
             print(f"{out}: exit {process.returncode}", flush=True)
 
 
-def measure(seeds):
-    """Rows {scene, tets, seed, model, cg_iterations, tip_errors} for every model of seeds."""
+def seed_models(seeds):
+    """{(seed, architecture): GraphNet} of every model of seeds."""
+    return {(seed, name): shipped.model(model_path(seed, name))
+            for seed in seeds for name in shipped.NAMES}
+
+
+def measure(models, cg_iterations=(0, CG_ITERATIONS)):
+    """Rows {scene, tets, seed, model, cg_iterations, tip_errors} for models {(seed, name):
+    GraphNet} on every scene, with each count of CG iterations after the step."""
     rows = []
-    models = {(seed, name): shipped.model(model_path(seed, name))
-              for seed in seeds for name in shipped.NAMES}
     for label, scene in scenes().items():
         reference, tip, deflection = fem_reference(scene)
         for (seed, name), model in models.items():
-            for k in (0, CG_ITERATIONS):
+            for k in cg_iterations:
                 positions = rollout(with_galerkin(model, True, None, k), scene, STEPS)
                 rows.append({"scene": label, "tets": scene.mesh.n_tets, "seed": seed,
                              "model": name, "cg_iterations": k,
                              "tip_errors": tip_errors(positions, reference, tip, deflection)})
-                print(f"{label[:44]:44} {seed} {name:13} {k:3d}  " + " / ".join(
+                print(f"{label[:44]:44} {seed} {name[-13:]:13} {k:3d}  " + " / ".join(
                     f"{e:.3f}" for e in rows[-1]["tip_errors"]), flush=True)
     return rows
+
+
+def compare(paths):
+    """Lines: each model file's mean tip error (shipped stepping, every checked step) over the
+    training-size scenes and over the others."""
+    rows = measure({(None, path): shipped.model(path) for path in paths}, (0,))
+    labels = list(scenes())
+    lines = [f"{'model':60} {'training-size scenes':>20} {'other scenes':>12}"]
+    for path in paths:
+        means = [np.mean([r["tip_errors"] for r in rows if r["model"] == path
+                          and r["scene"] in chosen])
+                 for chosen in (labels[:TRAINING_SIZE], labels[TRAINING_SIZE:])]
+        lines.append(f"{path[-60:]:60} {means[0]:>20.3f} {means[1]:>12.3f}")
+    return "\n".join(lines)
 
 
 def _compare(by, seeds, fmt=".3g"):
@@ -236,6 +260,8 @@ def main():
     m.add_argument("--json", default="seeds.json")
     r = sub.add_parser("summary")
     r.add_argument("--json", default="seeds.json")
+    c = sub.add_parser("compare")
+    c.add_argument("models", nargs="+")
     b = sub.add_parser("tables")
     b.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     b.add_argument("--steps", type=int, default=evaluate.STEPS)
@@ -248,6 +274,9 @@ def main():
         with open(args.json) as fh:
             print(summary(json.load(fh)["rows"]))
         return
+    if args.command == "compare":
+        print(compare(args.models))
+        return
     if args.command == "tables":
         results, suite = tables(args.seeds, args.steps)
         write_json_atomic(args.json, {"steps": args.steps, "seeds": args.seeds,
@@ -255,7 +284,7 @@ def main():
         print(format_tables(results, suite, args.seeds))
         print(f"-> {args.json}")
         return
-    rows = measure(args.seeds)
+    rows = measure(seed_models(args.seeds))
     write_json_atomic(args.json, {"steps": STEPS, "checked_steps": list(CHECKED),
                                   "rows": rows})
     print(summary(rows))
