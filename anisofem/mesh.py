@@ -10,8 +10,8 @@ from ._validate import as_float_array, as_index_array
 #: Tets per assembly block: the parallel assembly runs the blocks of one color on all threads
 #: at once, each block's tets in order on one thread (anisofem.kernels). Runs of consecutive
 #: tets keep what a thread reads and adds to close together: on 2 cores the 10^5-tet Hessian
-#: assembled in 40 ms this way against 100 ms with tets colored one by one (every color spread
-#: over the whole mesh) and 58 ms on one thread.
+#: assembled in 25-29 ms this way against 100 ms with tets colored one by one (every color
+#: spread over the whole mesh) and 57 ms on one thread (docs/experiments.md).
 ASSEMBLY_BLOCK = 512
 
 #: A rest tet is rejected as zero-volume when 6 |V| / l_max^3 is below this (l_max: its

@@ -23,6 +23,7 @@ import anisofem
 from anisofem import Material, Scene
 from anisognn import evaluate
 from anisognn.sampler import DENSITY, POISSON, YOUNG, geometries
+from seeds import TRAINING_SIZE, scenes
 
 DT = 0.02
 #: free vertices sampled as point-load sources on the larger scenes (--other)
@@ -47,7 +48,7 @@ def reach(scene, steps, sources=None):
     of scene at rest, over every free vertex as the point-load source, or over `sources` of
     them drawn with seed 0."""
     mesh = scene.mesh
-    fixed = scene.fixed_mask.reshape(mesh.n_vertices, 3).all(axis=1)
+    fixed = scene.fixed_mask.all(axis=1)
     X = mesh.vertices
     free = np.repeat(~fixed, 3)
     H = anisofem.hessian(scene, X, x_hat=X, dt=DT).tocsc()
@@ -77,7 +78,6 @@ def main():
                         help="the scenes of scripts/seeds.py beyond the training family's size")
     args = parser.parse_args()
     if args.other:
-        from seeds import TRAINING_SIZE, scenes
         cases = [(f"{label}: {s.mesh.n_tets} tets", s, SOURCES)
                  for label, s in list(scenes().items())[TRAINING_SIZE:]]
     else:

@@ -146,7 +146,7 @@ def compare(paths):
     """Lines: each model file's mean tip error (shipped stepping, every checked step) over the
     training-size scenes and over the others."""
     rows = measure({(None, path): shipped.model(path) for path in paths}, (0,))
-    labels = list(scenes())
+    labels = list(dict.fromkeys(r["scene"] for r in rows))
     lines = [f"{'model':60} {'training-size scenes':>20} {'other scenes':>12}"]
     for path in paths:
         means = [np.mean([r["tip_errors"] for r in rows if r["model"] == path
