@@ -2,7 +2,6 @@
 numpy implementation (anisofem.reference_numpy), measured in the same run, and the linear
 solvers at the largest size. Prints tables and writes JSON (atomically)."""
 import functools
-import json
 import subprocess
 import sys
 import time
@@ -11,29 +10,17 @@ import numba
 import numpy as np
 
 from . import linsolve, reference_numpy
-from ._files import atomic_path
+from .files import publish, result_path
 from .material import MODELS, Material
 from .meshgen import box_beam
 from .newton import minimize
 from .potential import Potential
-from .scene import Scene
-from .solve import default_scene, simulate, solve, step
+from .scene import Scene, default_scene
+from .solve import simulate, solve, step
+from .timing import best_time
 
 #: cells (nx, ny, nz) of box beams of about 10^2, 10^3, 10^4 and 10^5 tets (5 per cell)
 SIZES = {"1e2": (5, 2, 2), "1e3": (10, 4, 5), "1e4": (25, 8, 10), "1e5": (50, 20, 20)}
-
-
-def best_time(fn, repeat, budget=2.0):
-    """Least wall time of fn() over up to `repeat` runs (stops early past budget seconds;
-    the least is the measure least disturbed by other load on a shared machine)."""
-    best, start = np.inf, time.perf_counter()
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-        if time.perf_counter() - start > budget:
-            break
-    return best
 
 
 def bench_assembly(scene, x):
@@ -176,7 +163,7 @@ def first_solve_in_new_process():
     return time.perf_counter() - t0
 
 
-def run(sizes=tuple(SIZES), out="bench_anisofem.json"):
+def run(sizes=tuple(SIZES), out=result_path("bench_anisofem.json")):
     # the base materials first: after the 10^5-tet runs the same 10^4-tet kernels measured
     # up to 1.5x slower and their ratio less steady
     materials = bench_materials()
@@ -192,16 +179,6 @@ def run(sizes=tuple(SIZES), out="bench_anisofem.json"):
               "factorization_s": factorization, "materials_1e4": materials,
               "threads": numba.get_num_threads()}
     return publish(report, print_report, out)
-
-
-def publish(report, printer, out):
-    """printer(report), then report written to out as JSON (atomically) unless out is None;
-    returns report."""
-    printer(report)
-    if out:
-        write_json_atomic(out, report)
-        print(f"\nwrote {out}")
-    return report
 
 
 def print_report(r):
@@ -249,9 +226,3 @@ def print_materials(rows):
         cells = [f"{1e3 * row[k]:8.2f} ({row[k] / first[k]:4.2f}x)" for k in keys + ["solve_s"]]
         print(f"{name:<11}" + "".join(f"{c:>17}" for c in cells[:-1])
               + f"{cells[-1]:>14} {row['solve_iterations']:2d} its")
-
-
-def write_json_atomic(path, obj):
-    """Write obj as indented JSON to path atomically (numpy scalars as floats)."""
-    with atomic_path(path, ".json") as tmp, open(tmp, "w") as f:
-        json.dump(obj, f, indent=2, default=float)

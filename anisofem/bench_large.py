@@ -20,6 +20,8 @@ import time
 
 import numpy as np
 
+from .files import publish, result_path
+
 #: cells (nx, ny, nz) of the 0.1 x 0.02 x 0.02 m box cantilever (5 tets per cell)
 SIZES = {"1e4": (25, 8, 10), "1e5": (50, 20, 20), "1e6": (100, 40, 50)}
 #: the paths: label -> solve options; exact Newton runs up to EXACT_MAX tets
@@ -70,7 +72,7 @@ def measure(cells, path, poisson=0.48):
     return row, result.x
 
 
-def run(huge=False, out="bench_large.json", sizes=None):
+def run(huge=False, out=result_path("bench_large.json"), sizes=None):
     """Measure every (size, path) in its own process, compare each answer with exact
     Newton's where that ran (max vertex difference over the largest displacement), print the
     table and write JSON. sizes: {label: cells} (default SIZES, 1e6 only if huge)."""
@@ -79,11 +81,10 @@ def run(huge=False, out="bench_large.json", sizes=None):
     rows = []
     for size, cells in sizes.items():
         rows += _compared(size, cells, 0.48)
-    from .bench import publish
     return publish({"rows": rows}, print_report, out)
 
 
-def crossover(out="bench_crossover.json", sizes=None, poissons=CROSSOVER_POISSON):
+def crossover(out=result_path("bench_crossover.json"), sizes=None, poissons=CROSSOVER_POISSON):
     """Both paths on each cantilever of sizes ({label: cells}, default CROSSOVER_SIZES) at
     each Poisson ratio of poissons, each in its own process; print the table (the times,
     which path "auto" takes) and write JSON."""
@@ -91,7 +92,6 @@ def crossover(out="bench_crossover.json", sizes=None, poissons=CROSSOVER_POISSON
     for size, cells in (CROSSOVER_SIZES if sizes is None else sizes).items():
         for poisson in poissons:
             rows += _compared(size, cells, poisson)
-    from .bench import publish
     return publish({"rows": rows}, print_crossover, out)
 
 

@@ -5,7 +5,7 @@
       --kappa 1e5 --material neohookean -o beam.vtu
   python -m anisofem trade beam.msh --fiber 0.766 0 0.643 --kappa 1e5 --steps 100 \\
       --json trade.json --png trade.png
-  python -m anisofem bench --json bench_anisofem.json
+  python -m anisofem bench                  # writes results/bench_anisofem.json
   python -m anisofem bench --large --huge
 """
 import argparse
@@ -15,6 +15,7 @@ import sys
 import numpy as np
 
 from . import bench, bench_large, ladder, meshgen, methods
+from .files import write_json
 from .io import check_output_path, read_mesh, write_mesh
 from .inversion import inversion
 from .material import MODELS, Material
@@ -112,15 +113,15 @@ def _parser():
     b.add_argument("--sizes", nargs="+", default=list(bench.SIZES), choices=list(bench.SIZES))
     b.add_argument("--large", action="store_true",
                    help="static solves and backward-Euler steps at 10^4 and 10^5 tets by "
-                        "each large-mesh path, peak memory included (writes bench_large.json "
-                        "unless --json)")
+                        "each large-mesh path, peak memory included (minutes)")
     b.add_argument("--huge", action="store_true", help="with --large: 10^6 tets too (minutes)")
     b.add_argument("--crossover", action="store_true",
                    help="exact Newton against multigrid CG from 4,800 to 19,200 tets, where "
-                        "method='auto' switches (writes bench_crossover.json unless --json)")
+                        "method='auto' switches (minutes)")
     b.add_argument("--json", default=None,
-                   help="where to write the results (bench_anisofem.json, bench_large.json, "
-                        "bench_crossover.json)")
+                   help="where to write the results (default: results/bench_anisofem.json, "
+                        "with --large results/bench_large.json, with --crossover "
+                        "results/bench_crossover.json)")
     return p
 
 
@@ -180,7 +181,7 @@ def _trade(args):
                           surrogates=not args.no_surrogates, name=args.scene)
     print(ladder.trade_table(result))
     if args.json:
-        ladder.write_json(result, args.json)
+        write_json(args.json, result)
         print(f"-> {args.json}")
     if args.png:
         ladder.plot(result, args.png)
@@ -193,12 +194,13 @@ def _bench(args):
         raise ValueError("--huge: goes with --large")
     if args.large and args.crossover:
         raise ValueError("--crossover: runs alone, not with --large")
+    out = {} if args.json is None else {"out": args.json}
     if args.large:
-        bench_large.run(args.huge, args.json or "bench_large.json")
+        bench_large.run(args.huge, **out)
     elif args.crossover:
-        bench_large.crossover(args.json or "bench_crossover.json")
+        bench_large.crossover(**out)
     else:
-        bench.run(tuple(args.sizes), args.json or "bench_anisofem.json")
+        bench.run(tuple(args.sizes), **out)
     return 0
 
 

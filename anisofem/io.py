@@ -8,7 +8,7 @@ import os
 import meshio
 import numpy as np
 
-from ._files import atomic_path
+from .files import atomic_path
 from ._validate import as_float_array
 from .mesh import TetMesh
 from .metrics import volume_change

@@ -7,9 +7,10 @@ rollout (`anisofem.trade`, `python -m anisofem trade`).
 A rung is one way of rolling the scene forward: the exact rollout (the reference: the default
 method to rtol 1e-8, exact Newton or, on large meshes, multigrid CG), Newton with a fixed
 iteration budget, factorization reuse, L-BFGS, inexact Newton (CG with the diagonal, a kept
-factorization or multigrid as preconditioner), the exact rollout at a larger time step, and,
-where anisognn and its shipped models are installed, the surrogate (alone, with its Galerkin
-passes, as the warm start of one Newton iteration). Each rung rolls the scene out from rest
+factorization or multigrid as preconditioner), the exact rollout at a larger time step, and
+the rungs that installed packages register under the entry-point group "anisofem.rungs"
+(anisognn's shipped networks alone, with their Galerkin passes and as the warm start of one
+Newton iteration; export's ONNX runtime). Each rung rolls the scene out from rest
 in the same process; what is compared:
 
 - errors: at each checked time, the tip error |u(tip) - u_exact(tip)| / |u_static(tip)|, where
@@ -26,18 +27,18 @@ in the same process; what is compared:
   inverted: the most tets turned inside out (det F <= 0) at any recorded state;
   max_volume_change: the largest |det(F) - 1|.
 """
-import json
 import math
 import os
 import sys
 import time
 from dataclasses import dataclass
+from importlib.metadata import entry_points
 from typing import Callable
 
 import numpy as np
 
 from . import methods
-from ._files import atomic_path
+from .files import atomic_path
 from .metrics import volume_change
 from .potential import Potential
 from .scene import Scene
@@ -47,13 +48,16 @@ from .solve import Stepper, solve
 ENERGY_GAIN_MAX = 0.01
 #: Vertices whose static displacement is within this fraction of the largest form the tip.
 TIP_FRACTION = 0.99
+#: The entry-point group of rung providers: functions (scene, dt, notes) -> [Rung] that say in
+#: notes (a list of str) what they cannot run.
+RUNG_GROUP = "anisofem.rungs"
 
 
 @dataclass
 class Rung:
     """One way of rolling a scene forward.
 
-    name: shown in tables. kind: "fem" or "surrogate". make(scene, dt) returns advance(x, v)
+    name: shown in tables. kind: "fem", or "surrogate" for a learned model's rung. make(scene, dt) returns advance(x, v)
     -> (x, v, info) for one step of dt, with info a dict holding "failed" (bool) and any of
     "iterations", "factorizations", "linear_iterations". dt_factor: the rung steps dt_factor
     times the scene's dt.
@@ -117,7 +121,7 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, surrogates=True
 
     scene: an anisofem.Scene (held enough for a static solve: its static deflection is the
     error scale). steps: steps of dt (s) from rest. rungs: Rungs (default fem_rungs(), plus
-    the surrogate's rungs from anisognn when surrogates and it is installed). tolerance:
+    registered_rungs() when surrogates). tolerance:
     recommend the cheapest stable rung whose errors are all within it. progress: report each
     rung's progress on stderr. name: what the scene is called in tables and plots.
 
@@ -136,7 +140,7 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, surrogates=True
     if rungs is None:
         rungs = fem_rungs()
         if surrogates:
-            rungs += _surrogate_rungs(scene, dt, notes)
+            rungs += registered_rungs(scene, dt, notes)
     if not rungs or rungs[0].name != "exact":
         raise ValueError("rungs: the first rung must be the exact one (named 'exact')")
     multiple = math.lcm(*(r.dt_factor for r in rungs))
@@ -197,13 +201,21 @@ def _physical_reference_only(rungs, inverted, notes):
     return [r for r in rungs if r.kind == "fem"]
 
 
-def _surrogate_rungs(scene, dt, notes):
-    try:
-        from anisognn.rungs import surrogate_rungs
-    except ImportError as err:
-        notes.append(f"surrogate rungs skipped: anisognn cannot be imported ({err})")
-        return []
-    return surrogate_rungs(scene, dt, notes)
+def registered_rungs(scene, dt, notes):
+    """The rungs for scene at dt (s) of every provider installed under RUNG_GROUP, by provider
+    name; a provider that cannot be imported (its dependencies missing) is named in notes."""
+    providers = sorted(entry_points(group=RUNG_GROUP), key=lambda e: e.name)
+    if not providers:
+        notes.append(f"surrogate rungs: none installed (no {RUNG_GROUP!r} entry points)")
+    rungs = []
+    for provider in providers:
+        try:
+            make = provider.load()
+        except ImportError as err:
+            notes.append(f"{provider.name} rungs skipped: {err}")
+            continue
+        rungs += make(scene, dt, notes)
+    return rungs
 
 
 def _roll(rung, scene, dt, steps, label):
@@ -299,12 +311,6 @@ def trade_table(result):
                  f"{rec if rec else 'none'}")
     lines += [f"note: {n}" for n in result["notes"]]
     return "\n".join(lines)
-
-
-def write_json(result, path):
-    """Write the trade result to path as JSON, atomically."""
-    with atomic_path(path, ".json") as tmp, open(tmp, "w") as f:
-        json.dump(result, f, indent=1)
 
 
 def _label_positions(ax, rows, y_of, xlim, ylim):

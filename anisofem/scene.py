@@ -279,3 +279,24 @@ def _traction_force(mesh, traction, faces):
     for c in range(3):
         np.add.at(f[:, c], faces.ravel(), np.repeat(t[:, c] * area / 3.0, 3))
     return f
+
+
+#: default_scene's gravity, m/s^2
+GRAVITY = (0.0, 0.0, -9.81)
+
+
+def check_scene(scene):
+    """TypeError unless scene is a Scene (solve, step and simulate take nothing else)."""
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__} (a "
+                        f"TetMesh becomes one with anisofem.Scene or default_scene)")
+
+
+def default_scene(mesh, material=None):
+    """A cantilever of mesh: the paper's material (E = 100 kPa, nu = 0.48, 1000 kg/m^3, no
+    fibers) unless another Material is given, the vertices at the minimum x held fixed,
+    gravity 9.81 m/s^2 along -z."""
+    x = mesh.vertices[:, 0]
+    fixed = np.flatnonzero(x <= x.min() + 1e-9 * mesh.size)
+    return Scene(mesh, Material.paper() if material is None else material, fixed=fixed,
+                 gravity=GRAVITY)

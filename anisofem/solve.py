@@ -5,28 +5,12 @@ import numpy as np
 
 from . import methods
 from ._validate import as_count, as_scalar
-from .material import Material
-from .mesh import TetMesh
 from .newton import NewtonResult, minimize
 from .potential import Potential, check_positions
-from .scene import Scene
-
-#: Gravity used by solve(mesh): m/s^2 along -z.
-GRAVITY = (0.0, 0.0, -9.81)
-
-
-def default_scene(mesh, material=None):
-    """The scene solve(mesh) uses: the paper's material (E = 100 kPa, nu = 0.48, 1000 kg/m^3,
-    no fibers) unless another Material is given, the vertices at the minimum x held fixed,
-    gravity 9.81 m/s^2 along -z."""
-    x = mesh.vertices[:, 0]
-    fixed = np.flatnonzero(x <= x.min() + 1e-9 * mesh.size)
-    return Scene(mesh, Material.paper() if material is None else material, fixed=fixed,
-                 gravity=GRAVITY)
-
+from .scene import check_scene
 
 def solve(scene, x0=None, method="auto", warn=True, **options):
-    """Static equilibrium of a Scene (or of a TetMesh with default_scene's defaults).
+    """Static equilibrium of a Scene.
 
     x0: (n, 3) start, m (default: rest positions with fixed vertices at their prescribed
     positions). method: "auto" (default: exact Newton, or multigrid-preconditioned inexact
@@ -36,11 +20,7 @@ def solve(scene, x0=None, method="auto", warn=True, **options):
     solve fails. Returns a NewtonResult; .x is the (n, 3) equilibrium. Raises ValueError if
     the scene holds too little to have a unique equilibrium.
     """
-    if isinstance(scene, TetMesh):
-        scene = default_scene(scene)
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene: expected an anisofem.Scene or TetMesh, got "
-                        f"{type(scene).__name__}")
+    check_scene(scene)
     scene.check_static()
     x0 = scene.initial_positions() if x0 is None else scene.with_fixed(check_positions(
         scene, x0, "x0"))
@@ -77,8 +57,7 @@ def step(scene, x, v, dt, a_guess=None, method="auto", warn=True, **options):
     converges). Returns StepResult with v_new = (x_new - x) / dt. Fixed components end at
     their prescribed positions.
     """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
+    check_scene(scene)
     x = check_positions(scene, x, "x")
     v = check_positions(scene, v, "v")
     dt = as_scalar(dt, "dt")
@@ -188,6 +167,7 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, method="aut
     completed=False, at the first step whose solve fails (a step that spends a fixed iteration
     budget does not fail); what came before is kept.
     """
+    check_scene(scene)
     steps = as_count(steps, "steps")
     x = scene.with_fixed(scene.initial_positions() if x0 is None
                     else check_positions(scene, x0, "x0"))

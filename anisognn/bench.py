@@ -8,7 +8,8 @@ import numpy as np
 import torch
 
 from anisofem import box_beam, default_scene
-from anisofem.bench import best_time, write_json_atomic
+from anisofem.files import publish, result_path
+from anisofem.timing import best_time
 
 from .graph import from_scene
 from .model import GraphNet, ModelConfig
@@ -62,7 +63,8 @@ def bench_sampler(count=32):
     return times
 
 
-def run(out="bench_anisognn.json"):
+def run(out=result_path("bench_anisognn.json")):
+    """Time every case; print the table, write JSON to out (if given)."""
     rows = []
     for label, kwargs in CONFIGS.items():
         for aggregation in ("directional", "sum"):
@@ -71,6 +73,11 @@ def run(out="bench_anisognn.json"):
                 row.update(config=label, aggregation=aggregation)
                 rows.append(row)
     report = {"rows": rows, "sampler": bench_sampler(), "torch_threads": torch.get_num_threads()}
+    return publish(report, print_report, out)
+
+
+def print_report(report):
+    rows = report["rows"]
     print(f"anisognn per step on the CPU ({report['torch_threads']} torch threads), batch of 1")
     print(f"{'config':27} {'aggregation':11} {'tets':>6} | {'inference ms':>12} "
           f"{'loss ms':>8} {'train it ms':>11} {'loss share':>10}")
@@ -81,7 +88,3 @@ def run(out="bench_anisognn.json"):
     sam = report["sampler"]
     print(f"\nsampler: {1e3 * sam['sample_s']:.1f} ms per training sample, "
           f"{1e3 * sam['graph_s']:.1f} ms per graph built from it")
-    if out:
-        write_json_atomic(out, report)
-        print(f"\nwrote {out}")
-    return report

@@ -5,7 +5,7 @@ import os
 
 import torch
 
-from anisofem._files import atomic_path
+from anisofem.files import atomic_path
 
 from .model import GraphNet, ModelConfig
 
@@ -45,7 +45,7 @@ def read(path, map_location="cpu"):
 def model_from(payload):
     """A GraphNet with the checkpoint's config and weights."""
     try:
-        config = ModelConfig.from_dict(payload["config"])
+        config = ModelConfig(**payload["config"])
     except (TypeError, ValueError) as err:
         raise ValueError(f"checkpoint: bad model config: {err}") from None
     model = GraphNet(config)

@@ -4,6 +4,8 @@ import argparse
 import os
 import sys
 
+from anisofem.files import result_path
+
 from . import bench, evaluate, shipped, train
 from .model import with_galerkin
 
@@ -23,10 +25,12 @@ def main(argv=None):
                    help=f"a model.pt / checkpoint.pt file or a shipped name {shipped.NAMES}")
     p.add_argument("--steps", type=int, default=evaluate.STEPS,
                    help="rollout steps per scene (default %(default)s)")
-    p.add_argument("--json", default="evaluation.json", help="where to write the JSON")
+    p.add_argument("--json", default=result_path("evaluation.json"),
+                   help="where to write the JSON (default %(default)s)")
     add_galerkin_arguments(p)
     p = sub.add_parser("bench", help="time the network, the loss and a training iteration")
-    p.add_argument("--json", default="bench_anisognn.json", help="where to write the JSON")
+    p.add_argument("--json", default=result_path("bench_anisognn.json"),
+                   help="where to write the JSON (default %(default)s)")
     args = parser.parse_args(argv)
     if args.command == "train":
         overrides = {k: v for k, v in (("out", args.out), ("iterations", args.iterations),

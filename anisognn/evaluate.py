@@ -38,7 +38,7 @@ import numpy as np
 
 import anisofem
 from anisofem import Material, Scene, box_beam, cylinder_beam, metrics
-from anisofem.bench import write_json_atomic
+from anisofem.files import result_path, write_json
 
 from .sampler import DENSITY, POISSON, YOUNG
 
@@ -316,7 +316,7 @@ def _pick(rows, suite, group, key):
     return [r.get(key, math.inf) for r, c in zip(rows, suite) if c.group == group]
 
 
-def run(models, steps=STEPS, out="evaluation.json", echo=print, progress=True):
+def run(models, steps=STEPS, out=result_path("evaluation.json"), echo=print, progress=True):
     """Evaluate models {name: GraphNet} beside anisofem's own rollout ("fem"), print the
     tables (the first model over the second in the ratio columns) and write the JSON
     atomically; progress: a line on stderr per simulator and case. Returns the JSON dict."""
@@ -331,5 +331,5 @@ def run(models, steps=STEPS, out="evaluation.json", echo=print, progress=True):
               "summary": summary(results, suite, ratio)}
     echo("\nsummary: " + str(report["summary"]))
     if out:
-        write_json_atomic(os.fspath(out), report)
+        write_json(os.fspath(out), report)
     return report

@@ -32,11 +32,6 @@ AGGREGATIONS = ("directional", "sum")
 VERTEX_FLAGS = 3   # Dirichlet flags per component
 VERTEX_REAL = 7    # velocity 3, mass 1, external force 3
 EDGE_FEATURES = 15  # rest unit 3 + length 1, current unit 3 + length 1, fiber 3, strain 4
-#: Options of earlier versions, with the value under which a model never used them: a saved
-#: model that has one of them at this value loads (the option is dropped); one that used it
-#: cannot (docs/experiments.md says what each did).
-RETIRED = {"fiber_stress": False, "elastic_force": False, "force_scale": 0.0,
-           "anchored": False, "deformation_inputs": True, "force_only": False}
 
 
 @dataclass
@@ -86,12 +81,6 @@ class ModelConfig:
             raise ValueError("galerkin_passes: repeats the Galerkin step, so more than 1 needs "
                              "galerkin = true")
 
-    @classmethod
-    def from_dict(cls, fields):
-        """The config of a dict of its fields (a saved model's or a TOML [model] section), with
-        retired options (RETIRED) dropped where they hold their unused value."""
-        return cls(**without_retired(fields, RETIRED, "model"))
-
     @property
     def stepping(self):
         """How the model steps, in words: "K Galerkin pass(es)" or "no Galerkin step", and
@@ -106,19 +95,6 @@ class ModelConfig:
 
     def to_dict(self):
         return asdict(self)
-
-
-def without_retired(fields, retired, section):
-    """fields (dict) without the retired options {name: unused value}; ValueError naming the
-    option when one holds another value (a model or run that used it)."""
-    out = dict(fields)
-    for name, unused in retired.items():
-        if name in out:
-            if out[name] != unused:
-                raise ValueError(f"[{section}] {name} = {out[name]!r}: an option of earlier "
-                                 f"versions, no longer available (docs/experiments.md)")
-            del out[name]
-    return out
 
 
 class Normalizer(nn.Module):

@@ -1,10 +1,8 @@
-"""The surrogate's rungs of the speed/accuracy ladder (anisofem.trade): the shipped networks
-alone, with their Galerkin passes, followed by conjugate-gradient iterations, exported to ONNX,
-and as the warm start of one Newton iteration; and, side by side, the same Galerkin passes and
-iterations with the previous step's acceleration in the network's place (what the network's
-direction buys)."""
-import os
-
+"""The network's rungs of the speed/accuracy ladder (anisofem.trade finds surrogate_rungs through
+the "anisofem.rungs" entry point): the shipped networks alone, with their Galerkin passes,
+followed by conjugate-gradient iterations, and as the warm start of one Newton iteration; and,
+side by side, the same Galerkin passes and iterations with the previous step's acceleration in
+the network's place (what the network's direction buys)."""
 import numpy as np
 import torch
 
@@ -22,9 +20,6 @@ from .shipped import NAMES, pretrained
 
 #: CG iterations after the step on the ladder, each with the network and without it
 CG_ITERATIONS = (10, 40)
-#: The deployed files `python -m export` writes for the shipped models.
-ONNX_FOLDER = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                           "export", "models")
 
 
 def _network_step(model, scene):
@@ -83,27 +78,6 @@ def warm_start_rung(name, model, iterations=1):
     return Rung(name, "surrogate", make)
 
 
-def onnx_rung(name, path):
-    """The exported model stepped by export/runtime.py (numpy + onnxruntime only)."""
-    from export.runtime import OnnxSimulator
-
-    def make(scene, dt):
-        el = scene.elements
-        sim = OnnxSimulator(path, scene.mesh.vertices, scene.mesh.tets, fixed=scene.fixed_mask,
-                            density=scene.material.per_element(scene.mesh.n_tets)["density"],
-                            fiber_direction=el.fiber, fiber_stiffness=el.kappa)
-        f = scene.external_force
-
-        def advance(x, v):
-            try:
-                x, v = sim.step(x, v, f)
-            except FloatingPointError:
-                return x, v, {"failed": True}
-            return x.astype(np.float64), v.astype(np.float64), {"failed": False}
-        return advance
-    return Rung(name, "surrogate", make)
-
-
 def _trained_material(scene):
     """True when every tet has the material the shipped models were trained on."""
     p = scene.material.per_element(scene.mesh.n_tets)
@@ -142,18 +116,4 @@ def surrogate_rungs(scene, dt, notes):
     for k in CG_ITERATIONS:
         rungs += [network_rung(f"directional + cg x{k}", with_galerkin(directional, True, None, k)),
                   previous_acceleration_rung(f"no network + cg x{k}", passes, k)]
-    path = os.path.join(ONNX_FOLDER, "directional.onnx")
-    if not os.path.isfile(path):
-        notes.append(f"ONNX rung skipped: {path} is missing")
-    elif not _trained_material(scene) or not np.array_equal(scene.fixed_positions,
-                                                            scene.mesh.vertices):
-        notes.append("ONNX rung skipped: export/runtime.py steps the trained material with "
-                     "held vertices at rest, and this scene differs")
-    else:
-        try:
-            import onnxruntime  # noqa: F401
-        except ImportError:
-            notes.append("ONNX rung skipped: onnxruntime is not installed")
-        else:
-            rungs.append(onnx_rung("directional.onnx (shipped)", path))
     return rungs

@@ -31,12 +31,6 @@ POISSON = 0.48
 DENSITY = 1000.0
 
 
-#: Options of earlier versions, with the value under which a run never used them (see
-#: anisognn.model.without_retired).
-RETIRED = {"axis_fiber_probability": 0.0, "noise_modes": 0, "white_noise_probability": 0.0,
-           "noise_decades": 0.0}
-
-
 @dataclass
 class SamplerConfig:
     """Ranges of the sampled scenes (see module docstring); units as named."""

@@ -31,15 +31,13 @@ import torch
 import torch.distributed as dist
 
 import anisofem
-from anisofem._files import atomic_path
+from anisofem.files import atomic_path
 
 from . import checkpoint
 from .graph import batch as batch_graphs
 from .graph import from_scene
 from .loss import BatchPotential, potential_loss
-from . import model as model_module
-from . import sampler as sampler_module
-from .model import GraphNet, ModelConfig, integrate, without_retired
+from .model import GraphNet, ModelConfig, integrate
 from .sampler import Sample, Sampler, SamplerConfig
 
 #: sample streams of a seed: training uses the seed itself, these offsets the others
@@ -50,12 +48,6 @@ ROLLOUT_STREAM = 3_000_017
 
 class TrainingDiverged(RuntimeError):
     """The loss or the gradient became NaN or infinite."""
-
-
-#: Options of earlier versions per config section, with the value under which a run never used
-#: them (see anisognn.model.without_retired).
-RETIRED = {"model": model_module.RETIRED, "sampler": sampler_module.RETIRED,
-           "train": {"rest_weight": 0.0, "normalize_floor": 0.0}}
 
 
 @dataclass
@@ -140,7 +132,7 @@ def make_config(raw, source="config", **overrides):
     parts = {}
     for name, cls in (("model", ModelConfig), ("sampler", SamplerConfig),
                       ("train", TrainConfig)):
-        values = without_retired(raw.get(name, {}), RETIRED[name], name)
+        values = dict(raw.get(name, {}))
         if name == "train":
             values.update(overrides)
         known = {f.name for f in dataclasses.fields(cls)}

@@ -11,7 +11,8 @@ import onnxruntime
 import torch
 
 from anisofem import box_beam, default_scene
-from anisofem.bench import best_time, write_json_atomic
+from anisofem.files import publish, result_path
+from anisofem.timing import best_time
 from anisognn import shipped
 from anisognn.bench import MESHES
 from anisognn.model import GraphNet, ModelConfig, with_galerkin
@@ -64,7 +65,7 @@ def bench_case(net, onnx_path, cells):
             "runtime_step_s": best_time(lambda: sim.step(x, v, f), 30)}
 
 
-def run(sizes=tuple(MESHES), out="bench_export.json"):
+def run(sizes=tuple(MESHES), out=result_path("bench_export.json")):
     """Time every model on every mesh size; print the table, write JSON to out (if given)."""
     rows = []
     with tempfile.TemporaryDirectory() as folder:
@@ -77,16 +78,16 @@ def run(sizes=tuple(MESHES), out="bench_export.json"):
     report = {"rows": rows, "torch_threads": torch.get_num_threads(),
               "onnxruntime": onnxruntime.__version__, "torch": torch.__version__,
               "cpu_count": os.cpu_count(), "paper_step_s": PAPER_STEP_S}
+    return publish(report, print_report, out)
+
+
+def print_report(report):
     print(f"one step per call, best of up to 30 (torch {report['torch_threads']} threads, "
           f"onnxruntime default threads, {report['cpu_count']} CPUs)")
     print(f"{'config':36} {'tets':>6} | {'torch ms':>9} {'ort ms':>8} {'step ms':>8} "
           f"{'torch/ort':>9}")
-    for r in rows:
+    for r in report["rows"]:
         print(f"{r['config']:36} {r['tets']:6d} | {1e3 * r['torch_s']:9.2f} "
               f"{1e3 * r['onnxruntime_s']:8.2f} {1e3 * r['runtime_step_s']:8.2f} "
               f"{r['torch_s'] / r['onnxruntime_s']:9.2f}")
     print(f"(paper: {1e3 * PAPER_STEP_S:g} ms per step for 100 elements, desktop GPU, LibTorch)")
-    if out:
-        write_json_atomic(out, report)
-        print(f"\nwrote {out}")
-    return report

@@ -4,6 +4,7 @@ SCENE -o PATH` (a scene's constant tensors for an engine)."""
 import argparse
 import sys
 
+from anisofem.files import result_path
 from anisognn import shipped
 from anisognn.cli import add_galerkin_arguments, stepping
 
@@ -15,7 +16,8 @@ def main(argv=None):
     if argv[:1] == ["bench"]:
         parser = argparse.ArgumentParser(prog="python -m export bench",
                                          description="onnxruntime vs torch per step")
-        parser.add_argument("--json", default="bench_export.json", help="where to write the JSON")
+        parser.add_argument("--json", default=result_path("bench_export.json"),
+                            help="where to write the JSON (default %(default)s)")
         parser.add_argument("--sizes", nargs="+", default=list(bench.MESHES),
                             choices=list(bench.MESHES), help="mesh sizes (default: all)")
         args = parser.parse_args(argv[1:])

@@ -19,7 +19,7 @@ import onnx
 import torch
 from torch import nn
 
-from anisofem._files import atomic_path
+from anisofem.files import atomic_path
 
 from anisognn.graph import Graph
 from anisognn.model import GraphNet, integrate

@@ -19,7 +19,7 @@ import argparse
 import numpy as np
 
 import anisofem
-from anisofem.bench import write_json_atomic
+from anisofem.files import result_path, write_json
 from anisognn import evaluate, shipped
 from anisognn.model import with_galerkin
 from anisognn.rollout import rollout
@@ -105,12 +105,12 @@ def summary(rows):
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--iterations", type=int, nargs="+", default=[0, 10, 20, 40])
-    p.add_argument("--json", default="cg_iterations.json")
+    p.add_argument("--json", default=result_path("cg_iterations.json"))
     args = p.parse_args()
     print(f"{'case':34} {'model':13} {'k':>3}  tip error at steps {'/'.join(map(str, CHECKED))}"
           f"  f32 vs f64  without the network")
     rows = measure(args.iterations)
-    write_json_atomic(args.json, {"steps": STEPS, "checked_steps": list(CHECKED), "rows": rows})
+    write_json(args.json, {"steps": STEPS, "checked_steps": list(CHECKED), "rows": rows})
     print(summary(rows))
     print(f"-> {args.json}")
 

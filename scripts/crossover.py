@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 import anisofem
-from anisofem.bench import write_json_atomic
+from anisofem.files import result_path, write_json
 from anisofem.solve import Stepper
 from anisognn import pretrained
 from anisognn.rollout import network_step
@@ -129,7 +129,7 @@ def exponents(rows):
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--refinements", type=int, nargs="+", default=[1, 2, 4, 8])
-    p.add_argument("--json", default="crossover.json")
+    p.add_argument("--json", default=result_path("crossover.json"))
     p.add_argument("--gpu", action="store_true",
                    help="also time the directional model in torch on the GPU (needs CUDA)")
     args = p.parse_args()
@@ -140,7 +140,7 @@ def main():
     slopes = exponents(rows)
     print("time ~ tets^p between the two largest sizes: " + ", ".join(
         f"{k} p = {v:.2f}" for k, v in slopes.items()))
-    write_json_atomic(args.json, {"steps": STEPS, "dt": DT, "rows": rows, "exponents": slopes})
+    write_json(args.json, {"steps": STEPS, "dt": DT, "rows": rows, "exponents": slopes})
     print(f"-> {args.json}")
 
 

@@ -89,7 +89,7 @@ def main():
     p.add_argument("--cells", default="50x20x20", help="box cantilever cells (5 tets each)")
     p.add_argument("--solvers", nargs="+", default=list(SFEPY_SOLVERS),
                    choices=list(SFEPY_SOLVERS), help="sfepy's linear solvers to run")
-    p.add_argument("--out", default="peer_sfepy.json")
+    p.add_argument("--out", default=os.path.join("results", "peer_sfepy.json"))
     p.add_argument("--one", nargs=2, help=argparse.SUPPRESS)  # SOLVER PROBLEM.json, internal
     args = p.parse_args()
     if args.one:
@@ -123,7 +123,7 @@ def main():
         if "u" in row:
             row["difference_to_anisofem"] = float(np.abs(row.pop("u") - reference).max()) / scale
     report = {"cells": list(cells), "tets": 5 * int(np.prod(cells)), "rows": rows}
-    from anisofem.bench import publish
+    from anisofem.files import publish
     publish(report, print_report, args.out)
 
 
@@ -141,7 +141,7 @@ def _write_problem(cells, folder):
     from anisofem.meshgen import box_beam
     from anisofem.methods import Method, gradient_tolerance
     from anisofem.potential import Potential
-    from anisofem.solve import GRAVITY, default_scene
+    from anisofem.scene import GRAVITY, default_scene
     mesh = box_beam(cells=cells)
     scene = default_scene(mesh)
     mesh_file = os.path.join(folder, "beam.vtk")

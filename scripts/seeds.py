@@ -9,7 +9,7 @@ and shapes neither architecture was trained on.
     python scripts/seeds.py tables [--seeds 0 1 2 3 4] [--steps 1000] [--json seed_tables.json]
 
 train: `python -m anisognn train --config configs/shipped-NAME.toml --seed N --out
-models/seeds/seedN-NAME` for both architectures, JOBS runs at a time, each on one thread; a run
+experiments/seeds/seedN-NAME` for both architectures, JOBS runs at a time, each on one thread; a run
 started again resumes from its checkpoint, a finished one is skipped. Seed 0 is the shipped
 pair.
 
@@ -41,7 +41,7 @@ import numpy as np
 
 import anisofem
 from anisofem import Material, Scene, metrics
-from anisofem.bench import write_json_atomic
+from anisofem.files import result_path, write_json
 from anisognn import evaluate, shipped
 from anisognn.model import with_galerkin
 from anisognn.rollout import rollout
@@ -49,7 +49,7 @@ from anisognn.sampler import DENSITY, POISSON, YOUNG
 from cg_iterations import CHECKED, STEPS, fem_reference, tip_errors
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-FOLDER = os.path.join(ROOT, "models", "seeds")
+FOLDER = os.path.join(ROOT, "experiments", "seeds")
 #: the CG iterations after the step measured besides the shipped stepping (0)
 CG_ITERATIONS = 20
 FIBER_40 = (math.cos(math.radians(40)), 0.0, math.sin(math.radians(40)))
@@ -257,15 +257,15 @@ def main():
     t.add_argument("--jobs", type=int, default=2)
     m = sub.add_parser("measure")
     m.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
-    m.add_argument("--json", default="seeds.json")
+    m.add_argument("--json", default=result_path("seeds.json"))
     r = sub.add_parser("summary")
-    r.add_argument("--json", default="seeds.json")
+    r.add_argument("--json", default=result_path("seeds.json"))
     c = sub.add_parser("compare")
     c.add_argument("models", nargs="+")
     b = sub.add_parser("tables")
     b.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     b.add_argument("--steps", type=int, default=evaluate.STEPS)
-    b.add_argument("--json", default="seed_tables.json")
+    b.add_argument("--json", default=result_path("seed_tables.json"))
     args = p.parse_args()
     if args.command == "train":
         train(args.seeds, args.jobs)
@@ -279,13 +279,13 @@ def main():
         return
     if args.command == "tables":
         results, suite = tables(args.seeds, args.steps)
-        write_json_atomic(args.json, {"steps": args.steps, "seeds": args.seeds,
+        write_json(args.json, {"steps": args.steps, "seeds": args.seeds,
                                       "results": results})
         print(format_tables(results, suite, args.seeds))
         print(f"-> {args.json}")
         return
     rows = measure(seed_models(args.seeds))
-    write_json_atomic(args.json, {"steps": STEPS, "checked_steps": list(CHECKED),
+    write_json(args.json, {"steps": STEPS, "checked_steps": list(CHECKED),
                                   "rows": rows})
     print(summary(rows))
     print(f"-> {args.json}")

@@ -1,9 +1,9 @@
-"""anisofem._files.atomic_path: all or nothing, no temporary left behind."""
+"""anisofem.files.atomic_path: all or nothing, no temporary left behind."""
 import os
 
 import pytest
 
-from anisofem._files import atomic_path
+from anisofem.files import atomic_path
 
 
 def test_atomic_path_replaces_on_success(tmp_path):

@@ -1,4 +1,4 @@
-"""The configs shipped in configs/ parse, the shipped models' configs train, and the paper's is
+"""The configs in configs/ and experiments/configs/ parse, the shipped models' configs train, and the paper's is
 the paper's size."""
 import glob
 import math
@@ -14,7 +14,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 @pytest.mark.parametrize("path", sorted(
     glob.glob(os.path.join(ROOT, "configs", "*.toml"))
-    + glob.glob(os.path.join(ROOT, "configs", "*", "*.toml"))))
+    + glob.glob(os.path.join(ROOT, "experiments", "configs", "*", "*.toml"))))
 def test_shipped_configs_parse(path):
     config = train.load_config(path)
     assert config.model.dt == config.sampler.dt == 0.02

@@ -216,15 +216,6 @@ def test_config_validation():
     assert anisognn.ModelConfig().latent == 128 and ModelConfig().steps == 15
 
 
-def test_saved_configs_with_retired_options_load_only_where_they_were_unused():
-    saved = dict(ModelConfig(latent=16).to_dict(), fiber_stress=False, anchored=False,
-                 elastic_force=False, force_scale=0.0, deformation_inputs=True, force_only=False)
-    assert ModelConfig.from_dict(saved) == ModelConfig(latent=16)
-    with pytest.raises(ValueError, match=r"\[model\] elastic_force = True: an option of "
-                                         r"earlier versions"):
-        ModelConfig.from_dict(dict(saved, elastic_force=True))
-
-
 def per_element_fiber_scene(mesh, seed):
     """mesh with a random unit fiber and stiffness (up to 10 E) per tet, nothing held, no load."""
     rng = np.random.default_rng(seed)

@@ -24,7 +24,7 @@ def test_readme_python_snippets_run(tmp_path):
 def _product_files():
     """README.md and the text files under docs, the packages and configs (A/B configs too)."""
     yield os.path.join(ROOT, "README.md")
-    for top in ("docs", "anisofem", "anisognn", "export", "configs"):
+    for top in ("docs", "anisofem", "anisognn", "export", "configs", "experiments"):
         for folder, _, files in os.walk(os.path.join(ROOT, top)):
             yield from (os.path.join(folder, f) for f in files
                         if f.endswith((".md", ".toml", ".py")))

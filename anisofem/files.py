@@ -1,0 +1,51 @@
+"""Files written atomically (to a temporary file in the destination's folder, then renamed over
+the destination, so that a reader, or a run interrupted mid-write, never sees half a file), and
+where the commands write their results by default: the folder results/ of the current
+directory."""
+import contextlib
+import json
+import os
+import tempfile
+
+RESULTS = "results"
+
+
+def result_path(name):
+    """The default path of a result file `name` (e.g. "bench_anisofem.json"): results/name."""
+    return os.path.join(RESULTS, name)
+
+
+@contextlib.contextmanager
+def atomic_path(path, suffix=""):
+    """Yield a temporary path next to `path` (ending in suffix); on a clean exit rename it to
+    `path` with the permissions of a newly created file, on an error remove it."""
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=suffix, dir=folder)
+    os.close(fd)
+    try:
+        yield tmp
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0o600
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def write_json(path, obj):
+    """Write obj as indented JSON to path atomically (numpy scalars as floats), making its
+    folder when it is missing."""
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with atomic_path(path, ".json") as tmp, open(tmp, "w") as f:
+        json.dump(obj, f, indent=1, default=float)
+
+
+def publish(report, printer, out):
+    """printer(report), then report written to out as JSON unless out is None, and where it
+    went said; returns report."""
+    printer(report)
+    if out:
+        write_json(out, report)
+        print(f"\nwrote {out}")
+    return report
