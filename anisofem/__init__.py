@@ -1,5 +1,5 @@
 """anisofem: finite elements for fiber-reinforced (transversely isotropic) elastic solids."""
-from . import methods, metrics
+from . import inversion, methods, metrics
 from .io import read_mesh, write_mesh
 from .ladder import trade, trade_table
 from .material import Material
@@ -10,7 +10,7 @@ from .potential import element_energy, energy, gradient, hessian
 from .scene import Scene, default_scene
 from .solve import Rollout, StepResult, Stepper, simulate, solve, step
 
-__all__ = ["methods", "metrics", "read_mesh", "write_mesh", "trade", "trade_table", "Material",
+__all__ = ["inversion", "methods", "metrics", "read_mesh", "write_mesh", "trade", "trade_table", "Material",
            "TetMesh", "box_beam", "cylinder_beam", "hexes_to_tets", "t_shape", "y_shape",
            "ConvergenceWarning", "InversionWarning", "NewtonResult", "element_energy", "energy",
            "gradient", "hessian", "Scene", "Rollout", "StepResult", "Stepper", "default_scene",

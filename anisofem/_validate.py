@@ -16,6 +16,8 @@ def as_float_array(value, name, shape=None):
     if shape is not None:
         check_shape(arr, name, shape)
     if not np.isfinite(arr).all():
+        if arr.ndim == 0:
+            raise ValueError(f"{name}: must be finite, got {arr}")
         bad = np.argwhere(~np.isfinite(arr))[:3].tolist()
         raise ValueError(f"{name}: contains NaN or inf (at index {bad})")
     return arr

@@ -50,11 +50,11 @@ def _shape_arguments(p):
 
 def _scene_arguments(s):
     """The flags that make a Scene of a mesh (solve and trade)."""
-    s.add_argument("--fixed", default="x-min", help="end held fixed: AXIS-SIDE (x-min)")
+    s.add_argument("--fixed", default="x-min", help="end held fixed: AXIS-SIDE")
     s.add_argument("--gravity", type=float, nargs=3, default=(0.0, 0.0, -9.81),
                    metavar=("GX", "GY", "GZ"), help="m/s^2")
     s.add_argument("--young", type=float, default=1e5, help="Pa")
-    s.add_argument("--poisson", type=float, default=0.48)
+    s.add_argument("--poisson", type=float, default=0.48, help="Poisson's ratio")
     s.add_argument("--density", type=float, default=1000.0, help="kg/m^3")
     s.add_argument("--fiber", type=float, nargs=3, default=(1.0, 0.0, 0.0),
                    help="unit fiber direction")
@@ -66,6 +66,8 @@ def _scene_arguments(s):
 
 def _scene(args, mesh):
     fiber = np.asarray(args.fiber)
+    if not np.isfinite(fiber).all():
+        raise ValueError(f"--fiber: must be finite, got {args.fiber}")
     if not np.linalg.norm(fiber) > 0:
         raise ValueError(f"--fiber: a direction needs a nonzero vector, got {args.fiber}")
     material = Material(args.young, args.poisson, args.density, fiber / np.linalg.norm(fiber),
@@ -73,15 +75,25 @@ def _scene(args, mesh):
     return Scene(mesh, material, fixed=_fixed(mesh, args.fixed), gravity=args.gravity)
 
 
+class _ShowDefaults(argparse.ArgumentDefaultsHelpFormatter):
+    """Help that names each option's default, where it has one."""
+
+    def _get_help_string(self, action):
+        if action.default is None or action.default is False:
+            return action.help
+        return super()._get_help_string(action)
+
+
 def _parser():
     p = argparse.ArgumentParser(prog="python -m anisofem", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="command", required=True)
-    m = sub.add_parser("mesh", help="generate a mesh of one of the paper's shapes")
+    defaults = {"formatter_class": _ShowDefaults}
+    m = sub.add_parser("mesh", help="generate a mesh of one of the paper's shapes", **defaults)
     m.add_argument("shape", choices=sorted(_SHAPES))
     _shape_arguments(m)
     m.add_argument("-o", "--output", required=True)
-    s = sub.add_parser("solve", help="static equilibrium or a backward-Euler rollout")
+    s = sub.add_parser("solve", help="static equilibrium or a backward-Euler rollout", **defaults)
     s.add_argument("mesh", help="a mesh file meshio reads (.msh, .vtu, .xdmf, ...)")
     s.add_argument("-o", "--output", required=True, help="result file (.vtu, .xdmf, .msh)")
     _scene_arguments(s)
@@ -93,9 +105,10 @@ def _parser():
                         "multigrid-preconditioned inexact Newton on large meshes)")
     s.add_argument("--iterations", type=int, default=None,
                    help="a fixed budget of iterations per solve instead of a tolerance")
-    s.add_argument("--rtol", type=float, default=1e-8)
+    s.add_argument("--rtol", type=float, default=1e-8,
+                   help="relative tolerance of each solve's gradient norm")
     t = sub.add_parser("trade", help="the speed/accuracy trade of every solver rung on a scene "
-                                     "(table, JSON, Pareto plot)")
+                                     "(table, JSON, Pareto plot; minutes)", **defaults)
     t.add_argument("scene", help="a mesh file meshio reads, or a shape: "
                                  f"{', '.join(sorted(_SHAPES))}")
     _shape_arguments(t)
@@ -109,7 +122,8 @@ def _parser():
                    help="only the FEM rungs (skip the shipped networks)")
     t.add_argument("--json", help="write the result here")
     t.add_argument("--png", help="write the Pareto plot here")
-    b = sub.add_parser("bench", help="speed of the kernels and solvers (table + JSON)")
+    b = sub.add_parser("bench", help="speed of the kernels and solvers (table + JSON)",
+                       **defaults)
     b.add_argument("--sizes", nargs="+", default=list(bench.SIZES), choices=list(bench.SIZES))
     b.add_argument("--large", action="store_true",
                    help="static solves and backward-Euler steps at 10^4 and 10^5 tets by "

@@ -3,6 +3,8 @@ meshio's formats). Results carry fields a person can open in ParaView: point dat
 "displacement" (m), cell data "fiber_direction", "fiber_stiffness" (Pa), "energy" (J per tet),
 "energy_density" (J/m^3), "volume_change" (det F - 1) and "inverted" (1 where det F <= 0: the
 element is turned inside out)."""
+import contextlib
+import io
 import os
 
 import meshio
@@ -11,7 +13,7 @@ import numpy as np
 from .files import atomic_path
 from ._validate import as_float_array
 from .mesh import TetMesh
-from .metrics import volume_change
+from .inversion import volume_change
 from .potential import element_energy
 
 
@@ -25,17 +27,33 @@ def read_mesh(path, **mesh_options):
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise FileNotFoundError(f"path: no such mesh file {path!r}")
-    try:
-        m = meshio.read(path)
-    except Exception as err:  # meshio raises ReadError, ValueError, IndexError... on bad files
-        raise ValueError(f"path: meshio cannot read {path!r}: {err or type(err).__name__}") \
-            from None
+    m = _meshio_read(path)
     tets = [c.data for c in m.cells if c.type == "tetra"]
     if not tets:
         raise ValueError(f"path: {path} holds no tetra cells (found "
                          f"{sorted({c.type for c in m.cells})})")
     mesh_options.setdefault("unreferenced", "drop")
     return TetMesh(m.points[:, :3], np.concatenate(tets).astype(np.int64), **mesh_options)
+
+
+def _meshio_read(path):
+    """meshio.read(path) by each format its extension may name (Gmsh first for .msh), with
+    meshio's own printing silenced; a ValueError naming the file where none reads it (meshio
+    prints its errors and exits the process when it cannot read a file)."""
+    ext = os.path.splitext(path)[1].lower()
+    formats = sorted(meshio.extension_to_filetypes.get(ext, [None]), key=lambda f: f != "gmsh")
+    errors = []
+    for fmt in formats:
+        said = io.StringIO()
+        try:
+            with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+                return meshio.read(path, file_format=fmt)
+        except (Exception, SystemExit) as err:  # ReadError, ValueError, IndexError, exit...
+            why = [line.strip() for line in [str(err), *said.getvalue().splitlines()]
+                   if line.strip() and not line.strip().isdigit()
+                   and "Couldn't read file" not in line]
+            errors.append(f"not {fmt or 'a mesh'}" + (f": {why[0][:200]}" if why else ""))
+    raise ValueError(f"path: meshio cannot read {path!r} ({'; '.join(errors)})")
 
 
 def check_output_path(path):

@@ -39,7 +39,7 @@ import numpy as np
 
 from . import methods
 from .files import atomic_path
-from .metrics import volume_change
+from .inversion import volume_change
 from .potential import Potential
 from .scene import Scene
 from .solve import Stepper, solve

@@ -131,18 +131,10 @@ def check_positions(scene, x, name="x"):
     return as_float_array(x, name, shape=(scene.mesh.n_vertices, 3))
 
 
-def energy(scene, x, x_hat=None, dt=None, split=False):
-    """Potential G(x) in J (statics, or backward Euler with x_hat and dt).
-
-    split=True returns a dict with the terms "isotropic", "fiber", "external", "kinetic" and
-    "total" (external = -f_ext . x; kinetic = 0 in statics).
-    """
-    pot = Potential(scene, x_hat, dt)
-    terms = pot.terms(check_positions(scene, x))
-    if split:
-        terms.pop("elements")
-        return terms
-    return terms["total"]
+def energy(scene, x, x_hat=None, dt=None):
+    """Potential G(x) in J (statics, or backward Euler with x_hat and dt); its terms:
+    anisofem.metrics.energy_split."""
+    return Potential(scene, x_hat, dt).energy(check_positions(scene, x))
 
 
 def gradient(scene, x, x_hat=None, dt=None):

@@ -39,6 +39,7 @@ import numpy as np
 import anisofem
 from anisofem import Material, Scene, box_beam, cylinder_beam, metrics
 from anisofem.files import result_path, write_json
+from anisofem.inversion import volume_change
 
 from .sampler import DENSITY, POISSON, YOUNG
 
@@ -169,8 +170,8 @@ def score(scene, positions, x_fem):
     tip_error = float(np.linalg.norm(metrics.tip_displacement(mesh, x) - tip_fem))
     deflection = float(np.linalg.norm(tip_fem))
     force = metrics.imbalanced_force(scene, x)
-    vol = float(np.abs(metrics.volume_change(mesh, x)).max())
-    vol_fem = float(np.abs(metrics.volume_change(mesh, x_fem)).max())
+    vol = float(np.abs(volume_change(mesh, x)).max())
+    vol_fem = float(np.abs(volume_change(mesh, x_fem)).max())
     g_fem = anisofem.energy(scene, x_fem)
     gap = anisofem.energy(scene, x) - g_fem
     return {**out, "tip_error": tip_error, "tip_fem": deflection,
@@ -226,17 +227,13 @@ TITLES = {"cantilever": "Table 1: cantilever tip displacement error at rest (FEM
 
 
 def format_tables(results, suite, ratio=None):
-    """The results as text tables: one per group, the simulators side by side; with ratio =
-    (name a, name b), a's over b's for the group's first metric; then the energy gap and the
-    stability check of every scene."""
+    """The results as text tables that fit a terminal: one per group, each case's line followed
+    by a line per simulator; with ratio = (name a, name b), a line "a/b" with a's over b's for
+    the group's first metric; then the energy gap and the stability check of every scene."""
     names = list(results)
     lines = []
     for group, columns in COLUMNS.items():
-        lines += ["", TITLES[group]]
-        header = ["case"] + [f"{n}: {c[1]}" for n in names for c in columns]
-        if ratio:
-            header.append(f"{ratio[0]}/{ratio[1]}")
-        rows = []
+        blocks = []
         for i, case in enumerate(suite):
             if case.group != group:
                 continue
@@ -245,37 +242,60 @@ def format_tables(results, suite, ratio=None):
                 label += f" [{results[names[0]][i].get('tip_fem', math.nan) * 1e3:.1f} mm]"
             elif group == "tension":
                 label += f" [FEM {results[names[0]][i].get('volume_change_fem', math.nan):.2e}]"
-            row = [label] + [fmt.format(results[n][i].get(key, math.nan))
-                             for n in names for key, _, fmt in columns]
+            rows = [[n] + [fmt.format(results[n][i].get(key, math.nan))
+                           for key, _, fmt in columns] for n in names]
             if ratio:
-                key = columns[0][0]
-                a, b = (results[n][i].get(key, math.nan) for n in ratio)
-                row.append(f"{a / b:.2f}" if b else "-")
-            rows.append(row)
-        lines += _table(header, rows)
-    lines += ["", "Energy gap to the FEM equilibrium (J; share of the rest-to-equilibrium drop), "
-                  "mean acceleration of one step from it (m/s^2), stiffness at rest (share of "
-                  "the FEM's) and stability over the whole rollout"]
-    header = ["case"] + [f"{n}: {h}" for n in names
-                         for h in ("gap J", "share", "rest a", "rest k", "bounded")]
-    rows = [[case.label] + [v for n in names for v in (
-        f"{results[n][i].get('energy_gap', math.nan):.2e}",
-        f"{results[n][i].get('energy_gap_ratio', math.nan):.3f}",
-        f"{results[n][i]['rest_acceleration_mean']:.2e}",
-        f"{results[n][i]['rest_stiffness']:.2f}",
-        "yes" if results[n][i]["bounded"] else "NO")] for i, case in enumerate(suite)]
-    lines += _table(header, rows)
+                a, b = (results[n][i].get(columns[0][0], math.nan) for n in ratio)
+                rows.append([f"{ratio[0]}/{ratio[1]}", f"{a / b:.2f}" if b else "-"]
+                            + [""] * (len(columns) - 1))
+            blocks.append((label, rows))
+        lines += ["", TITLES[group]] + _table(["model"] + [c[1] for c in columns], blocks)
+    lines += ["", "Energy gap to the FEM equilibrium (J; share of the rest-to-equilibrium drop),",
+              "mean acceleration of one step from it (m/s^2), stiffness at rest (share of the",
+              "FEM's) and stability over the whole rollout"]
+    blocks = [(case.label, [[n, f"{results[n][i].get('energy_gap', math.nan):.2e}",
+                             f"{results[n][i].get('energy_gap_ratio', math.nan):.3f}",
+                             f"{results[n][i]['rest_acceleration_mean']:.2e}",
+                             f"{results[n][i]['rest_stiffness']:.2f}",
+                             "yes" if results[n][i]["bounded"] else "NO"] for n in names])
+              for i, case in enumerate(suite)]
+    lines += _table(["model", "gap J", "share", "rest a", "rest k", "bounded"], blocks)
     return "\n".join(lines)
 
 
-def _table(header, rows):
-    """Text lines of a table: first column left-aligned, the others right-aligned."""
+def _table(header, blocks):
+    """Text lines of a table of blocks [(title, rows)]: each title (unless None) on a line of
+    its own, its rows indented below; first column left-aligned, the others right-aligned."""
+    rows = [r for _, block in blocks for r in block]
     widths = [max(len(r[k]) for r in [header] + rows) for k in range(len(header))]
 
     def line(row):
-        return "  ".join(c.ljust(w) if k == 0 else c.rjust(w)
-                         for k, (c, w) in enumerate(zip(row, widths)))
-    return [line(header), line(["-" * w for w in widths])] + [line(r) for r in rows]
+        return ("  " + "  ".join(c.ljust(w) if k == 0 else c.rjust(w)
+                                 for k, (c, w) in enumerate(zip(row, widths)))).rstrip()
+    out = [line(header), line(["-" * w for w in widths])]
+    for title, block in blocks:
+        out += [title] * (title is not None) + [line(r) for r in block]
+    return out
+
+
+def format_summary(summary):
+    """The summary dict as text lines: a row per simulator, then the ratios if any."""
+    keys = (("tip_ratio_mean", "tip/FEM", "{:.3f}"), ("tip_ratio_max", "max", "{:.3f}"),
+            ("force_mean", "force N", "{:.2e}"), ("volume_change_error_max", "dV err", "{:.3f}"),
+            ("rest_acceleration_mean", "rest a", "{:.2e}"),
+            ("rest_stiffness_mean", "rest k", "{:.2f}"))
+    rows = [[name] + [fmt.format(s[key]) for key, _, fmt in keys]
+            + ["yes" if s["all_bounded"] else "NO"]
+            for name, s in summary.items() if name != "ratios"]
+    lines = ["Summary over the scored cases: tip error over the FEM's deflection (mean, max), "
+             "mean force,", "worst volume change error, mean rest acceleration and stiffness"]
+    lines += _table(["model"] + [h for _, h, _ in keys] + ["bounded"], [(None, rows)])
+    r = summary.get("ratios")
+    if r:
+        lines.append(f"tip error of the first model over the second's: mean "
+                     f"{r['tip_error_mean']:.2f}, max {r['tip_error_max']:.2f}; mean force "
+                     f"{r['force_mean']:.2f}")
+    return lines
 
 
 def summary(results, suite, ratio=None):
@@ -329,7 +349,7 @@ def run(models, steps=STEPS, out=result_path("evaluation.json"), echo=print, pro
         echo(f"not scored: {skipped['case']}: {skipped['reason']}")
     report = {"steps": steps, "dt": DT, "results": results, "not_scored": not_scored,
               "summary": summary(results, suite, ratio)}
-    echo("\nsummary: " + str(report["summary"]))
+    echo("\n" + "\n".join(format_summary(report["summary"])))
     if out:
         write_json(os.fspath(out), report)
     return report

@@ -266,9 +266,9 @@ def test_options_are_checked_by_name():
     with pytest.raises(ValueError, match="warm_start"):
         methods.make("reuse", warm_start="random")
     with pytest.raises(TypeError, match="refactor: not an option of method 'auto'"):
-        af.solve(af.box_beam(cells=(2, 1, 1)), refactor=0.5)
+        af.solve(af.default_scene(af.box_beam(cells=(2, 1, 1))), refactor=0.5)
     with pytest.raises(TypeError, match="refactor: not an option of method 'newton'"):
-        af.solve(af.box_beam(cells=(2, 1, 1)), method="newton", refactor=0.5)
+        af.solve(af.default_scene(af.box_beam(cells=(2, 1, 1))), method="newton", refactor=0.5)
 
 
 def _energy(scene, x, v):

@@ -11,7 +11,7 @@ from anisofem.potential import Potential
 
 
 def test_quadratic_convergence_near_the_solution(beam):
-    result = af.solve(beam, rtol=1e-10)
+    result = af.solve(af.default_scene(beam), rtol=1e-10)
     print("relative residuals:", ["%.3e" % r for r in result.residuals])
     assert result.converged and result.projected == 0
     r = result.residuals
@@ -23,8 +23,8 @@ def test_quadratic_convergence_near_the_solution(beam):
 
 
 def test_projecting_every_iteration_converges_only_linearly(beam):
-    adaptive = af.solve(beam, rtol=1e-10)
-    always = af.solve(beam, rtol=1e-10, projection="always")
+    adaptive = af.solve(af.default_scene(beam), rtol=1e-10)
+    always = af.solve(af.default_scene(beam), rtol=1e-10, projection="always")
     print("iterations: adaptive", adaptive.iterations, "always projected", always.iterations)
     assert always.converged and always.projected == always.iterations
     assert always.iterations > adaptive.iterations + 5
@@ -37,8 +37,8 @@ CHOLMOD = pytest.param("cholmod", marks=pytest.mark.skipif(
 
 @pytest.mark.parametrize("solver", ["banded", "superlu", "superlu-colamd", CHOLMOD])
 def test_linear_solvers_agree(beam, solver):
-    ref = af.solve(beam, linear_solver="dense", rtol=1e-10)
-    res = af.solve(beam, linear_solver=solver, rtol=1e-10)
+    ref = af.solve(af.default_scene(beam), linear_solver="dense", rtol=1e-10)
+    res = af.solve(af.default_scene(beam), linear_solver=solver, rtol=1e-10)
     assert res.converged
     assert np.abs(res.x - ref.x).max() < 1e-9
 
@@ -102,7 +102,8 @@ def test_buckling_needs_the_projected_fallback(solver):
 
 def test_stall_is_reported_not_returned_as_success(beam):
     with pytest.warns(af.ConvergenceWarning):
-        result = af.solve(beam, rtol=1e-30, atol=0)  # below round-off: the search stalls
+        # below round-off: the search stalls
+        result = af.solve(af.default_scene(beam), rtol=1e-30, atol=0)
     assert not result.converged
     assert "stalled" in result.message
     assert np.isfinite(result.x).all() and result.residuals[-1] < 1e-9
@@ -110,7 +111,7 @@ def test_stall_is_reported_not_returned_as_success(beam):
 
 def test_max_iter_is_reported(beam):
     with pytest.warns(af.ConvergenceWarning):
-        result = af.solve(beam, max_iter=2)
+        result = af.solve(af.default_scene(beam), max_iter=2)
     assert not result.converged and result.iterations == 2
     assert result.message == "max_iter reached"
 

@@ -15,7 +15,7 @@ def test_numba_and_numpy_agree_with_per_element_fibers():
     scene = af.Scene(mesh, af.Material(1e5, 0.45, 1000.0, d, kappa))
     x = mesh.vertices + 2e-3 * rng.standard_normal(mesh.vertices.shape)
     e_ref, g_ref = ref.elastic_energy_gradient(scene, x)
-    split = af.energy(scene, x, split=True)
+    split = af.metrics.energy_split(scene, x)
     assert abs(split["isotropic"] + split["fiber"] - e_ref) < 1e-12 * e_ref
     assert np.abs(af.gradient(scene, x) - g_ref).max() < 1e-10 * np.abs(g_ref).max()
     for project in (False, True):

@@ -161,7 +161,7 @@ def test_bad_states_and_steps(mesh):
 def test_non_convergence_is_never_success(mesh):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", af.ConvergenceWarning)
-        result = af.solve(mesh, max_iter=1)
+        result = af.solve(af.default_scene(mesh), max_iter=1)
         roll = af.simulate(af.default_scene(mesh), steps=3, max_iter=0)
     assert not result.converged and np.isfinite(result.x).all()
     assert not roll.converged and roll.positions.shape[0] == 1
@@ -173,7 +173,7 @@ def test_library_boundaries_name_the_users_input(tmp_path):
     with pytest.raises(TypeError, match="steps: expected a whole number, got 2.5"):
         af.simulate(af.default_scene(mesh), steps=2.5)
     with pytest.raises(TypeError, match="bogus: not an option of method 'auto'"):
-        af.solve(mesh, bogus=3)
+        af.solve(af.default_scene(mesh), bogus=3)
     with pytest.raises(FileNotFoundError, match="the folder of .*nowhere.* does not exist"):
         af.write_mesh(tmp_path / "nowhere" / "o.vtu", mesh)
     with pytest.raises(ValueError, match="has no mesh format"):
