@@ -8,7 +8,7 @@ from anisofem.files import result_path
 from anisognn import shipped
 from anisognn.cli import add_galerkin_arguments, stepping
 
-from . import bake, bench, to_onnx
+from . import bake, bench, model_path, to_onnx
 
 
 def main(argv=None):
@@ -29,7 +29,7 @@ def main(argv=None):
             "as PATH.json + PATH.bin (export/README.md, Baked scenes)")
         parser.add_argument("scene", choices=sorted(bake.SCENES))
         parser.add_argument("-o", "--output", required=True, help="PATH (without extension)")
-        parser.add_argument("--model", default="export/models/directional.onnx",
+        parser.add_argument("--model", default=model_path("directional"),
                             help="the .onnx file the scene is for (default %(default)s)")
         parser.add_argument("--angles", type=float, nargs="+", default=list(bake.ANGLES),
                             help="fiber angles in degrees from x towards z (default %(default)s)")

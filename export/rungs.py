@@ -1,7 +1,6 @@
 """The deployed model's rung of the speed/accuracy ladder (anisofem.trade finds onnx_rungs
 through the "anisofem.rungs" entry point): the shipped directional.onnx stepped by runtime.py,
 numpy and onnxruntime only."""
-import importlib.util
 import json
 import os
 
@@ -57,10 +56,11 @@ def onnx_rungs(scene, dt, notes):
     if not os.path.isfile(path):
         notes.append(f"ONNX rung skipped: {path} is missing")
         return []
-    if importlib.util.find_spec("onnxruntime") is None:
+    try:
+        import onnxruntime
+    except ImportError:
         notes.append("ONNX rung skipped: onnxruntime is not installed")
         return []
-    import onnxruntime
     session = onnxruntime.InferenceSession(path, providers=["CPUExecutionProvider"])
     reason = _unlike_runtime(scene, dt, session.get_modelmeta().custom_metadata_map)
     if reason:

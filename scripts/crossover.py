@@ -17,7 +17,6 @@ times between the two largest sizes. Run alone.
 """
 import argparse
 import math
-import os
 import time
 
 import numpy as np
@@ -28,12 +27,13 @@ from anisofem.files import result_path, write_json
 from anisofem.solve import Stepper
 from anisognn import pretrained
 from anisognn.rollout import network_step
+
+import export
 from export.runtime import OnnxSimulator
 
 STEPS = 10
 DT = 0.02
-MODEL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "export", "models",
-                     "directional.onnx")
+MODEL = export.model_path("directional")
 FIBER = (math.cos(math.radians(40)), 0.0, math.sin(math.radians(40)))
 #: the FEM paths: label -> (method options, largest tets it runs on)
 PATHS = {"exact": ({}, 12_800), "exact, multigrid CG": ({"method": "cg", "preconditioner": "amg"},
