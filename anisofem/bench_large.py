@@ -41,7 +41,8 @@ def measure(cells, path, poisson=0.48):
     from . import linsolve
     from .material import Material
     from .meshgen import box_beam
-    from .solve import default_scene, simulate, solve
+    from .scene import default_scene
+    from .solve import simulate, solve
 
     t0 = time.perf_counter()
     mesh = box_beam(cells=cells)

@@ -156,14 +156,6 @@ class TetMesh:
                              f"got shape {mask.shape}")
         return faces[mask]
 
-    def vertices_where(self, predicate):
-        """Indices of vertices whose rest position X (n, 3) satisfies predicate(X) -> (n,) bool."""
-        mask = np.asarray(predicate(self.vertices), dtype=bool)
-        if mask.shape != (self.n_vertices,):
-            raise ValueError(f"predicate: must return a ({self.n_vertices},) bool array, "
-                             f"got shape {mask.shape}")
-        return np.flatnonzero(mask)
-
     @cached_property
     def coloring(self):
         """(starts, ptr): the assembly blocks (runs of ASSEMBLY_BLOCK consecutive tets, the

@@ -219,48 +219,49 @@ COLUMNS = {"cantilever": (("tip_error", "tip error m", "{:.2e}"), ("tip_ratio", 
            "imbalance": (("force_mean", "mean force N", "{:.2e}"),
                          ("force_max", "max force N", "{:.2e}")),
            "tension": (("volume_change_max", "max |dV/V|", "{:.2e}"),
-                       ("volume_change_error", "vs FEM", "{:.3f}"))}
+                       ("volume_change_error", "vs FEM", "{:.3f}")),
+           "every case": (("energy_gap", "gap J", "{:.2e}"), ("energy_gap_ratio", "share", "{:.3f}"),
+                          ("rest_acceleration_mean", "rest a", "{:.2e}"),
+                          ("rest_stiffness", "rest k", "{:.2f}"), ("bounded", "bounded", "{}"))}
 TITLES = {"cantilever": "Table 1: cantilever tip displacement error at rest (FEM tip deflection "
                         "in brackets)",
           "imbalance": "Table 2: imbalanced force at the final state",
-          "tension": "Fig. 6: max per-element volume change, beam in tension"}
+          "tension": "Fig. 6: max per-element volume change, beam in tension",
+          "every case": "Energy gap to the FEM equilibrium (J; share of the rest-to-equilibrium "
+                        "drop),\nmean acceleration of one step from it (m/s^2), stiffness at rest"
+                        " (share of the\nFEM's) and stability over the whole rollout"}
 
 
 def format_tables(results, suite, ratio=None):
     """The results as text tables that fit a terminal: one per group, each case's line followed
     by a line per simulator; with ratio = (name a, name b), a line "a/b" with a's over b's for
-    the group's first metric; then the energy gap and the stability check of every scene."""
+    the group's first metric (not in the last table, of every case)."""
     names = list(results)
     lines = []
     for group, columns in COLUMNS.items():
         blocks = []
         for i, case in enumerate(suite):
-            if case.group != group:
+            if group not in (case.group, "every case"):
                 continue
             label = case.label
             if group == "cantilever":
                 label += f" [{results[names[0]][i].get('tip_fem', math.nan) * 1e3:.1f} mm]"
             elif group == "tension":
                 label += f" [FEM {results[names[0]][i].get('volume_change_fem', math.nan):.2e}]"
-            rows = [[n] + [fmt.format(results[n][i].get(key, math.nan))
+            rows = [[n] + [_cell(results[n][i].get(key, math.nan), fmt)
                            for key, _, fmt in columns] for n in names]
-            if ratio:
+            if ratio and group != "every case":
                 a, b = (results[n][i].get(columns[0][0], math.nan) for n in ratio)
                 rows.append([f"{ratio[0]}/{ratio[1]}", f"{a / b:.2f}" if b else "-"]
                             + [""] * (len(columns) - 1))
             blocks.append((label, rows))
         lines += ["", TITLES[group]] + _table(["model"] + [c[1] for c in columns], blocks)
-    lines += ["", "Energy gap to the FEM equilibrium (J; share of the rest-to-equilibrium drop),",
-              "mean acceleration of one step from it (m/s^2), stiffness at rest (share of the",
-              "FEM's) and stability over the whole rollout"]
-    blocks = [(case.label, [[n, f"{results[n][i].get('energy_gap', math.nan):.2e}",
-                             f"{results[n][i].get('energy_gap_ratio', math.nan):.3f}",
-                             f"{results[n][i]['rest_acceleration_mean']:.2e}",
-                             f"{results[n][i]['rest_stiffness']:.2f}",
-                             "yes" if results[n][i]["bounded"] else "NO"] for n in names])
-              for i, case in enumerate(suite)]
-    lines += _table(["model", "gap J", "share", "rest a", "rest k", "bounded"], blocks)
     return "\n".join(lines)
+
+
+def _cell(value, fmt):
+    """value as table text: fmt.format(value), a bool as yes or NO."""
+    return ("yes" if value else "NO") if isinstance(value, bool) else fmt.format(value)
 
 
 def _table(header, blocks):
@@ -280,21 +281,18 @@ def _table(header, blocks):
 
 def format_summary(summary):
     """The summary dict as text lines: a row per simulator, then the ratios if any."""
-    keys = (("tip_ratio_mean", "tip/FEM", "{:.3f}"), ("tip_ratio_max", "max", "{:.3f}"),
-            ("force_mean", "force N", "{:.2e}"), ("volume_change_error_max", "dV err", "{:.3f}"),
-            ("rest_acceleration_mean", "rest a", "{:.2e}"),
-            ("rest_stiffness_mean", "rest k", "{:.2f}"))
-    rows = [[name] + [fmt.format(s[key]) for key, _, fmt in keys]
-            + ["yes" if s["all_bounded"] else "NO"]
+    keys = ("tip_ratio_mean", "tip_ratio_max", "force_mean", "volume_change_error_max",
+            "rest_acceleration_mean", "rest_stiffness_mean")
+    rows = [[name] + [f"{s[k]:.3g}" for k in keys] + ["yes" if s["all_bounded"] else "NO"]
             for name, s in summary.items() if name != "ratios"]
-    lines = ["Summary over the scored cases: tip error over the FEM's deflection (mean, max), "
-             "mean force,", "worst volume change error, mean rest acceleration and stiffness"]
-    lines += _table(["model"] + [h for _, h, _ in keys] + ["bounded"], [(None, rows)])
+    lines = ["Summary: tip error over the FEM's deflection (mean, largest), mean force (N), "
+             "worst", "volume change error, at rest: mean acceleration (m/s^2) and stiffness"]
+    lines += _table(["model", "tip", "largest", "force", "dV", "rest a", "rest k", "bounded"],
+                    [(None, rows)])
     r = summary.get("ratios")
     if r:
-        lines.append(f"tip error of the first model over the second's: mean "
-                     f"{r['tip_error_mean']:.2f}, max {r['tip_error_max']:.2f}; mean force "
-                     f"{r['force_mean']:.2f}")
+        lines.append(f"first model over the second: tip error {r['tip_error_mean']:.2f} (largest"
+                     f" {r['tip_error_max']:.2f}), mean force {r['force_mean']:.2f}")
     return lines
 
 
@@ -352,4 +350,5 @@ def run(models, steps=STEPS, out=result_path("evaluation.json"), echo=print, pro
     echo("\n" + "\n".join(format_summary(report["summary"])))
     if out:
         write_json(os.fspath(out), report)
+        echo(f"wrote {out}")
     return report

@@ -6,7 +6,7 @@ the network's place (what the network's direction buys)."""
 import numpy as np
 import torch
 
-from anisofem import Material, Scene
+from anisofem import Material
 from anisofem.solve import Stepper
 from anisofem.ladder import Rung
 
@@ -86,9 +86,8 @@ def _trained_material(scene):
 
 
 def surrogate_rungs(scene, dt, notes):
-    """The shipped models' rungs for scene at dt (s); what cannot run is said in notes."""
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
+    """The shipped models' rungs for scene (an anisofem.Scene) at dt (s); what cannot run is
+    said in notes."""
     try:
         models = {name: pretrained(name) for name in NAMES}
     except FileNotFoundError as err:

@@ -1,6 +1,6 @@
 """`python -m export bake`: the constant tensors of a scene, written for an engine that steps
-model.onnx without numpy (export/runtime.py's write_arrays: a JSON header and raw
-little-endian arrays; export/README.md, Baked scenes).
+model.onnx without numpy (write_arrays: a JSON header and raw little-endian arrays;
+export/README.md, Baked scenes).
 
 A baked scene holds every constant model input (runtime.INPUTS, in its dtype), for each fiber
 angle asked the two fiber-dependent ones ("fiber@A", "tet_fiber@A" for A degrees from the x
@@ -15,6 +15,9 @@ import os
 
 import numpy as np
 
+from anisofem.files import atomic_path
+from anisofem.scene import GRAVITY
+
 from . import runtime
 
 #: the scenes `bake` knows: name -> (title, mesh maker, held end (axis, side))
@@ -24,7 +27,6 @@ SCENES = {
     "t": ("T, 0.1 m wide, standing on its stem", "t", (2, "min")),
     "y": ("Y, arms raised 35 degrees, standing on its stem", "y", (2, "min")),
 }
-GRAVITY = (0.0, 0.0, -9.81)
 #: the model inputs that depend on the fiber, baked once per angle as NAME@ANGLE
 FIBER_INPUTS = ("fiber", "tet_fiber")
 #: fiber angles baked by default, degrees (the fiber stiffness is the trained material's E)
@@ -84,8 +86,35 @@ def bake(name, out, model_path, angles=ANGLES):
               "E": int(sim.constants["senders"].shape[0]), "fiber_angles": angles,
               "gravity": list(GRAVITY),
               "trained_material": json.loads(sim.metadata["trained_material"])}
-    runtime.write_arrays(out, arrays, header)
+    write_arrays(out, arrays, header)
     return header
+
+
+def write_arrays(path, arrays, header=None):
+    """Write arrays {name: numpy array} as PATH.bin (raw little-endian, each array starting at
+    a multiple of 8 bytes) and PATH.json: {"format": ARRAYS_FORMAT, "bin": file name,
+    "arrays": {name: {"dtype", "shape", "offset" (bytes)}}} plus the entries of header (a
+    JSON-able dict). A C++/C#/JS engine reads them without numpy. Both files are written
+    atomically (a temporary file renamed)."""
+    table, chunks, offset = {}, [], 0
+    for name, value in arrays.items():
+        value = np.asarray(value)
+        kind = next((k for k, v in runtime.ARRAY_DTYPES.items() if np.dtype(v) == value.dtype),
+                    None)
+        if kind is None:
+            raise TypeError(f"arrays[{name!r}]: dtype {value.dtype} is not one of "
+                            f"{list(runtime.ARRAY_DTYPES)}")
+        raw = np.ascontiguousarray(value, dtype=runtime.ARRAY_DTYPES[kind]).tobytes()
+        table[name] = {"dtype": kind, "shape": list(value.shape), "offset": offset}
+        pad = -len(raw) % 8
+        chunks.append(raw + bytes(pad))
+        offset += len(raw) + pad
+    meta = {"format": runtime.ARRAYS_FORMAT, **(header or {}),
+            "bin": os.path.basename(str(path)) + ".bin", "arrays": table}
+    with atomic_path(str(path) + ".bin") as tmp, open(tmp, "wb") as f:
+        f.write(b"".join(chunks))
+    with atomic_path(str(path) + ".json") as tmp, open(tmp, "w") as f:
+        json.dump(meta, f, indent=1)
 
 
 def _trained_young(model_path):

@@ -5,6 +5,7 @@ import json
 import os
 
 import numpy as np
+import onnxruntime
 
 from anisofem.ladder import Rung
 
@@ -55,11 +56,6 @@ def onnx_rungs(scene, dt, notes):
     path = model_path("directional")
     if not os.path.isfile(path):
         notes.append(f"ONNX rung skipped: {path} is missing")
-        return []
-    try:
-        import onnxruntime
-    except ImportError:
-        notes.append("ONNX rung skipped: onnxruntime is not installed")
         return []
     session = onnxruntime.InferenceSession(path, providers=["CPUExecutionProvider"])
     reason = _unlike_runtime(scene, dt, session.get_modelmeta().custom_metadata_map)

@@ -228,39 +228,16 @@ def surface_triangles(vertices, tets):
     return faces
 
 
-#: the baked-scene file format (write_arrays / read_arrays)
+#: the baked-scene file format (export.bake.write_arrays / read_arrays)
 ARRAYS_FORMAT = "anisognn-arrays-1"
 #: numpy dtypes a baked file may hold, by the names its header uses
 ARRAY_DTYPES = {"float64": "<f8", "float32": "<f4", "int64": "<i8", "int32": "<i4",
                 "uint8": "u1"}
 
 
-def write_arrays(path, arrays, header=None):
-    """Write arrays {name: numpy array} as PATH.bin (raw little-endian, each array starting at
-    a multiple of 8 bytes) and PATH.json: {"format": ARRAYS_FORMAT, "bin": file name,
-    "arrays": {name: {"dtype", "shape", "offset" (bytes)}}} plus the entries of header (a
-    JSON-able dict). A C++/C#/JS engine reads them without numpy. Both files are written
-    atomically (a temporary file renamed)."""
-    table, chunks, offset = {}, [], 0
-    for name, value in arrays.items():
-        value = np.asarray(value)
-        kind = next((k for k, v in ARRAY_DTYPES.items() if np.dtype(v) == value.dtype), None)
-        if kind is None:
-            raise TypeError(f"arrays[{name!r}]: dtype {value.dtype} is not one of "
-                            f"{list(ARRAY_DTYPES)}")
-        raw = np.ascontiguousarray(value, dtype=ARRAY_DTYPES[kind]).tobytes()
-        table[name] = {"dtype": kind, "shape": list(value.shape), "offset": offset}
-        pad = -len(raw) % 8
-        chunks.append(raw + bytes(pad))
-        offset += len(raw) + pad
-    meta = {"format": ARRAYS_FORMAT, **(header or {}),
-            "bin": os.path.basename(str(path)) + ".bin", "arrays": table}
-    _write_atomic(str(path) + ".bin", b"".join(chunks))
-    _write_atomic(str(path) + ".json", json.dumps(meta, indent=1).encode())
-
-
 def read_arrays(path):
-    """(header dict, {name: numpy array}) of files written by write_arrays(path, ...)."""
+    """(header dict, {name: numpy array}) of the files PATH.json and PATH.bin written by
+    export.bake.write_arrays(path, ...)."""
     with open(str(path) + ".json") as f:
         header = json.load(f)
     if header.get("format") != ARRAYS_FORMAT:
@@ -274,14 +251,6 @@ def read_arrays(path):
         arrays[name] = np.frombuffer(data, dtype=dtype, count=count,
                                      offset=spec["offset"]).reshape(spec["shape"])
     return header, arrays
-
-
-def _write_atomic(path, payload):
-    """Write bytes to path through a temporary file in its folder, renamed over it."""
-    tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "wb") as f:
-        f.write(payload)
-    os.replace(tmp, path)
 
 
 class OnnxSimulator:

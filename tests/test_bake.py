@@ -18,7 +18,7 @@ def test_arrays_round_trip_byte_exact_with_aligned_offsets(tmp_path):
     arrays = {"a": rng.normal(size=(5, 3)), "b": rng.normal(size=7).astype(np.float32),
               "c": np.arange(11, dtype=np.int64).reshape(11, 1), "d": np.arange(3, dtype=np.int32),
               "e": np.array([1, 0, 1], dtype=np.uint8), "empty": np.zeros((0, 4))}
-    runtime.write_arrays(tmp_path / "s", arrays, {"note": "x"})
+    bake.write_arrays(tmp_path / "s", arrays, {"note": "x"})
     header, back = runtime.read_arrays(tmp_path / "s")
     assert header["note"] == "x" and header["bin"] == "s.bin"
     for name, value in arrays.items():
@@ -34,7 +34,7 @@ def test_arrays_round_trip_byte_exact_with_aligned_offsets(tmp_path):
 
 def test_arrays_refuse_bad_input(tmp_path):
     with pytest.raises(TypeError, match=r"arrays\['flags'\]: dtype bool"):
-        runtime.write_arrays(tmp_path / "s", {"flags": np.zeros(3, bool)})
+        bake.write_arrays(tmp_path / "s", {"flags": np.zeros(3, bool)})
     (tmp_path / "t.json").write_text(json.dumps({"format": "other"}))
     with pytest.raises(ValueError, match="not an 'anisognn-arrays-1' header"):
         runtime.read_arrays(tmp_path / "t")

@@ -252,12 +252,3 @@ def test_runtime_shape_gradients_are_anisofems():
                                mesh.shape_gradients, rtol=1e-12, atol=1e-9)
 
 
-def force_only_net(aggregation="directional"):
-    """A random (decoder normal-initialized) 16 x 2 force_only network in float64."""
-    torch.manual_seed(0)
-    net = GraphNet(ModelConfig(latent=16, steps=2, aggregation=aggregation, elastic_force=True,
-                               deformation_inputs=False, force_only=True))
-    torch.nn.init.normal_(net.decoder[-1].weight)
-    return net.double()
-
-

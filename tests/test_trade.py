@@ -73,6 +73,7 @@ def test_trade_command_on_a_mesh_file_with_the_surrogates(tmp_path):
     assert rows["newton x1"]["max_error"] > 0
     surrogates = [row for row in out["rungs"] if row["kind"] == "surrogate"]
     assert {"directional (shipped)", "directional + newton x1", "directional + cg x40",
+            "directional.onnx (shipped)",
             "no network + cg x40"} <= {s["name"] for s in surrogates}
     assert all(np.isfinite(s["errors"]).all() for s in surrogates)
     # forty CG iterations after the step bring the end of the transient closer to the FEM
@@ -109,8 +110,7 @@ def test_surrogate_rungs_at_the_extremes_report_instead_of_returning_nan(beam, m
     scene = af.Scene(beam, material, fixed=af.metrics.end_vertices(beam, 0, "min"),
                      gravity=(0, 0, -9.81))
     notes = []
-    from anisognn.rungs import surrogate_rungs
-    rungs = [ladder.fem_rung("exact")] + surrogate_rungs(scene, 0.02, notes)
+    rungs = [ladder.fem_rung("exact")] + ladder.registered_rungs(scene, 0.02, notes)
     out = ladder.trade(scene, steps=10, rungs=rungs, progress=False)
     assert len(out["rungs"]) >= 6 and out["rungs"][0]["stable"]
     print([(r["name"], r["max_error"], r["stable"]) for r in out["rungs"]], notes)
@@ -137,10 +137,15 @@ def test_surrogates_are_not_scored_against_an_inverted_or_foreign_reference():
     nh = ladder.trade(scene("neohookean"), steps=10, rungs=list(rungs), progress=False)
     assert [r["name"] for r in nh["rungs"]] == ["exact", "newton x1", "still"]
     assert all(r["inverted"] == 0 for r in nh["rungs"]) and not nh["notes"]
-    from anisognn.rungs import surrogate_rungs
     notes = []
-    assert surrogate_rungs(scene("neohookean"), 0.02, notes) == []
+    assert ladder.registered_rungs(scene("neohookean"), 0.02, notes) == []
     assert "trained on the StVK base material" in notes[0]
+    assert notes[1].startswith("ONNX rung skipped: runtime.py steps the trained material (StVK")
+    notes = []
+    assert ladder.registered_rungs(scene("stvk"), 0.01, notes) == []
+    assert notes == ["surrogate rungs skipped: the shipped models step dt = 0.02 s, the trade "
+                     "runs dt = 0.01 s",
+                     "ONNX rung skipped: the model steps dt = 0.02 s, the trade runs dt = 0.01 s"]
 
 
 def test_plot_labels_of_crowded_rungs_stack_up_inside_the_axes():
