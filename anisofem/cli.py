@@ -192,7 +192,8 @@ def _trade(args):
             raise FileNotFoundError(f"the folder of {path!r} does not exist")
     mesh = _SHAPES[args.scene](args) if args.scene in _SHAPES else read_mesh(args.scene)
     result = ladder.trade(_scene(args, mesh), args.steps, args.dt, tolerance=args.tolerance,
-                          surrogates=not args.no_surrogates, name=args.scene)
+                          rungs=ladder.fem_rungs() if args.no_surrogates else None,
+                          name=args.scene)
     print(ladder.trade_table(result))
     if args.json:
         write_json(args.json, result)

@@ -17,9 +17,11 @@ def result_path(name):
 
 @contextlib.contextmanager
 def atomic_path(path, suffix=""):
-    """Yield a temporary path next to `path` (ending in suffix); on a clean exit rename it to
-    `path` with the permissions of a newly created file, on an error remove it."""
+    """Yield a temporary path next to `path` (ending in suffix; its folder made when missing);
+    on a clean exit rename it to `path` with the permissions of a newly created file, on an
+    error remove it."""
     folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=suffix, dir=folder)
     os.close(fd)
     try:
@@ -34,9 +36,7 @@ def atomic_path(path, suffix=""):
 
 
 def write_json(path, obj):
-    """Write obj as indented JSON to path atomically (numpy scalars as floats), making its
-    folder when it is missing."""
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    """Write obj as indented JSON to path atomically (numpy scalars as floats)."""
     with atomic_path(path, ".json") as tmp, open(tmp, "w") as f:
         json.dump(obj, f, indent=1, default=float)
 

@@ -44,15 +44,13 @@ def _meshio_read(path):
     formats = sorted(meshio.extension_to_filetypes.get(ext, [None]), key=lambda f: f != "gmsh")
     errors = []
     for fmt in formats:
-        said = io.StringIO()
         try:
-            with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            with contextlib.redirect_stdout(io.StringIO()), \
+                    contextlib.redirect_stderr(io.StringIO()):
                 return meshio.read(path, file_format=fmt)
         except (Exception, SystemExit) as err:  # ReadError, ValueError, IndexError, exit...
-            why = [line.strip() for line in [str(err), *said.getvalue().splitlines()]
-                   if line.strip() and not line.strip().isdigit()
-                   and "Couldn't read file" not in line]
-            errors.append(f"not {fmt or 'a mesh'}" + (f": {why[0][:200]}" if why else ""))
+            why = "" if isinstance(err, SystemExit) or not str(err) else f": {str(err)[:200]}"
+            errors.append(f"not {fmt or 'a mesh'}{why}")
     raise ValueError(f"path: meshio cannot read {path!r} ({'; '.join(errors)})")
 
 

@@ -57,10 +57,10 @@ RUNG_GROUP = "anisofem.rungs"
 class Rung:
     """One way of rolling a scene forward.
 
-    name: shown in tables. kind: "fem", or "surrogate" for a learned model's rung. make(scene, dt) returns advance(x, v)
-    -> (x, v, info) for one step of dt, with info a dict holding "failed" (bool) and any of
-    "iterations", "factorizations", "linear_iterations". dt_factor: the rung steps dt_factor
-    times the scene's dt.
+    name: shown in tables. kind: "fem", or "surrogate" for a learned model's rung. make(scene,
+    dt) returns advance(x, v) -> (x, v, info) for one step of dt, with info a dict holding
+    "failed" (bool) and any of "iterations", "factorizations", "linear_iterations". dt_factor:
+    the rung steps dt_factor times the scene's dt.
     """
     name: str
     kind: str
@@ -115,14 +115,13 @@ def checked_steps(steps, multiple):
     return sorted(k for k in picks | {steps} if k <= steps)
 
 
-def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, surrogates=True,
-          progress=True, name=""):
+def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, progress=True, name=""):
     """Run every rung on scene and compare it with the exact rollout.
 
     scene: an anisofem.Scene (held enough for a static solve: its static deflection is the
-    error scale). steps: steps of dt (s) from rest. rungs: Rungs (default fem_rungs(), plus
-    registered_rungs() when surrogates). tolerance:
-    recommend the cheapest stable rung whose errors are all within it. progress: report each
+    error scale). steps: steps of dt (s) from rest. rungs: Rungs (default fem_rungs() plus
+    registered_rungs(); fem_rungs() alone leaves the surrogates out). tolerance: recommend the
+    cheapest stable rung whose errors are all within it. progress: report each
     rung's progress on stderr. name: what the scene is called in tables and plots.
 
     Returns a dict: {"scene": {...}, "times": [s], "rungs": [{"name", "kind", "ms_per_step",
@@ -138,9 +137,7 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, surrogates=True
         raise ValueError(f"dt: must be > 0 s, got {dt}")
     notes = []
     if rungs is None:
-        rungs = fem_rungs()
-        if surrogates:
-            rungs += registered_rungs(scene, dt, notes)
+        rungs = fem_rungs() + registered_rungs(scene, dt, notes)
     if not rungs or rungs[0].name != "exact":
         raise ValueError("rungs: the first rung must be the exact one (named 'exact')")
     multiple = math.lcm(*(r.dt_factor for r in rungs))

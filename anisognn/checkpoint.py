@@ -18,7 +18,6 @@ def save(path, model, **extra):
     lists and dicts of them) to path atomically."""
     payload = {"format": FORMAT, "version": VERSION, "config": model.config.to_dict(),
                "model": model.state_dict(), **extra}
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with atomic_path(path, ".pt") as tmp:
         torch.save(payload, tmp)
 

@@ -279,23 +279,6 @@ def _table(header, blocks):
     return out
 
 
-def format_summary(summary):
-    """The summary dict as text lines: a row per simulator, then the ratios if any."""
-    keys = ("tip_ratio_mean", "tip_ratio_max", "force_mean", "volume_change_error_max",
-            "rest_acceleration_mean", "rest_stiffness_mean")
-    rows = [[name] + [f"{s[k]:.3g}" for k in keys] + ["yes" if s["all_bounded"] else "NO"]
-            for name, s in summary.items() if name != "ratios"]
-    lines = ["Summary: tip error over the FEM's deflection (mean, largest), mean force (N), "
-             "worst", "volume change error, at rest: mean acceleration (m/s^2) and stiffness"]
-    lines += _table(["model", "tip", "largest", "force", "dV", "rest a", "rest k", "bounded"],
-                    [(None, rows)])
-    r = summary.get("ratios")
-    if r:
-        lines.append(f"first model over the second: tip error {r['tip_error_mean']:.2f} (largest"
-                     f" {r['tip_error_max']:.2f}), mean force {r['force_mean']:.2f}")
-    return lines
-
-
 def summary(results, suite, ratio=None):
     """Per simulator: mean tip ratio, mean imbalanced force, worst volume change error, mean
     acceleration at the FEM's rest, mean stiffness at rest, all finite and bounded; with
@@ -347,7 +330,6 @@ def run(models, steps=STEPS, out=result_path("evaluation.json"), echo=print, pro
         echo(f"not scored: {skipped['case']}: {skipped['reason']}")
     report = {"steps": steps, "dt": DT, "results": results, "not_scored": not_scored,
               "summary": summary(results, suite, ratio)}
-    echo("\n" + "\n".join(format_summary(report["summary"])))
     if out:
         write_json(os.fspath(out), report)
         echo(f"wrote {out}")

@@ -61,22 +61,13 @@ class ModelConfig:
         if self.aggregation not in AGGREGATIONS:
             raise ValueError(f"aggregation: expected one of {AGGREGATIONS}, got "
                              f"{self.aggregation!r}")
-        for name in ("latent", "hidden_layers", "steps"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"{name}: expected a positive integer, got {value!r}")
+        for name in ("latent", "hidden_layers", "steps", "galerkin_passes"):
+            check_integer(self, name, 1)
+        check_integer(self, "cg_iterations", 0)
         if not self.dt > 0:
             raise ValueError(f"dt: expected a time step > 0 s, got {self.dt!r}")
         if not isinstance(self.galerkin, bool):
             raise ValueError(f"galerkin: expected true or false, got {self.galerkin!r}")
-        if not (isinstance(self.galerkin_passes, int) and not isinstance(self.galerkin_passes, bool)
-                and self.galerkin_passes >= 1):
-            raise ValueError(f"galerkin_passes: expected an integer >= 1, got "
-                             f"{self.galerkin_passes!r}")
-        if not (isinstance(self.cg_iterations, int) and not isinstance(self.cg_iterations, bool)
-                and self.cg_iterations >= 0):
-            raise ValueError(f"cg_iterations: expected an integer >= 0, got "
-                             f"{self.cg_iterations!r}")
         if self.galerkin_passes > 1 and not self.galerkin:
             raise ValueError("galerkin_passes: repeats the Galerkin step, so more than 1 needs "
                              "galerkin = true")
@@ -95,6 +86,14 @@ class ModelConfig:
 
     def to_dict(self):
         return asdict(self)
+
+
+def check_integer(config, name, minimum, section=""):
+    """ValueError naming the field (in its config section) unless config.name is an integer
+    (not a bool) >= minimum."""
+    value = getattr(config, name)
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ValueError(f"{section}{name}: must be an integer >= {minimum}, got {value!r}")
 
 
 class Normalizer(nn.Module):

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from anisofem import Material, Scene, box_beam, cylinder_beam, simulate, solve
 
+from .model import check_integer
+
 YOUNG = 1e5
 POISSON = 0.48
 DENSITY = 1000.0
@@ -60,9 +62,7 @@ class SamplerConfig:
                      "equilibrium_spread", "noise_position", "noise_velocity"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"[sampler] {name}: must be >= 0, got {getattr(self, name)}")
-        if not (isinstance(self.deform_steps, int) and self.deform_steps >= 1):
-            raise ValueError(f"[sampler] deform_steps: must be an integer >= 1, got "
-                             f"{self.deform_steps!r}")
+        check_integer(self, "deform_steps", 1, "[sampler] ")
         if not self.dt > 0:
             raise ValueError(f"[sampler] dt: must be > 0 s, got {self.dt}")
 

@@ -37,7 +37,7 @@ from . import checkpoint
 from .graph import batch as batch_graphs
 from .graph import from_scene
 from .loss import BatchPotential, potential_loss
-from .model import GraphNet, ModelConfig, integrate
+from .model import GraphNet, ModelConfig, check_integer, integrate
 from .sampler import Sample, Sampler, SamplerConfig
 
 #: sample streams of a seed: training uses the seed itself, these offsets the others
@@ -93,9 +93,7 @@ class TrainConfig:
         if not 0 <= self.rollout_probability <= 1:
             raise ValueError("[train] rollout_probability: must be in [0, 1], got "
                              f"{self.rollout_probability}")
-        if not (isinstance(self.rollout_steps, int) and self.rollout_steps >= 1):
-            raise ValueError(f"[train] rollout_steps: must be an integer >= 1, got "
-                             f"{self.rollout_steps!r}")
+        check_integer(self, "rollout_steps", 1, "[train] ")
         if not isinstance(self.through_galerkin, bool):
             raise ValueError(f"[train] through_galerkin: expected true or false, got "
                              f"{self.through_galerkin!r}")

@@ -11,7 +11,6 @@ dependencies, and the network is a static graph of Gather, MatMul, LayerNorm and
 ops that the TorchScript exporter handles completely.
 """
 import json
-import os
 import warnings
 
 import numpy as np
@@ -94,7 +93,6 @@ def export(net, path, version=None):
     names = [name for name, _, _ in INPUTS]
     dynamic = {name: {i: d for i, d in enumerate(shape) if isinstance(d, str)}
                for name, _, shape in INPUTS + OUTPUTS}
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with atomic_path(path, ".onnx") as tmp:
         with warnings.catch_warnings(), torch.no_grad():
             warnings.simplefilter("ignore", DeprecationWarning)

@@ -17,6 +17,15 @@ else:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 
+@pytest.fixture(autouse=True)
+def one_torch_thread():
+    """Every test starts with torch on one thread: some sequences of earlier tests leave it on
+    two (numba's and torch's OpenMP share libgomp), and a training resumed in this process must
+    sum in the order of the one-thread process it continues."""
+    if torch is not None:
+        torch.set_num_threads(1)
+
+
 @pytest.fixture(scope="session")
 def beam():
     """The paper-sized cantilever: 0.1 x 0.02 x 0.02 m, 200 tets."""

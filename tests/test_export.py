@@ -321,7 +321,7 @@ def test_cli_galerkin_flags_choose_how_the_exported_model_steps(tmp_path, capsys
     assert np.abs(steps["2 Galerkin passes, 5 CG iterations"] - two).max() > 1e-3 * np.abs(
         two).max()
     for flags, error in ((["--galerkin", "off", "--galerkin-passes", "2"], "--galerkin-passes"),
-                         (["--galerkin-passes", "0"], "galerkin_passes: expected an integer"),
+                         (["--galerkin-passes", "0"], "galerkin_passes: must be an integer >= 1"),
                          (["--cg-iterations", "-1"], "--cg-iterations: expected an integer")):
         with pytest.raises(SystemExit, match=error):
             cli.main(["directional", "-o", str(tmp_path / "bad.onnx")] + flags)

@@ -16,7 +16,7 @@ def result(beam):
     d = np.array([np.cos(np.radians(40)), 0.0, np.sin(np.radians(40))])
     scene = af.Scene(beam, af.Material(1e5, 0.48, 1000.0, d, 1e5),
                      fixed=af.metrics.end_vertices(beam, 0, "min"), gravity=(0, 0, -9.81))
-    return ladder.trade(scene, steps=20, surrogates=False, progress=False)
+    return ladder.trade(scene, steps=20, rungs=ladder.fem_rungs(), progress=False)
 
 
 def test_exact_is_the_reference_and_capped_rungs_are_not(result):
