@@ -15,6 +15,8 @@ import os
 
 import numpy as np
 
+import anisofem
+from anisofem import metrics
 from anisofem.files import atomic_path
 from anisofem.scene import GRAVITY
 
@@ -35,8 +37,6 @@ ANGLES = (0, 15, 30, 45, 60, 75, 90)
 
 def scene_mesh(name):
     """(vertices (n, 3) m, tets (m, 4), held (n, 3) bool) of a scene of SCENES."""
-    import anisofem
-    from anisofem import metrics
     _, shape, (axis, side) = SCENES[name]
     mesh = {"box": lambda: anisofem.box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2)),
             "cylinder": lambda: anisofem.cylinder_beam(0.1, 0.01, 8, 2, 0),
