@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 
-from . import bench, bench_large, ladder, meshgen, methods
+from . import bench, bench_large, ladder, meshgen, methods, robustness
 from .files import write_json
 from .io import check_output_path, read_mesh, write_mesh
 from .inversion import inversion
@@ -132,10 +132,17 @@ def _parser():
     b.add_argument("--crossover", action="store_true",
                    help="exact Newton against multigrid CG from 4,800 to 19,200 tets, where "
                         "method='auto' switches (minutes)")
+    b.add_argument("--robustness", action="store_true",
+                   help="static solves of 324 soft cantilevers at 1-100 g: does each reach a "
+                        "minimum (about 10 minutes)")
+    b.add_argument("--dynamics", action="store_true",
+                   help="with --robustness: ten backward-Euler steps of 162 of them at dt = "
+                        "0.02, 0.2 and 1 s too (longer)")
     b.add_argument("--json", default=None,
                    help="where to write the results (default: results/bench_anisofem.json, "
                         "with --large results/bench_large.json, with --crossover "
-                        "results/bench_crossover.json)")
+                        "results/bench_crossover.json, with --robustness "
+                        "results/robustness.json)")
     return p
 
 
@@ -174,7 +181,8 @@ def _solve(args):
         res = solve(scene, **how)
         x, ok = res.x, res.converged
         print(f"{res.iterations} Newton iterations, converged: {ok}, relative residual "
-              f"{res.residuals[-1]:.2e}")
+              f"{res.residuals[-1]:.2e}, {'a minimum' if res.stability.minimum else 'a saddle'}"
+              f" (smallest eigenvalue of the Hessian {res.stability.smallest:.3g} N/m)")
     print("tip displacement (m):", np.array2string(tip_displacement(mesh, x), precision=6))
     inv = inversion(mesh, x)
     if not inv.physical:
@@ -207,10 +215,14 @@ def _trade(args):
 def _bench(args):
     if args.huge and not args.large:
         raise ValueError("--huge: goes with --large")
-    if args.large and args.crossover:
-        raise ValueError("--crossover: runs alone, not with --large")
+    if sum((args.large, args.crossover, args.robustness)) > 1:
+        raise ValueError("--large, --crossover, --robustness: one at a time")
+    if args.dynamics and not args.robustness:
+        raise ValueError("--dynamics: goes with --robustness")
     out = {} if args.json is None else {"out": args.json}
-    if args.large:
+    if args.robustness:
+        robustness.run(args.dynamics, **out)
+    elif args.large:
         bench_large.run(args.huge, **out)
     elif args.crossover:
         bench_large.crossover(**out)

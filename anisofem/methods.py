@@ -60,9 +60,14 @@ import numpy as np
 
 from . import linsolve, multigrid
 from .frames import VertexFrames
+from .stability import stability
 
 #: Curvature pairs of L-BFGS with s.y below this times |s| |y| are skipped.
 CURVATURE_MIN = 1e-10
+#: An iteration that leaves more than this share of the gradient norm counts as stalling.
+STALLING = 0.5
+#: The first step off a saddle met at the tolerance, as a share of the mesh's diagonal.
+SADDLE_STEP = 1e-3
 
 
 def gradient_tolerance(potential, rtol, atol=None):
@@ -131,6 +136,12 @@ class Method:
         """Told after each accepted step: s = x_new - x, y = g_new - g (unknown space),
         progress = |g_new| / |g|."""
 
+    def leave_saddle(self, x, g):
+        """At positions x that meet the tolerance (free gradient g): None at a minimum (or
+        where the method cannot tell), else (d, d^T H d < 0), a step along negative curvature
+        that the loop line-searches before it calls the solve converged."""
+        return None
+
     def __repr__(self):
         knobs = ", ".join(f"{k}={getattr(self, k)!r}" for k in _knobs(type(self)))
         return f"{type(self).__name__}({knobs})"
@@ -163,6 +174,9 @@ class Newton(Method):
         super().start(potential)
         self.solver = linsolve.make(self.linear_solver, potential.scene.n_free)
         self.layout = potential.scene.layout(self.solver.layout)
+        self.stalling = False    # the last iteration left more than STALLING of the gradient
+        self.indefinite = False  # the last true Hessian was not positive definite
+        self.curvature = None    # the last Stability computed (its eigenvector starts the next)
 
     def threads(self):
         return self.solver.threads()
@@ -187,12 +201,39 @@ class Newton(Method):
     def forget(self):
         """Called when a direction failed to make progress."""
 
+    def accepted(self, s, y, progress):
+        self.stalling = progress > STALLING
+
     def directions(self, x, g, residual):
         for projected in self._CHOICES[self.projection]:
-            if self.refresh(x, projected):
+            factored = self.refresh(x, projected)
+            if not projected:
+                self.indefinite = not factored
+            if factored:
                 self.counts["projected"] += projected
-                yield -self.apply(g)
+                p = -self.apply(g)
+                if projected and self.stalling and self.projection == "adaptive":
+                    escape = self._negative_curvature(x, g, math.sqrt(float(p @ p)))
+                    if escape is not None:
+                        yield p + escape[0], escape[1]
+                yield p
                 self.forget()
+
+    def _negative_curvature(self, x, g, length):
+        """(d, d^T H d) for the unit eigenvector of the true Hessian's most negative eigenvalue
+        at x scaled to length and pointed downhill, or None where the Hessian has none."""
+        previous = None if self.curvature is None else self.curvature.vector
+        self.curvature = stability(self.potential, x, previous)
+        if self.curvature.minimum or not length > 0:
+            return None
+        d = self.curvature.vector * length
+        return (-d if float(d @ g) > 0 else d), self.curvature.smallest * length ** 2
+
+    def leave_saddle(self, x, g):
+        if self.projection != "adaptive" or not self.indefinite:
+            return None
+        self.indefinite = False  # asked once per indefinite Hessian met
+        return self._negative_curvature(x, g, SADDLE_STEP * self.potential.scene.mesh.size)
 
 
 def _key(potential):

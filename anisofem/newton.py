@@ -32,6 +32,14 @@ from .inversion import Inversion, inversion
 
 ARMIJO = 1e-4
 MIN_STEP = 1e-10
+#: Energy changes below this share of |G| cannot rank two points: the line search then accepts
+#: one where the gradient norm halves
+ENERGY_NOISE = 1e-13
+#: A rise of G below this share of |G| with the gradient norm down 100x is round-off too: a
+#: converging step of a small Neo-Hookean cantilever raised G by 4e-13 of |G| while its
+#: gradient fell 20,000x (taking this as the noise level above made a StVK cantilever at
+#: 10,000 g stall instead)
+ENERGY_ROUNDOFF = 1e-11
 
 
 class ConvergenceWarning(RuntimeWarning):
@@ -70,6 +78,16 @@ class NewtonResult:
     message: str = ""
     seconds: float = 0.0
     inversion: Inversion = None
+    _stability: object = field(default=None, repr=False)
+
+    @property
+    def stability(self):
+        """For a static solve, the anisofem.stability.Stability of x, computed on first access:
+        the smallest eigenvalue of the free Hessian, .minimum False where x is a saddle. None
+        for a step."""
+        if callable(self._stability):
+            self._stability = self._stability()
+        return self._stability
 
     @property
     def physical(self):
@@ -136,7 +154,16 @@ def _iterate(potential, x0, method, accept):
     it = 0
     while True:
         if gnorm <= tol:
-            return x, True, it, res, energy, "converged"
+            escape = None if it >= method.max_iter else method.leave_saddle(x, g)
+            step = escape and _line_search(potential, x, energy, g, gnorm, free, *escape)
+            if not step:
+                return x, True, it, res, energy, "converged"
+            it += 1  # a saddle met at the tolerance, left along its negative curvature
+            x, energy, grad, _ = step
+            g = grad.ravel()[free]
+            gnorm = _norm(g)
+            res.append(gnorm / scale)
+            continue
         if it >= method.max_iter:
             return x, False, it, res, energy, "max_iter reached"
         if method.budget and it >= method.iterations and (accept is None or
@@ -145,7 +172,7 @@ def _iterate(potential, x0, method, accept):
         it += 1
         step = None
         for p in method.directions(x, g, res[-1]):
-            step = _line_search(potential, x, energy, g, gnorm, free, p)
+            step = _line_search(potential, x, energy, g, gnorm, free, *_curved(p))
             if step is not None:
                 break
         if step is None:
@@ -158,19 +185,28 @@ def _iterate(potential, x0, method, accept):
         res.append(gnorm / scale)
 
 
+def _curved(direction):
+    """(p, curvature) of a direction from Method.directions: an array p, or a pair (p, d^T H d
+    < 0 in N m of its part d along negative curvature)."""
+    return direction if isinstance(direction, tuple) else (direction, 0.0)
+
+
 def _norm(v):
     """Euclidean norm of a 1-D float array (cheaper than np.linalg.norm on small ones)."""
     return math.sqrt(float(np.dot(v, v)))
 
 
-def _line_search(potential, x, energy, g, gnorm, free, p):
+def _line_search(potential, x, energy, g, gnorm, free, p, curvature=0.0):
     """Backtracking along direction p (unknown space) from x: (x_new, energy, gradient (n, 3),
     step taken (unknown space)) or None if p is no descent direction or nothing makes
-    progress."""
+    progress. curvature < 0 (N m): the second-order decrease p promises along negative
+    curvature, for a p that descends by it where the slope does not (Armijo's condition on
+    alpha slope + alpha^2 curvature / 2, as in More and Sorensen's curvilinear search)."""
     slope = float(np.dot(p, g))
-    if not math.isfinite(slope) or slope >= -1e-14 * _norm(p) * gnorm:
+    if not (math.isfinite(slope) and math.isfinite(curvature)) or (
+            slope >= -1e-14 * _norm(p) * gnorm and not curvature < 0):
         return None
-    noise = 1e-13 * max(abs(energy), 1e-300)
+    noise = ENERGY_NOISE * max(abs(energy), 1e-300)
     alpha = 1.0
     while alpha >= MIN_STEP:
         xt = x.copy()
@@ -180,7 +216,10 @@ def _line_search(potential, x, energy, g, gnorm, free, p):
             # below round-off the energy cannot rank the points: accept if the gradient halves
             if _norm(gt.ravel()[free]) < 0.5 * gnorm:
                 return xt, et, gt, alpha * p
-        elif et <= energy + ARMIJO * alpha * slope:
+        elif et <= energy + ARMIJO * alpha * (slope + 0.5 * alpha * curvature):
+            return xt, et, gt, alpha * p
+        elif et - energy <= ENERGY_ROUNDOFF * abs(energy) and \
+                _norm(gt.ravel()[free]) < 0.01 * gnorm:
             return xt, et, gt, alpha * p
         alpha *= 0.5
     return None

@@ -8,6 +8,7 @@ from ._validate import as_count, as_scalar
 from .newton import NewtonResult, minimize
 from .potential import Potential, check_positions
 from .scene import check_scene
+from .stability import stability
 
 def solve(scene, x0=None, method="auto", warn=True, **options):
     """Static equilibrium of a Scene.
@@ -17,7 +18,8 @@ def solve(scene, x0=None, method="auto", warn=True, **options):
     Newton on large meshes; anisofem.methods.choose), "newton", "reuse", "lbfgs", "cg" or an
     anisofem.methods.Method; options: the method's (rtol, atol, max_iter, iterations,
     projection, linear_solver, ...; see anisofem.methods). warn: a ConvergenceWarning when the
-    solve fails. Returns a NewtonResult; .x is the (n, 3) equilibrium. Raises ValueError if
+    solve fails. Returns a NewtonResult; .x is the (n, 3) equilibrium, .stability says
+    whether it is a minimum or a saddle (computed when asked). Raises ValueError if
     the scene holds too little to have a unique equilibrium.
     """
     check_scene(scene)
@@ -30,7 +32,10 @@ def solve(scene, x0=None, method="auto", warn=True, **options):
                          f"(det F <= 0), where their energy is infinite; start from a state "
                          f"with det F > 0 (prescribed positions far from rest: reach them in "
                          f"steps, scene.held_at)")
-    return minimize(Potential(scene), x0, method, warn=warn, **options)
+    potential = Potential(scene)
+    result = minimize(potential, x0, method, warn=warn, **options)
+    result._stability = lambda: stability(potential, result.x)
+    return result
 
 
 @dataclass

@@ -1,0 +1,71 @@
+"""Newton leaves saddles: the static solves that used to stop short of an equilibrium (soft
+cantilevers whose compressed face meets a mesh-scale instability) reach a minimum, a column
+past its buckling load leaves the straight state, and the stability verdict is the smallest
+eigenvalue of the free Hessian."""
+import warnings
+
+import numpy as np
+import pytest
+
+import anisofem as af
+from anisofem import robustness
+from anisofem.potential import Potential
+from anisofem.stability import stability
+
+#: (length m, base, g): 20 x 4 x 4 cells, fibers along x, kappa = E; each ended "max_iter
+#: reached" or "the line search stalled" with the projected-Hessian fallback alone
+STOPPED_BEFORE = [(0.1, "stvk", 5), (0.1, "neohookean", 10), (0.1, "neohookean", 20),
+                  (0.2, "stvk", 2), (0.2, "stvk", 5), (0.2, "neohookean", 5),
+                  (0.2, "neohookean", 10)]
+
+
+@pytest.mark.parametrize("length, base, g", STOPPED_BEFORE)
+def test_soft_cantilevers_reach_a_minimum(length, base, g):
+    scene = robustness.scene(length, (20, 4, 4), "x", base, g)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", af.InversionWarning)  # StVK may invert: it says so
+        result = af.solve(scene)
+    assert result.converged, result.message
+    assert result.stability.minimum, result.stability
+    assert result.physical or base == "stvk"
+
+
+def column(force):
+    """A 0.1 m Neo-Hookean column held at x = 0 under a dead compressive force (N) on its
+    free end, past the buckling load from about 1 N on this mesh."""
+    mesh = af.box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
+    tip = af.metrics.end_vertices(mesh, 0, "max")
+    f = np.zeros((mesh.n_vertices, 3))
+    f[tip, 0] = -force / tip.size
+    return af.Scene(mesh, af.Material(model="neohookean"),
+                    fixed=af.metrics.end_vertices(mesh, 0, "min"), nodal_force=f)
+
+
+def test_a_buckled_column_leaves_the_straight_saddle_that_projection_alone_stops_at():
+    scene = column(1.0)
+    straight = af.solve(scene, projection="always")
+    assert straight.converged and not straight.stability.minimum
+    assert straight.stability.smallest < 0
+    assert np.abs(af.metrics.tip_displacement(scene.mesh, straight.x)[1:]).max() < 1e-9
+    buckled = af.solve(scene)
+    assert buckled.converged and buckled.stability.minimum and buckled.physical
+    assert buckled.energy < straight.energy
+    assert np.abs(af.metrics.tip_displacement(scene.mesh, buckled.x)[1:]).max() > 1e-3
+    below = af.solve(column(0.5))  # under the buckling load the straight state is the minimum
+    assert below.stability.minimum and below.iterations <= 5
+
+
+@pytest.mark.parametrize("state", ["rest", "bent", "crushed"])
+def test_lanczos_smallest_eigenvalue_is_the_dense_one(state):
+    mesh = af.box_beam(cells=(4, 2, 2))
+    scene = af.Scene(mesh, af.Material(1e5, 0.48, 1000.0, (0.6, 0.0, 0.8), 5e5),
+                     fixed=af.metrics.end_vertices(mesh, 0, "min"), gravity=(0, 0, -9.81))
+    x = {"rest": mesh.vertices, "bent": af.solve(scene).x,
+         "crushed": mesh.vertices * np.array([0.7, 1.0, 1.0])}[state]
+    got = stability(Potential(scene), x)
+    free = scene.free_dofs
+    dense = af.hessian(scene, x).toarray()[np.ix_(free, free)]
+    values = np.linalg.eigvalsh(dense)
+    assert got.smallest == pytest.approx(values[0], rel=1e-6, abs=1e-9 * values[-1])
+    assert got.minimum == (values[0] >= -1e-9 * dense.diagonal().max())
+    assert abs(got.vector @ dense @ got.vector - values[0]) <= 1e-6 * values[-1]
