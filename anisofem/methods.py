@@ -64,8 +64,9 @@ from .stability import stability
 
 #: Curvature pairs of L-BFGS with s.y below this times |s| |y| are skipped.
 CURVATURE_MIN = 1e-10
-#: An iteration that leaves more than this share of the gradient norm counts as stalling.
-STALLING = 0.5
+#: An iteration that leaves more than this share of the gradient norm counts as stalling (0.5
+#: instead: 67 against 72 of 76 hard cantilevers reached a minimum, in 1.8x the time).
+STALLING = 0.9
 #: The first step off a saddle met at the tolerance, as a share of the mesh's diagonal.
 SADDLE_STEP = 1e-3
 
