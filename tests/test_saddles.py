@@ -69,3 +69,16 @@ def test_lanczos_smallest_eigenvalue_is_the_dense_one(state):
     assert got.smallest == pytest.approx(values[0], rel=1e-6, abs=1e-9 * values[-1])
     assert got.minimum == (values[0] >= -1e-9 * dense.diagonal().max())
     assert abs(got.vector @ dense @ got.vector - values[0]) <= 1e-6 * values[-1]
+
+
+def test_robustness_report_counts_minima_and_lists_the_rest(capsys):
+    rows = [robustness.static_row(0.1, (4, 2, 2), "x", "neohookean", 1)]
+    assert rows[0]["converged"] and rows[0]["minimum"] and rows[0]["inverted"] == 0
+    stuck = dict(rows[0], converged=False, minimum=False, message="max_iter reached",
+                 smallest_eigenvalue=-3.0, g=100)
+    dyn = robustness.dynamic_row(0.1, (4, 2, 2), "x", "stvk", 10, 0.2)
+    assert dyn["converged"] and dyn["steps"] == robustness.STEPS
+    robustness.print_report({"statics": rows + [stuck], "dynamics": [dyn]})
+    said = capsys.readouterr().out
+    assert "not a minimum: 0.1 m 4x2x2 fiber x neohookean 100 g: max_iter reached" in said
+    assert "stvk          10 g  dt 0.2   |   1 of 1" in said and "   1/1 " in said
