@@ -65,7 +65,7 @@ from .stability import stability
 #: Curvature pairs of L-BFGS with s.y below this times |s| |y| are skipped.
 CURVATURE_MIN = 1e-10
 #: An iteration that leaves more than this share of the gradient norm counts as stalling (0.5
-#: instead: 67 against 72 of 76 hard cantilevers reached a minimum, in 1.8x the time).
+#: measured: docs/experiments.md)
 STALLING = 0.9
 #: The first step off a saddle met at the tolerance, as a share of the mesh's diagonal.
 SADDLE_STEP = 1e-3
@@ -185,15 +185,23 @@ class Newton(Method):
     def refresh(self, x, projected, data=None):
         """Factor the Hessian at x (assembled unless its data in self.layout is given) and keep
         it as self._solve; False when it cannot be factored."""
+        solve = self._factor(x, projected, data)
+        if solve is None:
+            return False
+        self._solve = solve
+        return True
+
+    def _factor(self, x, projected, data=None):
+        """The solve of the Hessian at x factored (see refresh), or None where the factorization
+        fails (the true Hessian not positive definite)."""
         if data is None:
             data = self.potential.hessian_data(x, self.layout, project=projected,
                                                want_grad=False)[2]
         self.counts["factorizations"] += 1
         try:
-            self._solve = self.solver.factor(self.layout, data)
+            return self.solver.factor(self.layout, data)
         except linsolve.FactorizationError:
-            return False
-        return True
+            return None
 
     def apply(self, g):
         """The inverse-Hessian approximation applied to g."""
@@ -234,6 +242,8 @@ class Newton(Method):
         if self.projection != "adaptive" or not self.indefinite:
             return None
         self.indefinite = False  # asked once per indefinite Hessian met
+        if self._factor(x, projected=False) is not None:
+            return None  # the true Hessian at x factors: positive definite, no Lanczos needed
         return self._negative_curvature(x, g, SADDLE_STEP * self.potential.scene.mesh.size)
 
 

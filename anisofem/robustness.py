@@ -18,10 +18,8 @@ from .files import publish, result_path
 from .material import Material
 from .meshgen import box_beam
 from .metrics import end_vertices
-from .potential import Potential
 from .scene import Scene
 from .solve import simulate, solve
-from .stability import stability
 
 LENGTHS = (0.05, 0.1, 0.2)                       # m
 CELLS = ((10, 2, 2), (20, 4, 4), (30, 6, 6))
@@ -57,7 +55,7 @@ def static_row(length, cells, fiber, base, load):
         warnings.simplefilter("ignore")
         r = solve(s)
     seconds = time.perf_counter() - t0
-    st = stability(Potential(s), r.x)
+    st = r.stability
     return {"length": length, "cells": list(cells), "fiber": fiber, "base": base, "g": load,
             "converged": r.converged, "iterations": r.iterations, "seconds": seconds,
             "message": r.message, "minimum": st.minimum, "smallest_eigenvalue": st.smallest,

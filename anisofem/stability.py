@@ -21,10 +21,11 @@ MAX_LANCZOS = 5000
 @dataclass
 class Stability:
     """smallest: the smallest eigenvalue of the free Hessian at the state, N/m; scale: the
-    Hessian's largest diagonal entry, N/m; vector: the unit eigenvector (unknown order)."""
+    Hessian's largest diagonal entry, N/m; vector: the unit eigenvector (unknown order), None
+    where Lanczos did not converge."""
     smallest: float
     scale: float
-    vector: np.ndarray
+    vector: np.ndarray = None
 
     @property
     def minimum(self):
@@ -51,5 +52,5 @@ def stability(potential, x, start=None):
         values, vectors = spla.eigsh(H, k=1, which="SA", v0=start, tol=1e-6,
                                      maxiter=MAX_LANCZOS)
     except spla.ArpackNoConvergence:
-        return Stability(math.nan, scale, np.zeros(H.shape[0]))
+        return Stability(math.nan, scale)
     return Stability(float(values[0]), scale, vectors[:, 0])

@@ -82,3 +82,14 @@ def test_robustness_report_counts_minima_and_lists_the_rest(capsys):
     said = capsys.readouterr().out
     assert "not a minimum: 0.1 m 4x2x2 fiber x neohookean 100 g: max_iter reached" in said
     assert "stvk          10 g  dt 0.2   |   1 of 1" in said and "   1/1 " in said
+
+
+def test_a_lanczos_that_does_not_converge_says_unknown_and_the_next_starts_afresh(monkeypatch):
+    scene = robustness.scene(0.1, (20, 4, 4), "x", "stvk", 5)
+    x = af.solve(scene, projection="always", max_iter=20, warn=False).x
+    monkeypatch.setattr("anisofem.stability.MAX_LANCZOS", 1)
+    unknown = stability(Potential(scene), x)
+    assert np.isnan(unknown.smallest) and unknown.minimum and unknown.vector is None
+    monkeypatch.undo()
+    again = stability(Potential(scene), x, unknown.vector)
+    assert again.smallest < 0 and not again.minimum
