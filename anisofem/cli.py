@@ -21,7 +21,7 @@ from .inversion import inversion
 from .material import MODELS, Material
 from .metrics import end_vertices, tip_displacement
 from .scene import Scene
-from .solve import simulate, solve
+from .solve import CONTINUATION, simulate, solve
 
 _SHAPES = {"box": lambda a: meshgen.box_beam(a.size, a.cells),
            "cylinder": lambda a: meshgen.cylinder_beam(a.size[0], a.size[1] / 2, a.cells[0],
@@ -107,6 +107,9 @@ def _parser():
                    help="a fixed budget of iterations per solve instead of a tolerance")
     s.add_argument("--rtol", type=float, default=1e-8,
                    help="relative tolerance of each solve's gradient norm")
+    s.add_argument("--continuation", default="auto", choices=CONTINUATION,
+                   help="static solve: ramp the load in increments where the whole load fails "
+                        "(auto), from the start (always) or never")
     t = sub.add_parser("trade", help="the speed/accuracy trade of every solver rung on a scene "
                                      "(table, JSON, Pareto plot; minutes)", **defaults)
     t.add_argument("scene", help="a mesh file meshio reads, or a shape: "
@@ -178,9 +181,10 @@ def _solve(args):
                   if args.iterations else "")
         print(f"{len(roll.positions) - 1} steps, converged: {roll.converged}{budget}")
     else:
-        res = solve(scene, **how)
+        res = solve(scene, continuation=args.continuation, **how)
         x, ok = res.x, res.converged
-        print(f"{res.iterations} Newton iterations, converged: {ok}, relative residual "
+        ramped = f" in {res.increments} load increments" if res.increments else ""
+        print(f"{res.iterations} Newton iterations{ramped}, converged: {ok}, relative residual "
               f"{res.residuals[-1]:.2e}, {'a minimum' if res.stability.minimum else 'a saddle'}"
               f" (smallest eigenvalue of the Hessian {res.stability.smallest:.3g} N/m)")
     print("tip displacement (m):", np.array2string(tip_displacement(mesh, x), precision=6))

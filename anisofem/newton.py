@@ -33,8 +33,12 @@ from .inversion import Inversion, inversion
 ARMIJO = 1e-4
 MIN_STEP = 1e-10
 #: Energy changes below this share of |G| cannot rank two points: the line search then accepts
-#: one where the gradient norm halves
+#: one where the gradient norm falls to NOISE_PROGRESS of its value or below
 ENERGY_NOISE = 1e-13
+#: 0.9: a Neo-Hookean step converging linearly (0.74 per iteration, the projected Hessian near
+#: a saddle) lowered G by 2e-14 J of 0.2 J, below the noise level; asking the gradient to halve
+#: stalled it at 1e-6 of the load
+NOISE_PROGRESS = 0.9
 #: A rise of G below this share of |G| with the gradient norm down 100x is round-off too: a
 #: converging step of a small Neo-Hookean cantilever raised G by 4e-13 of |G| while its
 #: gradient fell 20,000x (taking this as the noise level above made a StVK cantilever at
@@ -64,7 +68,9 @@ class NewtonResult:
     factorizations: sparse or dense factorizations. linear_iterations: conjugate-gradient
     iterations. method: the method's name. message: why it stopped. seconds: wall time.
     inversion: the anisofem.inversion.Inversion of x (inverted and degenerate elements, the
-    smallest det F); converged speaks of the equations, physical of the state.
+    smallest det F); converged speaks of the equations, physical of the state. increments: the
+    load increments of a static solve by load continuation (anisofem.continuation; 0 where
+    the whole load was solved at once).
     """
     x: np.ndarray
     converged: bool
@@ -78,6 +84,7 @@ class NewtonResult:
     message: str = ""
     seconds: float = 0.0
     inversion: Inversion = None
+    increments: int = 0
     _stability: object = field(default=None, repr=False)
 
     @property
@@ -126,15 +133,23 @@ def minimize(potential, x0, method="auto", *, warn=True, accept=None, **options)
                           method=method.name, message=message,
                           seconds=time.perf_counter() - t0,
                           inversion=inversion(potential.scene.mesh, x), **method.counts)
-    if warn and result.failed:
-        warnings.warn(f"{method.name} did not converge: {message} after {it} iterations, "
-                      f"relative residual {res[-1]:.3g}", ConvergenceWarning, stacklevel=3)
-    if warn and not result.physical:
-        inv = result.inversion
-        warnings.warn(f"{inv.inverted} of {potential.scene.mesh.n_tets} elements are turned "
-                      f"inside out (det F <= 0, smallest {inv.min_volume_ratio:.3g}): the state "
-                      f"is not physical", InversionWarning, stacklevel=3)
+    if warn:
+        report(result, potential.scene.mesh.n_tets, stacklevel=4)
     return result
+
+
+def report(result, n_tets, stacklevel=3):
+    """Warn about a NewtonResult of a mesh of n_tets elements that failed (ConvergenceWarning)
+    or is not physical (InversionWarning); stacklevel: as warnings.warn's, from report."""
+    if result.failed:
+        warnings.warn(f"{result.method} did not converge: {result.message} after "
+                      f"{result.iterations} iterations, relative residual "
+                      f"{result.residuals[-1]:.3g}", ConvergenceWarning, stacklevel=stacklevel)
+    if not result.physical:
+        inv = result.inversion
+        warnings.warn(f"{inv.inverted} of {n_tets} elements are turned inside out (det F "
+                      f"<= 0, smallest {inv.min_volume_ratio:.3g}): the state is not physical",
+                      InversionWarning, stacklevel=stacklevel)
 
 
 def _iterate(potential, x0, method, accept):
@@ -159,24 +174,20 @@ def _iterate(potential, x0, method, accept):
             if not step:
                 return x, True, it, res, energy, "converged"
             it += 1  # a saddle met at the tolerance, left along its negative curvature
-            x, energy, grad, _ = step
-            g = grad.ravel()[free]
-            gnorm = _norm(g)
-            res.append(gnorm / scale)
-            continue
-        if it >= method.max_iter:
-            return x, False, it, res, energy, "max_iter reached"
-        if method.budget and it >= method.iterations and (accept is None or
-                                                          accept(x, energy)):
-            return x, False, it, res, energy, BUDGET_SPENT
-        it += 1
-        step = None
-        for p in method.directions(x, g, res[-1]):
-            step = _line_search(potential, x, energy, g, gnorm, free, *_curved(p))
-            if step is not None:
-                break
-        if step is None:
-            return x, False, it, res, energy, "no descent direction: the line search stalled"
+        else:
+            if it >= method.max_iter:
+                return x, False, it, res, energy, "max_iter reached"
+            if method.budget and it >= method.iterations and (accept is None or
+                                                              accept(x, energy)):
+                return x, False, it, res, energy, BUDGET_SPENT
+            it += 1
+            step = None
+            for p in method.directions(x, g, res[-1]):
+                step = _line_search(potential, x, energy, g, gnorm, free, *_curved(p))
+                if step is not None:
+                    break
+            if step is None:
+                return x, False, it, res, energy, "no descent direction: the line search stalled"
         x, energy, grad, s = step
         g_new = grad.ravel()[free]
         norm_new = _norm(g_new)
@@ -213,8 +224,8 @@ def _line_search(potential, x, energy, g, gnorm, free, p, curvature=0.0):
         xt.ravel()[free] += alpha * p
         et, gt = potential.energy_gradient(xt)
         if abs(et - energy) <= noise:
-            # below round-off the energy cannot rank the points: accept if the gradient halves
-            if _norm(gt.ravel()[free]) < 0.5 * gnorm:
+            # below round-off the energy cannot rank the points: the gradient norm must fall
+            if _norm(gt.ravel()[free]) < NOISE_PROGRESS * gnorm:
                 return xt, et, gt, alpha * p
         elif et <= energy + ARMIJO * alpha * (slope + 0.5 * alpha * curvature):
             return xt, et, gt, alpha * p

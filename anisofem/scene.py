@@ -242,6 +242,17 @@ class Scene:
         moved.fixed_positions = x
         return moved
 
+    def loaded(self, share):
+        """The same scene under `share` of its load (0 to 1): the external force times share,
+        and the fixed components share of the way from rest to their prescribed positions (load
+        continuation, anisofem.continuation). Shares what held_at shares."""
+        rest = self.mesh.vertices
+        moved = self.held_at(rest + share * (self.fixed_positions - rest))
+        force = share * self.external_force
+        force.setflags(write=False)
+        moved.external_force = force
+        return moved
+
     @cached_property
     def neohookean(self):
         """(m,) bool: the elements with the Neo-Hookean base (the others are StVK)."""

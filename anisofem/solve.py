@@ -5,12 +5,17 @@ import numpy as np
 
 from . import methods
 from ._validate import as_count, as_scalar
-from .newton import NewtonResult, minimize
+from .continuation import ramp
+from .newton import NewtonResult, minimize, report
 from .potential import Potential, check_positions
 from .scene import check_scene
 from .stability import stability
 
-def solve(scene, x0=None, method="auto", warn=True, **options):
+#: solve's continuation choices (see solve)
+CONTINUATION = ("auto", "always", "never")
+
+
+def solve(scene, x0=None, method="auto", warn=True, continuation="auto", **options):
     """Static equilibrium of a Scene.
 
     x0: (n, 3) start, m (default: rest positions with fixed vertices at their prescribed
@@ -18,24 +23,58 @@ def solve(scene, x0=None, method="auto", warn=True, **options):
     Newton on large meshes; anisofem.methods.choose), "newton", "reuse", "lbfgs", "cg" or an
     anisofem.methods.Method; options: the method's (rtol, atol, max_iter, iterations,
     projection, linear_solver, ...; see anisofem.methods). warn: a ConvergenceWarning when the
-    solve fails. Returns a NewtonResult; .x is the (n, 3) equilibrium, .stability says
-    whether it is a minimum or a saddle (computed when asked). Raises ValueError if
-    the scene holds too little to have a unique equilibrium.
+    solve fails. continuation: "auto" (default) solves the whole load from x0 and, where that
+    fails short of round-off, ramps the load up from x0 in increments, each from the last
+    equilibrium (anisofem.continuation); "always" ramps from the start; "never" does not.
+    Returns a NewtonResult; .x is the (n, 3) equilibrium, .increments the load increments
+    taken (0: none), .stability says whether it is a minimum or a saddle (computed when
+    asked). Raises ValueError if the scene holds too little to have a unique equilibrium.
     """
     check_scene(scene)
     scene.check_static()
+    if continuation not in CONTINUATION:
+        raise ValueError(f"continuation: expected one of {CONTINUATION}, got "
+                         f"{continuation!r}")
     x0 = scene.initial_positions() if x0 is None else scene.with_fixed(check_positions(
         scene, x0, "x0"))
+    potential = Potential(scene)
+    method = methods.make(method, scene.n_free, **options)
+    if continuation == "always" and method.budget:
+        raise ValueError(f"continuation: 'always' needs a method that iterates to its "
+                         f"tolerance, not a fixed budget of {method.iterations} iterations; "
+                         f"pass continuation='never'")
     bad = scene.outside_domain(x0)
-    if bad:
+    ramped = continuation == "always" or (bad and continuation == "auto" and not method.budget
+                                          and _in_domain_at_rest(scene, x0))
+    if bad and not ramped:
         raise ValueError(f"x0: {bad} Neo-Hookean elements start turned inside out or flat "
                          f"(det F <= 0), where their energy is infinite; start from a state "
                          f"with det F > 0 (prescribed positions far from rest: reach them in "
-                         f"steps, scene.held_at)")
-    potential = Potential(scene)
-    result = minimize(potential, x0, method, warn=warn, **options)
+                         f"steps, continuation='auto' or scene.held_at)")
+    if ramped:
+        result = ramp(scene, x0, method)
+    else:
+        result = minimize(potential, x0, method, warn=False)
+        if continuation == "auto" and result.failed and not _at_roundoff(potential, result):
+            result = ramp(scene, x0, method, spent=[result])
+    if warn:
+        report(result, scene.mesh.n_tets)
     result._stability = lambda: stability(potential, result.x)
     return result
+
+
+def _in_domain_at_rest(scene, x):
+    """Whether positions x (n, 3) with the fixed components at rest leave every Neo-Hookean
+    element in its domain (so that only the prescribed positions take x out of it)."""
+    unloaded = scene.loaded(0.0)
+    return not unloaded.outside_domain(unloaded.with_fixed(x))
+
+
+def _at_roundoff(potential, result):
+    """Whether a failed solve got as close as round-off lets it (within 100 times
+    Scene.gradient_roundoff): more load steps would not take it closer."""
+    scale = potential.force_scale()
+    return result.residuals[-1] * scale <= 100.0 * potential.scene.gradient_roundoff
 
 
 @dataclass

@@ -111,7 +111,7 @@ def test_stall_is_reported_not_returned_as_success(beam):
 
 def test_max_iter_is_reported(beam):
     with pytest.warns(af.ConvergenceWarning):
-        result = af.solve(af.default_scene(beam), max_iter=2)
+        result = af.solve(af.default_scene(beam), max_iter=2, continuation="never")
     assert not result.converged and result.iterations == 2
     assert result.message == "max_iter reached"
 
