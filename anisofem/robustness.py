@@ -2,9 +2,10 @@
 grid of soft cantilevers (0.02 x 0.02 m section) where Newton meets compressive instabilities:
 lengths LENGTHS, cells CELLS, no fiber, fibers along the beam and at 40 degrees in x-z
 (kappa = E), both base materials, the loads LOADS (multiples of g). For each static solve
-(default method, from rest): converged, iterations, seconds, whether the state is a minimum
-(the smallest eigenvalue of the free Hessian, anisofem.stability) and physical (no element
-turned inside out); with dynamics=True also ten backward-Euler steps at each of DTS at
+(default method and load continuation, from rest): converged, iterations, seconds, load
+increments (0 where the whole load was solved at once), whether the state is a minimum (the
+smallest eigenvalue of the free Hessian, anisofem.stability) and physical (no element turned
+inside out); with dynamics=True also ten backward-Euler steps at each of DTS at
 DYNAMIC_LOADS. Prints a summary table and the failures, writes JSON."""
 import itertools
 import math
@@ -59,7 +60,7 @@ def static_row(length, cells, fiber, base, load):
     return {"length": length, "cells": list(cells), "fiber": fiber, "base": base, "g": load,
             "converged": r.converged, "iterations": r.iterations, "seconds": seconds,
             "message": r.message, "minimum": st.minimum, "smallest_eigenvalue": st.smallest,
-            "inverted": r.inversion.inverted}
+            "inverted": r.inversion.inverted, "increments": r.increments}
 
 
 def dynamic_row(length, cells, fiber, base, load, dt):
@@ -100,8 +101,8 @@ def print_report(report):
     and seconds; then every case that did not reach a minimum."""
     rows = report["statics"]
     print("Static solves from rest (default method): per base and load, how many cantilevers")
-    print(f"{'base':<11} {'g':>4} | {'minimum':>7} {'converged':>9} {'inverted':>8} | "
-          f"{'median its':>10} {'median s':>8} {'max s':>7}")
+    print(f"{'base':<11} {'g':>4} | {'minimum':>7} {'converged':>9} {'inverted':>8} "
+          f"{'ramped':>6} | {'median its':>10} {'median s':>8} {'max s':>7}")
     for base, load in itertools.product(BASES, LOADS):
         group = [r for r in rows if r["base"] == base and r["g"] == load]
         if not group:
@@ -109,7 +110,8 @@ def print_report(report):
         good = [r for r in group if r["converged"] and r["minimum"]]
         print(f"{base:<11} {load:4g} | {len(good):4d}/{len(group):<2d} "
               f"{sum(r['converged'] for r in group):9d} "
-              f"{sum(r['inverted'] > 0 for r in group):8d} | "
+              f"{sum(r['inverted'] > 0 for r in group):8d} "
+              f"{sum(r['increments'] > 0 for r in group):6d} | "
               f"{np.median([r['iterations'] for r in group]):10.1f} "
               f"{np.median([r['seconds'] for r in group]):8.3f} "
               f"{max(r['seconds'] for r in group):7.2f}")
