@@ -1,9 +1,9 @@
-"""Load continuation for static solves: the load ramped from none to the whole in increments,
-each solved from the last equilibrium (as Abaqus and FEBio do for statics), for loads that
-Newton cannot take in one go from rest.
-
-The load of a Scene is its external force and the displacements it prescribes
-(Scene.loaded). The increments adapt: the first is FIRST of the load; one that converges in
+"""Load continuation: the load ramped from none to the whole in increments, each solved from
+the last equilibrium (as Abaqus and FEBio do for statics), for loads that Newton cannot take
+in one go. A static solve ramps the external force and the displacements the scene prescribes
+(Scene.loaded); a backward-Euler step ramps the external force only (its prescribed positions
+are the step's own), each increment's minimizer a step of the same length from the same state,
+so the last one is the step asked for. The increments adapt: the first is FIRST of the load; one that converges in
 at most EASY iterations doubles the next; one that fails is halved and tried again from the
 last equilibrium, down to SMALLEST. Each increment starts from a secant predictor (the last
 two equilibria extrapolated), or from the last equilibrium where that prediction leaves the
@@ -14,7 +14,6 @@ import time
 import numpy as np
 
 from .newton import minimize
-from .potential import Potential
 
 #: The first increment, a share of the whole load.
 FIRST = 0.25
@@ -26,11 +25,13 @@ SMALLEST = 1.0 / 1024
 COUNTS = ("iterations", "projected", "factorizations", "linear_iterations")
 
 
-def ramp(scene, x0, method, spent=()):
-    """Static equilibrium of scene (an anisofem.scene.Scene) by load continuation from x0
-    (n, 3), m, its fixed components at rest-load positions or not (each increment sets them).
-    method: an anisofem.methods.Method that iterates to its tolerance. spent: NewtonResults of
-    earlier attempts, whose iterations, factorizations and seconds the result includes.
+def ramp(potential_at, x0, method, spent=()):
+    """The minimizer of potential_at(1.0) by load continuation from x0 (n, 3), m.
+    potential_at(share) -> the anisofem.potential.Potential under that share of the load (a
+    static scene's Scene.loaded, or a step's potential with its external force scaled); x0's
+    fixed components are set by each increment's scene. method: an anisofem.methods.Method
+    that iterates to its tolerance. spent: NewtonResults of earlier attempts, whose
+    iterations, counts and seconds the result includes.
 
     Returns a NewtonResult for the whole load with increments set (the increments that
     converged); its iterations, counts and seconds sum every solve tried, failed increments
@@ -47,10 +48,9 @@ def ramp(scene, x0, method, spent=()):
     increment, increments = FIRST, 0
     while True:
         share = min(1.0, done + increment)
-        loaded = scene if share == 1.0 else scene.loaded(share)
-        start = _predict(loaded, x, previous, share - done)
-        result = None if start is None else minimize(Potential(loaded), start, method,
-                                                     warn=False)
+        potential = potential_at(share)
+        start = _predict(potential.scene, x, previous, share - done)
+        result = None if start is None else minimize(potential, start, method, warn=False)
         if result is not None:
             _add(totals, result)
         if result is not None and result.converged:

@@ -242,12 +242,14 @@ class Scene:
         moved.fixed_positions = x
         return moved
 
-    def loaded(self, share):
+    def loaded(self, share, prescribed=True):
         """The same scene under `share` of its load (0 to 1): the external force times share,
-        and the fixed components share of the way from rest to their prescribed positions (load
-        continuation, anisofem.continuation). Shares what held_at shares."""
+        and with prescribed the fixed components share of the way from rest to their prescribed
+        positions (load continuation, anisofem.continuation; a step keeps them). Shares what
+        held_at shares."""
         rest = self.mesh.vertices
-        moved = self.held_at(rest + share * (self.fixed_positions - rest))
+        moved = self.held_at(rest + share * (self.fixed_positions - rest) if prescribed
+                             else self.fixed_positions)
         force = share * self.external_force
         force.setflags(write=False)
         moved.external_force = force

@@ -51,12 +51,14 @@ def solve(scene, x0=None, method="auto", warn=True, continuation="auto", **optio
                          f"(det F <= 0), where their energy is infinite; start from a state "
                          f"with det F > 0 (prescribed positions far from rest: reach them in "
                          f"steps, continuation='auto' or scene.held_at)")
+    def potential_at(share):
+        return potential if share == 1.0 else Potential(scene.loaded(share))
     if ramped:
-        result = ramp(scene, x0, method)
+        result = ramp(potential_at, x0, method)
     else:
         result = minimize(potential, x0, method, warn=False)
         if continuation == "auto" and result.failed and not _at_roundoff(potential, result):
-            result = ramp(scene, x0, method, spent=[result])
+            result = ramp(potential_at, x0, method, spent=[result])
     if warn:
         report(result, scene.mesh.n_tets)
     result._stability = lambda: stability(potential, result.x)
@@ -98,8 +100,10 @@ def step(scene, x, v, dt, a_guess=None, method="auto", warn=True, **options):
     `method` with `options` (see solve and anisofem.methods; pass a Method instance to keep
     its factorizations from one call to the next). A step with an iteration budget that would
     end with more mechanical energy than it started with iterates on until it does not (or
-    converges). Returns StepResult with v_new = (x_new - x) / dt. Fixed components end at
-    their prescribed positions.
+    converges). Where the step's solve fails short of round-off, its external force is ramped
+    up in increments, each solved from the last (anisofem.continuation): the step is the same,
+    only the path to it changes. Returns StepResult with v_new = (x_new - x) / dt. Fixed
+    components end at their prescribed positions.
     """
     check_scene(scene)
     x = check_positions(scene, x, "x")
@@ -113,8 +117,15 @@ def step(scene, x, v, dt, a_guess=None, method="auto", warn=True, **options):
     potential = Potential(scene, x_hat, dt, x_start=x)
     method = methods.make(method, scene.n_free, **options)
     accept = _no_energy_gain(potential) if method.budget else None
-    result = minimize(potential, _start_in_domain(scene, start, x), method, warn=warn,
-                      accept=accept)
+    first = _start_in_domain(scene, start, x)
+    result = minimize(potential, first, method, warn=False, accept=accept)
+    if result.failed and not _at_roundoff(potential, result):
+        def potential_at(share):
+            return potential if share == 1.0 else Potential(
+                scene.loaded(share, prescribed=False), x_hat, dt, x_start=x)
+        result = ramp(potential_at, first, method, spent=[result])
+    if warn:
+        report(result, scene.mesh.n_tets)
     return StepResult(result.x, (result.x - x) / dt, result)
 
 

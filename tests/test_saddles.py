@@ -30,6 +30,25 @@ def test_soft_cantilevers_reach_a_minimum(length, base, g):
     assert result.physical or base == "stvk"
 
 
+def test_a_crawl_to_a_saddle_is_cut_short():
+    """The projected steps converged to a saddle at 0.81 per iteration and spent max_iter on
+    it; after ten of them in a row Newton looks for negative curvature and leaves."""
+    scene = robustness.scene(0.05, (10, 2, 2), "40 deg", "stvk", 30)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", af.InversionWarning)  # StVK at 30 g: a few invert
+        result = af.solve(scene, continuation="never")
+    assert result.converged and result.stability.minimum
+    assert result.iterations <= 50
+
+
+def test_steps_converging_below_the_energy_noise_finish():
+    """Each step's last iterations lowered G by less than 1e-13 of |G| while the gradient fell
+    to 0.74 per iteration; the line search used to wait for it to halve and stalled at step 1."""
+    scene = robustness.scene(0.05, (10, 2, 2), "x", "neohookean", 100)
+    rollout = af.simulate(scene, 10, dt=0.02)
+    assert rollout.converged and rollout.physical
+
+
 def column(force):
     """A 0.1 m Neo-Hookean column held at x = 0 under a dead compressive force (N) on its
     free end, past the buckling load from about 1 N on this mesh."""
