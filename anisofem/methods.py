@@ -29,7 +29,9 @@ reports failure instead of returning NaN. The methods differ in what a direction
 - "cg" (NewtonCG): inexact Newton, preconditioned conjugate gradients on the assembled
   Hessian, stopped at a forcing tolerance eta times the gradient norm or after cg_iter
   iterations, and truncated at negative curvature (Steihaug); a first-iteration negative
-  curvature retries with the projected Hessian. eta follows how well the last iteration's
+  curvature retries with the projected Hessian. It does not step along negative curvature
+  itself (measured: docs/experiments.md); where its solve fails, load continuation takes over
+  (anisofem.continuation). eta follows how well the last iteration's
   quadratic model predicted the gradient it led to (Eisenstat and Walker 1996, choice 1):
   loose while the nonlinearity limits what a step can gain, tight once the model is good, so
   a solve spends its CG iterations where they buy progress (at 10^5 tets a backward-Euler

@@ -56,6 +56,20 @@ def test_a_whole_load_out_of_reach_is_finished_by_increments(cantilever):
     assert np.abs(ramped.x - exact.x).max() <= 1e-6 * scale
 
 
+def test_a_step_out_of_reach_is_the_same_step_by_increments(cantilever):
+    """A 1 s step from rest needs more than 6 iterations; with max_iter 6 the step ramps its
+    external force and lands on the step that unlimited Newton takes."""
+    x = cantilever.mesh.vertices
+    v = np.zeros_like(x)
+    exact = af.step(cantilever, x, v, 1.0)
+    assert exact.converged and exact.newton.increments == 0 and exact.newton.iterations > 6
+    ramped = af.step(cantilever, x, v, 1.0, max_iter=6)
+    assert ramped.converged and ramped.newton.increments >= 2
+    assert ramped.newton.iterations > 6  # the failed attempt, counted
+    scale = np.abs(exact.x - x).max()
+    assert np.abs(ramped.x - exact.x).max() <= 1e-6 * scale
+
+
 def test_a_continuation_that_cannot_go_on_says_how_far_it_got(cantilever, monkeypatch):
     monkeypatch.setattr(continuation, "SMALLEST", 0.2)  # one halving allowed
     with pytest.warns(af.ConvergenceWarning, match="load continuation stopped at"):
