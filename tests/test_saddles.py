@@ -30,6 +30,14 @@ def test_soft_cantilevers_reach_a_minimum(length, base, g):
     assert result.physical or base == "stvk"
 
 
+@pytest.mark.parametrize("length", [0.1, 0.2])
+@pytest.mark.parametrize("dt", [0.02, 0.2, 1.0])
+def test_neohookean_rollouts_at_10_g_take_every_step(length, dt):
+    """Each of these six rollouts stopped at its second step, "max_iter reached"."""
+    rollout = af.simulate(robustness.scene(length, (20, 4, 4), "x", "neohookean", 10), 10, dt)
+    assert rollout.converged and rollout.physical
+
+
 def test_a_crawl_to_a_saddle_is_cut_short():
     """The projected steps converged to a saddle at 0.81 per iteration and spent max_iter on
     it; after ten of them in a row Newton looks for negative curvature and leaves."""
