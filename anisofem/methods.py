@@ -73,6 +73,8 @@ STALLING = 0.9
 #: where each leaves less than STALLING of the gradient: a StVK cantilever converged to a saddle
 #: at 0.81 per iteration for 80 iterations
 PROJECTED_RUN = 10
+#: A step at least this share of the squared length of its direction counts as a whole step.
+FULL_STEP = 0.98
 #: The first step off a saddle met at the tolerance, as a share of the mesh's diagonal.
 SADDLE_STEP = 1e-3
 
@@ -182,7 +184,8 @@ class Newton(Method):
         self.solver = linsolve.make(self.linear_solver, potential.scene.n_free)
         self.layout = potential.scene.layout(self.solver.layout)
         self.stalling = False    # the last iteration left more than STALLING of the gradient
-        self.run = 0             # projected iterations in a row since the last escape tried
+        self.run = 0             # whole projected steps in a row since the last escape tried
+        self._plain, self._projected = None, False  # the last Newton direction offered
         self.indefinite = False  # the last true Hessian was not positive definite
         self.curvature = None    # the last Stability computed (its eigenvector starts the next)
         # length of the next step along negative curvature, m; grows and shrinks as a trust
@@ -222,11 +225,17 @@ class Newton(Method):
         """Called when a direction failed to make progress."""
 
     def accepted(self, s, y, progress):
-        self.stalling = progress > STALLING
         if self._escape is not None:  # a step along negative curvature went this far of it
             share = math.sqrt(float(s @ s) / float(self._escape @ self._escape))
             self.escape_length *= 2.0 if share > 0.99 else share
             self._escape = None
+            self.stalling, self.run = progress > STALLING, 0
+            return
+        # only whole steps say the iteration is in Newton's local regime: far from an
+        # equilibrium, damped steps that leave most of the gradient are the globalization's
+        whole = float(s @ s) >= FULL_STEP * float(self._plain @ self._plain)
+        self.stalling = whole and progress > STALLING
+        self.run = self.run + 1 if whole and self._projected else 0
 
     def directions(self, x, g, residual):
         for projected in self._CHOICES[self.projection]:
@@ -236,7 +245,7 @@ class Newton(Method):
             if factored:
                 self.counts["projected"] += projected
                 p = -self.apply(g)
-                self.run = self.run + 1 if projected else 0
+                self._plain, self._projected = p, projected
                 if projected and self.projection == "adaptive" and (
                         self.stalling or self.run > PROJECTED_RUN):
                     self.run = 0
@@ -334,7 +343,9 @@ class FactorReuse(_KeptFactor):
         yield from super().directions(x, g, residual)
 
     def accepted(self, s, y, progress):
-        if not self._fresh and progress > self.refactor:
+        if self._fresh:
+            super().accepted(s, y, progress)
+        elif progress > self.refactor:
             self._solve = None
 
 
