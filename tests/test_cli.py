@@ -26,6 +26,15 @@ def test_mesh_then_solve(tmp_path):
     assert {"energy", "fiber_direction"} <= set(out.cell_data)
 
 
+def test_continuation_flag_ramps_the_load_and_says_so(tmp_path):
+    run("mesh", "box", "--cells", "4", "2", "2", "-o", "beam.msh", cwd=tmp_path)
+    r = run("solve", "beam.msh", "--continuation", "always", "-o", "out.vtu", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "load increments, converged: True" in r.stdout and "a minimum" in r.stdout
+    r = run("solve", "beam.msh", "--continuation", "sometimes", "-o", "o.vtu", cwd=tmp_path)
+    assert r.returncode != 0 and "--continuation" in r.stderr
+
+
 def test_material_flag_keeps_a_hard_squeeze_physical(tmp_path):
     run("mesh", "box", "--cells", "10", "2", "2", "-o", "beam.msh", cwd=tmp_path)
     said = {}
