@@ -137,7 +137,7 @@ def _parser():
                         "method='auto' switches (minutes)")
     b.add_argument("--robustness", action="store_true",
                    help="static solves of 324 soft cantilevers at 1-100 g: does each reach a "
-                        "minimum (about 10 minutes)")
+                        "minimum (about 3 minutes)")
     b.add_argument("--dynamics", action="store_true",
                    help="with --robustness: ten backward-Euler steps of 162 of them at dt = "
                         "0.02, 0.2 and 1 s too (longer)")

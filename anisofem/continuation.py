@@ -25,11 +25,19 @@ SMALLEST = 1.0 / 1024
 COUNTS = ("iterations", "projected", "factorizations", "linear_iterations")
 
 
-def ramp(potential_at, x0, method, spent=()):
-    """The minimizer of potential_at(1.0) by load continuation from x0 (n, 3), m.
-    potential_at(share) -> the anisofem.potential.Potential under that share of the load (a
-    static scene's Scene.loaded, or a step's potential with its external force scaled); x0's
-    fixed components are set by each increment's scene. method: an anisofem.methods.Method
+def worth_ramping(potential, result):
+    """Whether a solve of potential that ended in result calls for load continuation: it
+    failed (not a spent budget) short of round-off (more than 100 times
+    Scene.gradient_roundoff from the tolerance it could reach)."""
+    scale = potential.force_scale()
+    return result.failed and result.residuals[-1] * scale > 100.0 * \
+        potential.scene.gradient_roundoff
+
+
+def ramp(potential, x0, method, spent=()):
+    """The minimizer of potential (an anisofem.potential.Potential) by load continuation from
+    x0 (n, 3), m: each increment minimizes potential.loaded(share); x0's fixed components
+    are set by each increment's scene. method: an anisofem.methods.Method
     that iterates to its tolerance. spent: NewtonResults of earlier attempts, whose
     iterations, counts and seconds the result includes.
 
@@ -48,9 +56,9 @@ def ramp(potential_at, x0, method, spent=()):
     increment, increments = FIRST, 0
     while True:
         share = min(1.0, done + increment)
-        potential = potential_at(share)
-        start = _predict(potential.scene, x, previous, share - done)
-        result = None if start is None else minimize(potential, start, method, warn=False)
+        loaded = potential if share == 1.0 else potential.loaded(share)
+        start = _predict(loaded.scene, x, previous, share - done)
+        result = None if start is None else minimize(loaded, start, method, warn=False)
         if result is not None:
             _add(totals, result)
         if result is not None and result.converged:

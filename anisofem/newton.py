@@ -69,8 +69,8 @@ class NewtonResult:
     iterations. method: the method's name. message: why it stopped. seconds: wall time.
     inversion: the anisofem.inversion.Inversion of x (inverted and degenerate elements, the
     smallest det F); converged speaks of the equations, physical of the state. increments: the
-    load increments of a static solve by load continuation (anisofem.continuation; 0 where
-    the whole load was solved at once).
+    load increments of a solve by load continuation (anisofem.continuation; 0 where the whole
+    load was solved at once).
     """
     x: np.ndarray
     converged: bool

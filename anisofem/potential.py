@@ -46,6 +46,16 @@ class Potential:
             x_start = self.x_hat if self.dynamic else scene.initial_positions()
         self.x_start = check_positions(scene, x_start, "x_start")
 
+    def loaded(self, share):
+        """The same problem under `share` (0 to 1) of its load (load continuation,
+        anisofem.continuation): statics under Scene.loaded(share), external force and
+        prescribed displacements scaled; a step with its external force scaled, from the same
+        state with the same x_hat and dt (its prescribed positions are the step's own)."""
+        if not self.dynamic:
+            return Potential(self.scene.loaded(share))
+        return Potential(self.scene.loaded(share, prescribed=False), self.x_hat, self.dt,
+                         x_start=self.x_start)
+
     def force_scale(self):
         """The size of this problem's forces in N, whatever the start of a solve: the norms
         over the free components of the external force, the elastic force at x_start and, in

@@ -5,7 +5,7 @@ import numpy as np
 
 from . import methods
 from ._validate import as_count, as_scalar
-from .continuation import ramp
+from .continuation import ramp, worth_ramping
 from .newton import NewtonResult, minimize, report
 from .potential import Potential, check_positions
 from .scene import check_scene
@@ -24,7 +24,8 @@ def solve(scene, x0=None, method="auto", warn=True, continuation="auto", **optio
     anisofem.methods.Method; options: the method's (rtol, atol, max_iter, iterations,
     projection, linear_solver, ...; see anisofem.methods). warn: a ConvergenceWarning when the
     solve fails. continuation: "auto" (default) solves the whole load from x0 and, where that
-    fails short of round-off, ramps the load up from x0 in increments, each from the last
+    fails short of round-off or where only the prescribed positions turn Neo-Hookean
+    elements of x0 inside out, ramps the load up from x0 in increments, each from the last
     equilibrium (anisofem.continuation); "always" ramps from the start; "never" does not.
     Returns a NewtonResult; .x is the (n, 3) equilibrium, .increments the load increments
     taken (0: none), .stability says whether it is a minimum or a saddle (computed when
@@ -51,14 +52,12 @@ def solve(scene, x0=None, method="auto", warn=True, continuation="auto", **optio
                          f"(det F <= 0), where their energy is infinite; start from a state "
                          f"with det F > 0 (prescribed positions far from rest: reach them in "
                          f"steps, continuation='auto' or scene.held_at)")
-    def potential_at(share):
-        return potential if share == 1.0 else Potential(scene.loaded(share))
     if ramped:
-        result = ramp(potential_at, x0, method)
+        result = ramp(potential, x0, method)
     else:
         result = minimize(potential, x0, method, warn=False)
-        if continuation == "auto" and result.failed and not _at_roundoff(potential, result):
-            result = ramp(potential_at, x0, method, spent=[result])
+        if continuation == "auto" and worth_ramping(potential, result):
+            result = ramp(potential, x0, method, spent=[result])
     if warn:
         report(result, scene.mesh.n_tets)
     result._stability = lambda: stability(potential, result.x)
@@ -70,13 +69,6 @@ def _in_domain_at_rest(scene, x):
     element in its domain (so that only the prescribed positions take x out of it)."""
     unloaded = scene.loaded(0.0)
     return not unloaded.outside_domain(unloaded.with_fixed(x))
-
-
-def _at_roundoff(potential, result):
-    """Whether a failed solve got as close as round-off lets it (within 100 times
-    Scene.gradient_roundoff): more load steps would not take it closer."""
-    scale = potential.force_scale()
-    return result.residuals[-1] * scale <= 100.0 * potential.scene.gradient_roundoff
 
 
 @dataclass
@@ -119,11 +111,8 @@ def step(scene, x, v, dt, a_guess=None, method="auto", warn=True, **options):
     accept = _no_energy_gain(potential) if method.budget else None
     first = _start_in_domain(scene, start, x)
     result = minimize(potential, first, method, warn=False, accept=accept)
-    if result.failed and not _at_roundoff(potential, result):
-        def potential_at(share):
-            return potential if share == 1.0 else Potential(
-                scene.loaded(share, prescribed=False), x_hat, dt, x_start=x)
-        result = ramp(potential_at, first, method, spent=[result])
+    if worth_ramping(potential, result):
+        result = ramp(potential, first, method, spent=[result])
     if warn:
         report(result, scene.mesh.n_tets)
     return StepResult(result.x, (result.x - x) / dt, result)

@@ -24,6 +24,8 @@ from . import linsolve
 ROUNDOFF = 1e-9
 #: Lanczos restarts before the smallest eigenvalue is called unknown
 MAX_LANCZOS = 5000
+#: Hessians of fewer unknowns are decomposed densely (ARPACK wants more than its basis size)
+DENSE_MAX = 16
 
 
 @dataclass
@@ -58,7 +60,7 @@ def free_hessian(potential, x):
 def stability(potential, x):
     """The Stability of positions x (n, 3) for potential (see the module docstring)."""
     H = free_hessian(potential, x)
-    if H.shape[0] < 16:
+    if H.shape[0] < DENSE_MAX:
         return _dense(H)
     try:
         inverse = linsolve.SuperLU().factor(H, H.data.copy())  # H reads as its own layout
@@ -73,7 +75,7 @@ def stability(potential, x):
 def negative_curvature(H, start=None):
     """The Stability of the free Hessian H (k, k) from its smallest eigenpair by Lanczos, started
     from start (an eigenvector guess, e.g. the last one) or a fixed pseudo-random vector."""
-    if H.shape[0] < 16:
+    if H.shape[0] < DENSE_MAX:
         return _dense(H)
     try:
         values, vectors = spla.eigsh(H, k=1, which="SA", tol=1e-6, maxiter=MAX_LANCZOS,
