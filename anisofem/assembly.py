@@ -1,5 +1,6 @@
-"""Sparsity patterns: where each entry of each 12x12 element Hessian lands, built once per mesh
-and set of unknowns, so that assembly is a scatter-add into a preallocated array."""
+"""Sparsity patterns: where each entry of each element Hessian (3k x 3k for k nodes per
+element) lands, built once per mesh and set of unknowns, so that assembly is a scatter-add into
+a preallocated array."""
 from functools import cached_property
 
 import numpy as np
@@ -20,24 +21,33 @@ def unknown_dofs(dof_map):
 
 
 def element_dofs(tets, dof_map):
-    """(m, 12) unknown index of each element DOF (3 a + i), -1 where the DOF is not unknown.
+    """(m, 3k) unknown index of each element DOF (3 a + i) of elements with k nodes tets (m, k),
+    -1 where the DOF is not unknown.
 
-    dof_map: (n, 3) int64, the unknown index of each vertex component or -1.
+    dof_map: (n, 3) int64, the unknown index of each node component or -1.
     """
-    return dof_map[tets].reshape(tets.shape[0], 12)
+    return dof_map[tets].reshape(tets.shape[0], -1)
 
 
 def _entry_dofs(tets, dof_map):
-    """(k unknowns, rows (m, 144), cols (m, 144)): the unknowns of each element-matrix entry."""
+    """(k unknowns, rows (m, (3k)^2), cols (m, (3k)^2)): the unknowns of each element-matrix
+    entry."""
     ed = element_dofs(tets, dof_map)
-    return int(dof_map.max()) + 1, np.repeat(ed, 12, axis=1), np.tile(ed, (1, 12))
+    width = ed.shape[1]
+    return int(dof_map.max()) + 1, np.repeat(ed, width, axis=1), np.tile(ed, (1, width))
+
+
+def _position_type(largest):
+    """int32 for positions up to `largest` where they fit (the element loop is compiled for
+    one index type), else int64."""
+    return np.int32 if largest < 2 ** 31 - 1 else np.int64
 
 
 class CsrLayout:
     """CSR pattern of the Hessian restricted to the unknowns of dof_map.
 
-    Attributes: map (m, 144) position of element entry (r, c) in the CSR data, -1 where r or
-    c is not unknown (int32 while the pattern has fewer than 2^31 entries, else int64); diag
+    Attributes: map (m, (3k)^2) position of element entry (r, c) in the CSR data, -1 where r
+    or c is not unknown (int32 while the pattern has fewer than 2^31 entries, else int64); diag
     (k,) position of each diagonal entry; dofs (k,) flat DOF of each unknown; shape (k, k).
 
     Built from the vertex adjacency (the unique vertex pairs of the tets, m * 16 of them) and
@@ -59,12 +69,12 @@ class CsrLayout:
         del pairs
         row_length = _dof_row_lengths(vertex_ptr, neighbors, dof_map, k)
         nnz = int(row_length.sum())
-        index = np.int32 if nnz < 2 ** 31 - 1 else np.int64
+        index = _position_type(nnz)
         self.indptr = np.zeros(k + 1, index)
         np.cumsum(row_length, out=self.indptr[1:])
         self.indices = np.empty(nnz, index)
         _fill_dof_rows(vertex_ptr, neighbors, dof_map, self.indptr, self.indices)
-        self.map = np.empty((tets.shape[0], 144), index)
+        self.map = np.empty((tets.shape[0], (3 * tets.shape[1]) ** 2), index)
         _element_positions(tets, dof_map, self.indptr, self.indices, self.map)
         self.diag = np.empty(k, np.int64)
         _diagonal_positions(self.indptr, self.indices, self.diag)
@@ -137,16 +147,17 @@ def _find(indptr, indices, r, c):
 
 @njit(cache=True, parallel=True)
 def _element_positions(tets, dof_map, indptr, indices, out):
-    """out[e, 12 r + c]: position of element entry (r, c) (r, c = 3 a + i) in the CSR data, or
-    -1 where its row or column is not unknown."""
+    """out[e, 3k r + c]: position of element entry (r, c) (r, c = 3 a + i, k nodes) in the CSR
+    data, or -1 where its row or column is not unknown."""
+    k = tets.shape[1]
     for e in prange(tets.shape[0]):
-        for a in range(4):
+        for a in range(k):
             for i in range(3):
                 row = dof_map[tets[e, a], i]
-                for b in range(4):
+                for b in range(k):
                     for kk in range(3):
                         col = dof_map[tets[e, b], kk]
-                        slot = 12 * (3 * a + i) + 3 * b + kk
+                        slot = 3 * k * (3 * a + i) + 3 * b + kk
                         out[e, slot] = -1 if row < 0 or col < 0 else _find(indptr, indices,
                                                                            row, col)
 
@@ -164,7 +175,8 @@ class DenseLayout:
 
     def __init__(self, tets, dof_map):
         k, rows, cols = _entry_dofs(tets, dof_map)
-        self.map = np.where((rows >= 0) & (cols >= 0), rows * k + cols, -1).astype(np.int64)
+        self.map = np.where((rows >= 0) & (cols >= 0), rows * k + cols,
+                            -1).astype(_position_type(k * k))
         self.diag = np.arange(k, dtype=np.int64) * (k + 1)
         self.dofs = unknown_dofs(dof_map)
         self.shape = (k, k)
@@ -182,7 +194,7 @@ class BandedLayout:
     Cuthill-McKee order of the unknowns (which keeps the band narrow on beams).
 
     Attributes: perm (k,) unknown at each banded position; kd the number of subdiagonals;
-    map (m, 144) position of element entry (r, c) in the (kd + 1, k) column-major band, -1
+    map (m, (3k)^2) position of element entry (r, c) in the (kd + 1, k) column-major band, -1
     where r or c is not unknown or the entry lies above the diagonal (the band holds the lower
     triangle: band[i - j, j] = H[i, j] for i >= j, in banded positions); diag (k,) position of
     each unknown's diagonal entry; dofs (k,) flat DOF of each unknown; shape (k, k).
@@ -200,7 +212,7 @@ class BandedLayout:
         position[self.perm] = np.arange(k)
         pr, pc = position[rows[valid]], position[cols[valid]]
         self.kd = int((pr - pc).max()) if pr.size else 0
-        self.map = np.full(rows.shape, -1, np.int64)
+        self.map = np.full(rows.shape, -1, _position_type((self.kd + 1) * k))
         self.map[valid] = np.where(pr >= pc, (pr - pc) + pc * (self.kd + 1), -1)
         self.diag = position * (self.kd + 1)
         self.dofs = unknown_dofs(dof_map)

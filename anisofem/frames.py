@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels import _sym3_eigen
+from .sym3 import eigen
 
 
 class VertexFrames:
@@ -106,7 +106,7 @@ def _star_rotations(x, rest, first, second):
         for p in range(3):
             for q in range(3):
                 S[p, q] = a[0, p] * a[0, q] + a[1, p] * a[1, q] + a[2, p] * a[2, q]
-        _sym3_eigen(S, w, V)
+        eigen(S, w, V)
         smallest = 0
         for k in range(1, 3):
             if w[k] < w[smallest]:

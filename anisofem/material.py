@@ -2,9 +2,7 @@
 import numpy as np
 
 from ._validate import as_float_array, per_element
-
-#: Base material models, in the order of their codes in anisofem.kernels (STVK, NEOHOOKEAN).
-MODELS = ("stvk", "neohookean")
+from .densities import MODELS
 
 #: Tolerance on |d| - 1 for fiber directions of elements with fiber_stiffness > 0.
 UNIT_TOLERANCE = 1e-6

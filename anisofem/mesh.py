@@ -121,13 +121,19 @@ class TetMesh:
 
         Row a is grad N_a; the deformation gradient is F = sum_a x_a grads[a]^T.
         """
-        X = self.vertices[self.tets]
-        Dm = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2)
-        Dm_inv = np.linalg.inv(Dm)
+        Dm_inv = self.inverse_jacobians
         grads = np.empty((self.n_tets, 4, 3))
         grads[:, 1:] = Dm_inv
         grads[:, 0] = -Dm_inv.sum(axis=1)
         return grads
+
+    @cached_property
+    def inverse_jacobians(self):
+        """(m, 3, 3) Dm^-1, Dm the columns X_1 - X_0, X_2 - X_0, X_3 - X_0 of each tet: row k is
+        the material gradient of the reference coordinate xi_k (anisofem.elements), 1/m."""
+        X = self.vertices[self.tets]
+        Dm = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2)
+        return np.linalg.inv(Dm)
 
     @cached_property
     def edges(self):

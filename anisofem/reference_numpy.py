@@ -12,7 +12,7 @@ def _deformation(scene, x):
     if scene.neohookean.any():
         raise ValueError("scene: anisofem.reference_numpy implements the StVK base material "
                          "only, and this scene has Neo-Hookean elements")
-    F = np.einsum("eai,eaj->eij", x[el.tets], el.grads)
+    F = np.einsum("eai,eaj->eij", x[el.tets], scene.mesh.shape_gradients)
     C = np.einsum("eki,ekj->eij", F, F)
     E = 0.5 * (C - np.eye(3))
     trE = np.trace(E, axis1=1, axis2=2)
@@ -27,13 +27,13 @@ def _deformation(scene, x):
 def elastic_energy_gradient(scene, x):
     """(elastic energy in J, gradient (n, 3) in N)."""
     F, S, psi = _deformation(scene, x)
-    return float((scene.elements.volumes * psi).sum()), _gradient(scene, x, F, S)
+    return float((scene.mesh.rest_volumes * psi).sum()), _gradient(scene, x, F, S)
 
 
 def _gradient(scene, x, F, S):
     el = scene.elements
     P = F @ S
-    ge = el.volumes[:, None, None] * np.einsum("eij,eaj->eai", P, el.grads)
+    ge = scene.mesh.rest_volumes[:, None, None] * np.einsum("eij,eaj->eai", P, scene.mesh.shape_gradients)
     grad = np.zeros_like(x)
     for i in range(3):
         grad[:, i] = np.bincount(el.tets.ravel(), ge[:, :, i].ravel(), minlength=x.shape[0])
@@ -52,7 +52,7 @@ def _hessians(scene, F, S, project):
     if project:
         w, V = np.linalg.eigh(S)
         S = np.einsum("eik,ek,ejk->eij", V, np.maximum(w, 0.0), V)
-    G = el.grads
+    G = scene.mesh.shape_gradients
     q = np.einsum("eij,eaj->eai", F, G)
     B = np.einsum("eik,ejk->eij", F, F)
     gg = np.einsum("eai,ebi->eab", G, G)
@@ -64,7 +64,7 @@ def _hessians(scene, F, S, project):
          + mu * np.einsum("eik,eab->eaibk", B, gg)
          + np.einsum("eab,ik->eaibk", geo, np.eye(3))
          + 8 * k * np.einsum("ea,eb,ei,ek->eaibk", s, s, Fd, Fd))
-    return (H * el.volumes[:, None, None, None, None]).reshape(-1, 144)
+    return (H * scene.mesh.rest_volumes[:, None, None, None, None]).reshape(-1, 144)
 
 
 def elastic_hessian(scene, x, project=True):
@@ -83,7 +83,7 @@ class NumpyPotential(Potential):
 
     def _elastic(self, x, want_grad=False, layout=None, project=False):
         F, S, psi = _deformation(self.scene, x)
-        e = self.scene.elements.volumes * psi
+        e = self.scene.mesh.rest_volumes * psi
         grad = _gradient(self.scene, x, F, S) if want_grad else None
         if layout is None:
             return e, np.zeros_like(e), grad, None

@@ -9,7 +9,9 @@ import numpy as np
 from ._validate import as_float_array, as_index_array, check_shape, per_element
 from .assembly import BandedLayout, CsrLayout, DenseLayout
 from .inversion import volume_change
-from .kernels import STVK
+from .kernels import MAX_NODES
+from .densities import STVK
+from .elements.tet4 import TET4
 from .material import Material
 from .mesh import TetMesh
 
@@ -20,11 +22,11 @@ ROUNDOFF_FACTOR = 2.0
 
 @dataclass(frozen=True)
 class ElementData:
-    """Arrays the element kernels read (see anisofem.kernels), one row per tet."""
-    tets: np.ndarray          # (m, 4) int64
-    grads: np.ndarray         # (m, 4, 3) shape-function gradients, 1/m
-    volumes: np.ndarray       # (m,) rest volumes, m^3
-    model: np.ndarray         # (m,) int8 base model (anisofem.kernels.STVK, NEOHOOKEAN)
+    """Arrays the element loop reads (see anisofem.kernels), one row per element."""
+    tets: np.ndarray          # (m, k) int64 node indices, k nodes per element
+    grads: np.ndarray         # (m, q, k, 3) shape gradients at the quadrature points, 1/m
+    weights: np.ndarray       # (m, q) quadrature weights times the rest volume, m^3
+    model: np.ndarray         # (m,) int8 base law (anisofem.densities.MODELS)
     mu: np.ndarray            # (m,) Pa
     lam: np.ndarray           # (m,) Pa
     kappa: np.ndarray         # (m,) Pa
@@ -181,15 +183,8 @@ class Scene:
 
     @cached_property
     def elements(self):
-        p = self._params
-        starts, ptr = self.mesh.coloring
-        kappa = p["kappa"]
-        return ElementData(
-            tets=np.ascontiguousarray(self.mesh.tets, dtype=np.int64),
-            grads=self.mesh.shape_gradients, volumes=self.mesh.rest_volumes, model=p["model"],
-            mu=p["mu"], lam=p["lam"], kappa=kappa, fiber=p["fiber"],
-            has_fiber=bool((kappa > 0).any()),
-            block_starts=starts, color_ptr=ptr)
+        return element_data(TET4, self.mesh.tets, self.mesh.inverse_jacobians,
+                            self.mesh.rest_volumes, self._params, self.mesh.coloring)
 
     def layout(self, kind):
         """The Hessian layout over the free DOFs: kind "csr", "dense" or "banded" (cached)."""
@@ -266,6 +261,23 @@ class Scene:
         if not self.neohookean.any():
             return 0
         return int((volume_change(self.mesh, x)[self.neohookean] <= -1.0).sum())
+
+
+def element_data(element, tets, inverse_jacobians, volumes, params, coloring):
+    """The ElementData of elements of type `element` (anisofem.elements) with node indices
+    tets (m, k), inverse Jacobians Dm^-1 (m, 3, 3) in 1/m, rest volumes (m,) in m^3, material
+    parameters `params` (Material.per_element) and assembly coloring (TetMesh.coloring)."""
+    if element.n_nodes > MAX_NODES:
+        raise ValueError(f"element: {element.name} has {element.n_nodes} nodes; the element "
+                         f"loop holds at most {MAX_NODES}")
+    kappa = params["kappa"]
+    starts, ptr = coloring
+    return ElementData(
+        tets=np.ascontiguousarray(tets, dtype=np.int64),
+        grads=np.einsum("pak,ekj->epaj", element.point_gradients, inverse_jacobians),
+        weights=volumes[:, None] * element.weights, model=params["model"], mu=params["mu"],
+        lam=params["lam"], kappa=kappa, fiber=params["fiber"],
+        has_fiber=bool((kappa > 0).any()), block_starts=starts, color_ptr=ptr)
 
 
 def _to_vertices(mesh, per_tet):
