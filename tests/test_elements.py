@@ -14,6 +14,7 @@ from anisofem.assembly import DenseLayout
 from anisofem.elements.tet4 import TET4
 from anisofem.elements.tet10 import TET10, quadratic_nodes
 from anisofem.scene import element_data
+from test_derivatives import random_tet, rotation
 
 E = 1e5
 
@@ -93,25 +94,6 @@ class Quadratic:
         kernels.assemble(x, self.elements, want_hess=True, project=project,
                          hess_map=self.layout.map, hess_data=data)
         return self.layout.matrix(data)
-
-
-def rotation(rng):
-    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
-    q *= np.sign(np.diag(r))
-    return q if np.linalg.det(q) > 0 else -q
-
-
-def random_tet(rng, flatness=1.0):
-    while True:
-        X = rng.standard_normal((4, 3)) * 0.01
-        X[:, 2] *= flatness
-        X = X @ rotation(rng).T
-        if np.dot(X[1] - X[0], np.cross(X[2] - X[0], X[3] - X[0])) < 0:
-            X[[2, 3]] = X[[3, 2]]
-        try:
-            return af.TetMesh(X, [[0, 1, 2, 3]])
-        except ValueError:
-            continue
 
 
 def curved_state(rng, q, stretches, bend=0.05):
