@@ -33,7 +33,8 @@ def elastic_energy_gradient(scene, x):
 def _gradient(scene, x, F, S):
     el = scene.elements
     P = F @ S
-    ge = scene.mesh.rest_volumes[:, None, None] * np.einsum("eij,eaj->eai", P, scene.mesh.shape_gradients)
+    mesh = scene.mesh
+    ge = mesh.rest_volumes[:, None, None] * np.einsum("eij,eaj->eai", P, mesh.shape_gradients)
     grad = np.zeros_like(x)
     for i in range(3):
         grad[:, i] = np.bincount(el.tets.ravel(), ge[:, :, i].ravel(), minlength=x.shape[0])
