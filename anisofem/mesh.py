@@ -6,6 +6,7 @@ import numpy as np
 from numba import njit
 
 from ._validate import as_float_array, as_index_array
+from .elements.tet4 import TET4
 
 #: Tets per assembly block: the parallel assembly runs the blocks of one color on all threads
 #: at once, each block's tets in order on one thread (anisofem.kernels). Runs of consecutive
@@ -121,11 +122,7 @@ class TetMesh:
 
         Row a is grad N_a; the deformation gradient is F = sum_a x_a grads[a]^T.
         """
-        Dm_inv = self.inverse_jacobians
-        grads = np.empty((self.n_tets, 4, 3))
-        grads[:, 1:] = Dm_inv
-        grads[:, 0] = -Dm_inv.sum(axis=1)
-        return grads
+        return np.einsum("ak,ekj->eaj", TET4.point_gradients[0], self.inverse_jacobians)
 
     @cached_property
     def inverse_jacobians(self):
