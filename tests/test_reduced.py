@@ -1,0 +1,141 @@
+"""The reduced model (anisofem.reduced): its polynomial equals the full FEM projected on the
+basis, its Hessian matches finite differences, its solves converge or say so and approach the
+full FEM, and bad input is refused."""
+import numpy as np
+import pytest
+
+import anisofem as af
+from anisofem.reduced import ReducedModel
+
+E = 1e5
+FIBER = (np.cos(np.radians(40)), 0.0, np.sin(np.radians(40)))
+
+
+def cantilever(cells=(10, 2, 2), nu=0.48, kappa=E, model="stvk", length=0.1):
+    mesh = af.box_beam(cells=cells, size=(length, 0.02, 0.02))
+    x = mesh.vertices[:, 0]
+    return af.Scene(mesh, af.Material(E, nu, 1000.0, FIBER, kappa, model=model),
+                    fixed=np.flatnonzero(x <= x.min() + 1e-9), gravity=(0, 0, -9.81))
+
+
+@pytest.fixture(scope="module")
+def model():
+    return ReducedModel(cantilever(), modes=4)
+
+
+def random_q(model, rng, size=0.2):
+    """Reduced coordinates that move the beam by about `size` of its length."""
+    q = rng.standard_normal(model.r)
+    u = (model.basis @ q).reshape(-1, 3)
+    return q * size * 0.1 / np.abs(u).max()
+
+
+def test_polynomial_equals_the_projected_fem(model):
+    scene = model.scene
+    f_ext = scene.external_force
+    rng = np.random.default_rng(0)
+    assert model.r == 4 + 10
+    for _ in range(3):
+        q = random_q(model, rng)
+        x = model.positions(q)
+        elastic = af.energy(scene, x) + np.sum(f_ext * x)
+        assert abs(model.energy(q) - elastic) <= 1e-10 * abs(elastic)
+        f, H = model.force(q, hessian=True)
+        expected_f = model.basis.T @ (af.gradient(scene, x) + f_ext).ravel()
+        assert np.linalg.norm(f - expected_f) <= 1e-10 * np.linalg.norm(expected_f)
+        expected_H = model.basis.T @ (af.hessian(scene, x) @ model.basis)
+        assert np.linalg.norm(H - expected_H) <= 1e-10 * np.linalg.norm(expected_H)
+
+
+def test_reduced_hessian_matches_finite_differences(model):
+    rng = np.random.default_rng(1)
+    q = random_q(model, rng)
+    _, H = model.force(q, hessian=True)
+    h = 1e-6 * np.linalg.norm(q)
+    fd = np.column_stack([(model.force(q + h * e) - model.force(q - h * e)) / (2 * h)
+                          for e in np.eye(model.r)])
+    assert np.linalg.norm(H - fd) <= 1e-7 * np.linalg.norm(H)
+    g = model.force(q)
+    fd_g = np.array([(model.energy(q + h * e) - model.energy(q - h * e)) / (2 * h)
+                     for e in np.eye(model.r)])
+    assert np.linalg.norm(g - fd_g) <= 1e-7 * np.linalg.norm(g)
+
+
+def test_basis_is_mass_orthonormal_and_zero_on_fixed_components(model):
+    scene = model.scene
+    M = np.repeat(scene.masses, 3)
+    assert np.abs(model.basis.T @ (M[:, None] * model.basis) - np.eye(model.r)).max() < 1e-10
+    assert np.abs(model.basis[scene.fixed_mask.ravel()]).max() == 0.0
+
+
+def tip(scene, x):
+    X = scene.mesh.vertices
+    return x[X[:, 0] >= X[:, 0].max() - 1e-9, 2].mean() - X[X[:, 0] >= X[:, 0].max() - 1e-9,
+                                                            2].mean()
+
+
+def test_static_sag_approaches_the_full_solve():
+    scene = cantilever()
+    full = af.solve(scene)
+    exact = tip(scene, full.x)
+    errors = []
+    for modes in (4, 6):
+        reduced = ReducedModel(scene, modes=modes)
+        q, report = reduced.solve()
+        assert report.converged
+        errors.append(abs(tip(scene, reduced.positions(q)) - exact) / abs(exact))
+    linear = ReducedModel(scene, modes=6, derivatives=False)
+    q, _ = linear.solve()
+    assert errors[1] < 0.01 and errors[1] < errors[0] + 1e-3
+    assert errors[1] < abs(tip(scene, linear.positions(q)) - exact) / abs(exact)
+
+
+def test_backward_euler_does_not_gain_energy(model):
+    q, v = np.zeros(model.r), np.zeros(model.r)
+    dt = 0.02
+
+    def mechanical(q, v):
+        return model.energy(q) - model.external @ q + 0.5 * v @ v
+    before = mechanical(q, v)
+    for _ in range(50):
+        q, v, report = model.step(q, v, dt)
+        assert report.converged
+        now = mechanical(q, v)
+        assert now <= before + 1e-12 * abs(before)
+        before = now
+
+
+def test_nodal_force_is_projected(model):
+    scene = model.scene
+    force = np.zeros((scene.mesh.n_vertices, 3))
+    force[-1, 1] = 0.3
+    assert np.allclose(model.project(force), model.basis.T @ force.ravel())
+    q1, _ = model.solve()
+    q2, report = model.solve(force=force)
+    assert report.converged and np.linalg.norm(q2 - q1) > 0
+
+
+@pytest.mark.parametrize("nu,kappa,dt", [(0.499, E, 0.02), (0.48, 100 * E, 0.02),
+                                         (0.48, E, 1e-4), (0.48, E, 0.1)])
+def test_extremes_converge_or_say_so(nu, kappa, dt):
+    reduced = ReducedModel(cantilever(nu=nu, kappa=kappa), modes=4)
+    q, v = np.zeros(reduced.r), np.zeros(reduced.r)
+    for _ in range(10):
+        q, v, report = reduced.step(q, v, dt)
+        assert np.isfinite(q).all() and np.isfinite(v).all()
+        assert report.converged
+
+
+def test_bad_input_is_refused():
+    with pytest.raises(ValueError, match="Neo-Hookean"):
+        ReducedModel(cantilever(model="neohookean"))
+    scene = cantilever(cells=(2, 1, 1))
+    with pytest.raises(ValueError, match="modes"):
+        ReducedModel(scene, modes=scene.n_free)
+    with pytest.raises(ValueError, match="modes"):
+        ReducedModel(scene, modes=0)
+    mesh = af.box_beam(cells=(2, 1, 1))
+    with pytest.raises(ValueError, match="fixed"):
+        ReducedModel(af.Scene(mesh, af.Material()))
+    with pytest.raises(ValueError, match="dt"):
+        ReducedModel(scene, modes=2).step(np.zeros(5), np.zeros(5), 0.0)
