@@ -123,6 +123,9 @@ def _parser():
                         "the static deflection")
     t.add_argument("--no-surrogates", action="store_true",
                    help="only the FEM rungs (skip the shipped networks)")
+    t.add_argument("--rungs", nargs="+", metavar="NAME",
+                   help="run only these rungs besides the exact one (names as in the table, "
+                        "quoted: --rungs 'reduced m5' 'cg amg')")
     t.add_argument("--json", help="write the result here")
     t.add_argument("--png", help="write the Pareto plot here")
     b = sub.add_parser("bench", help="speed of the kernels and solvers (table + JSON)",
@@ -203,9 +206,15 @@ def _trade(args):
         if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
             raise FileNotFoundError(f"the folder of {path!r} does not exist")
     mesh = _SHAPES[args.scene](args) if args.scene in _SHAPES else read_mesh(args.scene)
-    result = ladder.trade(_scene(args, mesh), args.steps, args.dt, tolerance=args.tolerance,
-                          rungs=ladder.fem_rungs() if args.no_surrogates else None,
+    scene = _scene(args, mesh)
+    rungs, notes = ladder.fem_rungs(), []
+    if not args.no_surrogates:
+        rungs += ladder.registered_rungs(scene, args.dt, notes)
+    if args.rungs:
+        rungs = ladder.select_rungs(rungs, args.rungs)
+    result = ladder.trade(scene, args.steps, args.dt, tolerance=args.tolerance, rungs=rungs,
                           name=args.scene)
+    result["notes"][:0] = notes
     print(ladder.trade_table(result))
     if args.json:
         write_json(args.json, result)

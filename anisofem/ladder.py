@@ -7,8 +7,8 @@ rollout (`anisofem.trade`, `python -m anisofem trade`).
 A rung is one way of rolling the scene forward: the exact rollout (the reference: the default
 method to rtol 1e-8, exact Newton or, on large meshes, multigrid CG), Newton with a fixed
 iteration budget, factorization reuse, L-BFGS, inexact Newton (CG with the diagonal, a kept
-factorization or multigrid as preconditioner), the exact rollout at a larger time step, and
-the rungs that installed packages register under the entry-point group "anisofem.rungs"
+factorization or multigrid as preconditioner), the exact rollout at a larger time step, the
+scene's reduced model (anisofem.reduced) at a few basis sizes, and the rungs that installed packages register under the entry-point group "anisofem.rungs"
 (anisognn's shipped networks alone, with their Galerkin passes and as the warm start of one
 Newton iteration; export's ONNX runtime). Each rung rolls the scene out from rest
 in the same process; what is compared:
@@ -20,6 +20,8 @@ in the same process; what is compared:
 - ms_per_step: wall time per step of the scene's dt, all steps but the first (which holds
   one-time set-up and compilation) averaged, so amortized refactorizations count; a rung with a
   larger step reports its time per dt of simulated time (ms per own step / dt_factor);
+- setup_seconds (reduced rungs): building the model before the rollout (basis and
+  polynomial), not in ms_per_step;
 - energy_drift: max over time of H(t) - H(0), H = kinetic + elastic - f_ext . x, over |the
   static potential|: backward Euler never gains energy (<= 0), a rung that does is unstable;
 - stable: every step was taken (none failed), every state finite, energy_drift <= 0.01;
@@ -41,6 +43,7 @@ from . import methods
 from .files import atomic_path
 from .inversion import volume_change
 from .potential import Potential
+from .reduced import ReducedModel
 from .scene import Scene
 from .solve import Stepper, solve
 
@@ -57,7 +60,8 @@ RUNG_GROUP = "anisofem.rungs"
 class Rung:
     """One way of rolling a scene forward.
 
-    name: shown in tables. kind: "fem", or "surrogate" for a learned model's rung. make(scene,
+    name: shown in tables. kind: "fem", "reduced" (a reduced model of the scene), or
+    "surrogate" for a learned model's rung. make(scene,
     dt) returns advance(x, v) -> (x, v, info) for one step of dt, with info a dict holding
     "failed" (bool) and any of "iterations", "factorizations", "linear_iterations". dt_factor:
     the rung steps dt_factor times the scene's dt.
@@ -85,11 +89,38 @@ def fem_rung(name, method="auto", dt_factor=1, **options):
     return Rung(name, "fem", make, dt_factor)
 
 
+def reduced_rung(modes):
+    """A Rung stepping the scene's ReducedModel (anisofem.reduced) with `modes` vibration
+    modes and their modal derivatives. The model is built before the rollout; its first step
+    reports the build time as "setup_seconds"."""
+    def make(scene, dt):
+        model = ReducedModel(scene, modes=modes)
+        q, w = np.zeros(model.r), np.zeros(model.r)
+        setup = {"setup_seconds": model.build_seconds}
+
+        def advance(x, v):
+            nonlocal q, w, setup
+            q, w, report = model.step(q, w, dt)
+            x_next = model.positions(q)
+            info = {"failed": not report.converged, "message": report.message,
+                    "iterations": report.iterations, **setup}
+            setup = {}
+            return x_next, (x_next - x) / dt, info
+        return advance
+    return Rung(f"reduced m{modes}", "reduced", make)
+
+
+#: Vibration modes of the listed reduced rungs (their bases hold 20, 27 and 44 coordinates):
+#: on the trade cantilevers 5 modes is the cheapest within 1% of the exact rollout, 8 about
+#: 10x more accurate at 3-8x the cost, and past 8 the cost grows as r^4 for little.
+REDUCED_MODES = (5, 6, 8)
+
+
 def fem_rungs():
     """The anisofem ladder, exact first (the default method, "auto", to rtol 1e-8: exact
     Newton, or multigrid CG on large meshes): "xK" is a budget of K iterations per step, "rtol
     R" iterates to the relative tolerance R (1e-8 where none is named), "dt xK" steps K times
-    longer."""
+    longer, "reduced mK" the scene's reduced model with K vibration modes."""
     return [fem_rung("exact"),
             fem_rung("newton x1", "newton", iterations=1),
             fem_rung("newton x2", "newton", iterations=2),
@@ -103,7 +134,18 @@ def fem_rungs():
             fem_rung("cg amg", "cg", preconditioner="amg"),
             fem_rung("cg amg rtol 1e-2", "cg", preconditioner="amg", rtol=1e-2),
             fem_rung("exact dt x2", dt_factor=2),
-            fem_rung("exact dt x5", dt_factor=5)]
+            fem_rung("exact dt x5", dt_factor=5)] + [reduced_rung(m) for m in REDUCED_MODES]
+
+
+def select_rungs(rungs, names):
+    """The exact rung and the rungs named in names (str list), in the ladder's order; an
+    unknown name raises ValueError listing the known ones."""
+    known = [r.name for r in rungs]
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ValueError(f"rungs: no rung named {', '.join(map(repr, unknown))}; the rungs are "
+                         f"{', '.join(map(repr, known))}")
+    return [r for r in rungs if r.name == "exact" or r.name in names]
 
 
 def checked_steps(steps, multiple):
@@ -162,6 +204,7 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, progress=True, 
                     dt)
     rows = [row(rungs[0], exact)]
     rungs = _physical_reference_only(rungs, rows[0]["inverted"], notes)
+    rungs = _representable(rungs, scene, notes)
     for i, rung in enumerate(rungs[1:], 2):
         label = f"[{i}/{len(rungs)}] {rung.name}"
         rows.append(row(rung, _roll(rung, scene, dt, steps, label if progress else None)))
@@ -190,12 +233,21 @@ def mark_front(rows):
 def _physical_reference_only(rungs, inverted, notes):
     """rungs without the surrogate's when the exact rollout turns `inverted` elements inside
     out: a network is scored against the FEM's answer, and that answer is not physical."""
-    if not inverted or all(r.kind == "fem" for r in rungs):
+    if not inverted or all(r.kind != "surrogate" for r in rungs):
         return rungs
     notes.append(f"surrogate rungs not scored: the exact rollout turns {inverted} elements "
                  f"inside out (StVK), so it is no physical reference (--material neohookean "
                  f"keeps the scene physical)")
-    return [r for r in rungs if r.kind == "fem"]
+    return [r for r in rungs if r.kind != "surrogate"]
+
+
+def _representable(rungs, scene, notes):
+    """rungs without the reduced ones where the scene has Neo-Hookean elements (the reduced
+    model's energy is exact only for the StVK base), saying so in notes."""
+    if not scene.neohookean.any() or all(r.kind != "reduced" for r in rungs):
+        return rungs
+    notes.append("reduced rungs not run: the reduced model needs the StVK base material")
+    return [r for r in rungs if r.kind != "reduced"]
 
 
 def registered_rungs(scene, dt, notes):
@@ -280,6 +332,9 @@ def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt
            "max_volume_change": max(float(np.abs(c).max()) for c in change),
            "stable": bool(run["completed"] and drift <= ENERGY_GAIN_MAX),
            "steps_taken": len(secs)}
+    setup = [info["setup_seconds"] for info in run["infos"] if "setup_seconds" in info]
+    if setup:
+        row["setup_seconds"] = setup[0]
     for key in ("iterations", "factorizations", "linear_iterations"):
         values = [info[key] for info in run["infos"] if key in info]
         if values:
@@ -312,23 +367,32 @@ def trade_table(result):
 
 def _label_positions(ax, rows, y_of, xlim, ylim):
     """Where the plot's rung labels go, lowest rung first, each moved up while it would overlap
-    one already placed: ([(text, (x, y) of the rung, (x, y) of the label, moved)], the y of
-    the highest label's top), in data coordinates of the log-log axes ax with limits xlim,
-    ylim."""
-    # label size in decades: about 5.5 and 11 pixels per character width and line height
+    a label already placed or another rung's marker: ([(text, (x, y) of the rung, (x, y) of
+    the label, moved)], the y of the highest label's top), in data coordinates of the log-log
+    axes ax with limits xlim, ylim."""
+    # sizes in decades: about 5.5 and 11 pixels per character width and line height, markers
+    # about 5 pixels across from their centre
     box = ax.get_window_extent()
     char_w = 5.5 * math.log10(xlim[1] / xlim[0]) / box.width
     line_h = 11.0 * math.log10(ylim[1] / ylim[0]) / box.height
+    mark_x, mark_y = 5.0 * char_w / 5.5, 5.0 * line_h / 11.0
+    markers = [(math.log10(r["ms_per_step"]), math.log10(y_of(r))) for r in rows]
     placed, labels = [], []
     for r in sorted(rows, key=y_of):
         x, y = r["ms_per_step"], y_of(r)
         text = r["name"] + (" (reference)" if r["name"] == "exact" else "")
-        lx, ly, w = math.log10(x) + 0.02, math.log10(y) + 0.3 * line_h, len(text) * char_w
-        while any(lx < px + pw and px < lx + w and abs(ly - py) < line_h
-                  for px, py, pw in placed):
+        lx, ly, w = math.log10(x) + 1.2 * mark_x, math.log10(y) - 0.4 * line_h, len(text) * char_w
+
+        def hits(ly):
+            return any(lx < px + pw and px < lx + w and abs(ly - py) < line_h
+                       for px, py, pw in placed) or any(
+                lx - mark_x < mx < lx + w + mark_x and ly - mark_y < my < ly + line_h + mark_y
+                for mx, my in markers if (mx, my) != (math.log10(x), math.log10(y)))
+        start = ly
+        while hits(ly):
             ly += 0.5 * line_h
         placed.append((lx, ly, w))
-        labels.append((text, (x, y), (10 ** lx, 10 ** ly), ly - math.log10(y) > 0.8 * line_h))
+        labels.append((text, (x, y), (10 ** lx, 10 ** ly), ly > start))
     top = max((py for _, py, _ in placed), default=-math.inf) + 1.5 * line_h
     return labels, 10 ** top
 
@@ -348,7 +412,7 @@ def plot(result, path):
     finite = [r["max_error"] for r in rows if 0 < r["max_error"] < math.inf]
     floor = min(finite) / 10 if finite else 1e-6
     ceiling = max(finite) * 10 if finite else 1.0
-    fig, ax = plt.subplots(figsize=(8, 5.5))
+    fig, ax = plt.subplots(figsize=(10, 5.5))
     ax.axhline(result["tolerance"], color="0.6", lw=0.8, ls="--")
     def y_of(r):
         return min(max(r["max_error"], floor), ceiling)
@@ -364,7 +428,8 @@ def plot(result, path):
     ys = [y_of(r) for r in front]
     ax.step(xs, ys, where="post", color="tab:green", lw=6, alpha=0.25,
             solid_capstyle="round", label="Pareto front")
-    styles = {"fem": ("o", "tab:blue", "anisofem"), "surrogate": ("s", "tab:orange", "surrogate")}
+    styles = {"fem": ("o", "tab:blue", "anisofem"), "reduced": ("D", "tab:purple", "reduced model"),
+              "surrogate": ("s", "tab:orange", "surrogate")}
     ax.set_xscale("log")
     ax.set_yscale("log")
     ms = [r["ms_per_step"] for r in rows]
@@ -385,6 +450,10 @@ def plot(result, path):
         ax.scatter(r["ms_per_step"], y_of(r), marker=marker, color=color, s=50, zorder=3,
                    label=None if label in shown else label)
         shown.add(label)
+        if r["name"] == result["recommended"]:
+            ax.scatter(r["ms_per_step"], y_of(r), marker="o", s=220, facecolors="none",
+                       edgecolors="tab:green", linewidths=2, zorder=4,
+                       label=f"recommended (within {result['tolerance']:g})")
     labels, top = _label_positions(ax, rows, y_of, xlim, ylim)
     for _ in range(3):  # the axes grow to hold the highest label; the labels are placed anew
         if top <= ylim[1]:
@@ -402,7 +471,7 @@ def plot(result, path):
     ax.set_title(f"{os.path.basename(sc['name']) or 'scene'}: {sc['tets']:,} tets, "
                  f"dt = {sc['dt']:g} s, {sc['steps']} steps", fontsize=10)
     ax.grid(True, which="major", alpha=0.3)
-    ax.legend(fontsize=8, loc="lower left")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     fig.tight_layout()
     with atomic_path(path, ".png") as tmp:
         fig.savefig(tmp, dpi=120, format="png")

@@ -26,7 +26,7 @@ scene = af.default_scene(mesh)
 assert af.solve(scene).converged
 assert af.simulate(scene, 3).converged
 result = af.trade(scene, steps=10, progress=False)
-assert {r["kind"] for r in result["rungs"]} == {"fem"}
+assert {r["kind"] for r in result["rungs"]} == {"fem", "reduced"}
 assert len(result["rungs"]) == len(af.ladder.fem_rungs())
 print("\\n".join(result["notes"]))
 assert not {"torch", "onnxruntime", "matplotlib"} & set(sys.modules)

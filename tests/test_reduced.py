@@ -5,17 +5,20 @@ import numpy as np
 import pytest
 
 import anisofem as af
+from anisofem import ladder
 from anisofem.reduced import ReducedModel
+from anisofem.reduced.polynomial import polynomial
+from test_elements import Quadratic
 
 E = 1e5
 FIBER = (np.cos(np.radians(40)), 0.0, np.sin(np.radians(40)))
 
 
-def cantilever(cells=(10, 2, 2), nu=0.48, kappa=E, model="stvk", length=0.1):
+def cantilever(cells=(10, 2, 2), nu=0.48, kappa=E, model="stvk", length=0.1, g=9.81):
     mesh = af.box_beam(cells=cells, size=(length, 0.02, 0.02))
     x = mesh.vertices[:, 0]
     return af.Scene(mesh, af.Material(E, nu, 1000.0, FIBER, kappa, model=model),
-                    fixed=np.flatnonzero(x <= x.min() + 1e-9), gravity=(0, 0, -9.81))
+                    fixed=np.flatnonzero(x <= x.min() + 1e-9), gravity=(0, 0, -g))
 
 
 @pytest.fixture(scope="module")
@@ -45,6 +48,25 @@ def test_polynomial_equals_the_projected_fem(model):
         assert np.linalg.norm(f - expected_f) <= 1e-10 * np.linalg.norm(expected_f)
         expected_H = model.basis.T @ (af.hessian(scene, x) @ model.basis)
         assert np.linalg.norm(H - expected_H) <= 1e-10 * np.linalg.norm(expected_H)
+
+
+def test_polynomial_of_quadratic_tets_equals_their_energy():
+    """The coefficients are summed per quadrature point, so a 10-node element's 14 points
+    give its exact energy, gradient and Hessian along any basis."""
+    mesh = af.box_beam(cells=(2, 1, 1), size=(0.1, 0.02, 0.02))
+    p2 = Quadratic(mesh, af.Material(E, 0.45, 1000.0, FIBER, 10 * E))
+    rng = np.random.default_rng(3)
+    basis = rng.standard_normal((p2.nodes.size, 7)) * 0.01
+    P = polynomial(p2.elements, p2.nodes, basis)
+    for _ in range(3):
+        q = rng.standard_normal(7)
+        x = p2.nodes + (basis @ q).reshape(-1, 3)
+        assert abs(P.energy(q) - p2.energy(x)) <= 1e-10 * abs(p2.energy(x))
+        g, H = P.gradient(q, hessian=True)
+        expected = basis.T @ p2.gradient(x).ravel()
+        assert np.linalg.norm(g - expected) <= 1e-10 * np.linalg.norm(expected)
+        expected = basis.T @ (p2.hessian(x) @ basis)
+        assert np.linalg.norm(H - expected) <= 1e-10 * np.linalg.norm(expected)
 
 
 def test_reduced_hessian_matches_finite_differences(model):
@@ -115,10 +137,11 @@ def test_nodal_force_is_projected(model):
     assert report.converged and np.linalg.norm(q2 - q1) > 0
 
 
-@pytest.mark.parametrize("nu,kappa,dt", [(0.499, E, 0.02), (0.48, 100 * E, 0.02),
-                                         (0.48, E, 1e-4), (0.48, E, 0.1)])
-def test_extremes_converge_or_say_so(nu, kappa, dt):
-    reduced = ReducedModel(cantilever(nu=nu, kappa=kappa), modes=4)
+@pytest.mark.parametrize("nu,kappa,dt,g", [(0.499, E, 0.02, 9.81), (0.48, 100 * E, 0.02, 9.81),
+                                           (0.48, E, 1e-4, 9.81), (0.48, E, 0.1, 9.81),
+                                           (0.48, E, 0.02, 98.1)])
+def test_extremes_converge(nu, kappa, dt, g):
+    reduced = ReducedModel(cantilever(nu=nu, kappa=kappa, g=g), modes=4)
     q, v = np.zeros(reduced.r), np.zeros(reduced.r)
     for _ in range(10):
         q, v, report = reduced.step(q, v, dt)
@@ -139,3 +162,40 @@ def test_bad_input_is_refused():
         ReducedModel(af.Scene(mesh, af.Material()))
     with pytest.raises(ValueError, match="dt"):
         ReducedModel(scene, modes=2).step(np.zeros(5), np.zeros(5), 0.0)
+
+
+def test_static_solve_at_ten_g_converges():
+    reduced = ReducedModel(cantilever(g=98.1), modes=5)
+    q, report = reduced.solve()
+    assert report.converged and np.isfinite(q).all()
+
+
+def test_failure_is_reported_not_hidden(model):
+    q, v = np.zeros(model.r), np.zeros(model.r)
+    _, _, report = model.step(q, v, 0.02, rtol=0.0, max_iter=1)
+    assert not report.converged and report.message == "1 iterations spent"
+
+
+def test_trade_lists_reduced_rungs_beside_the_exact_one():
+    scene = cantilever()
+    result = af.trade(scene, steps=10, rungs=[ladder.fem_rung("exact"), ladder.reduced_rung(5)],
+                      progress=False)
+    row = result["rungs"][1]
+    assert row["name"] == "reduced m5" and row["kind"] == "reduced" and row["stable"]
+    assert row["setup_seconds"] > 0 and row["max_error"] < 0.01
+
+
+def test_trade_leaves_reduced_rungs_out_of_neo_hookean_scenes():
+    scene = cantilever(model="neohookean")
+    result = af.trade(scene, steps=2, rungs=[ladder.fem_rung("exact"), ladder.reduced_rung(4)],
+                      progress=False)
+    assert [r["name"] for r in result["rungs"]] == ["exact"]
+    assert any("StVK" in note for note in result["notes"])
+
+
+def test_select_rungs_keeps_exact_and_refuses_unknown_names():
+    rungs = ladder.fem_rungs()
+    assert [r.name for r in ladder.select_rungs(rungs, ["reduced m5"])] == ["exact",
+                                                                            "reduced m5"]
+    with pytest.raises(ValueError, match="no rung named 'reduced m7'"):
+        ladder.select_rungs(rungs, ["reduced m7"])

@@ -1,0 +1,156 @@
+"""ReducedModel: a scene's motion restricted to x = x0 + U q, stepped in r dimensions.
+
+The basis U (anisofem.reduced.basis) is mass-orthonormal, U^T M U = I with the lumped mass, so
+backward Euler minimizes
+
+    1/(2 dt^2) |q - q_hat|^2 + V(q) - f_r . q,   q_hat = q_n + dt v_n,  f_r = U^T f_ext,
+
+and statics V(q) - f_r . q, with V the exact quartic of anisofem.reduced.polynomial. Both by
+Newton with the Hessian's negative eigenvalues clamped and a backtracking line search whose
+energy decrease is the exact quartic in the step length (no difference of two energies, so
+the search ranks points below the energy's round-off).
+"""
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..densities import STVK
+from ..potential import Potential
+from ..scene import check_scene
+from . import basis as _basis
+from . import kernels
+from .polynomial import polynomial
+
+#: Default number of vibration modes; the basis holds them and their m (m + 1) / 2 modal
+#: derivatives, less dependent directions (6 modes: r = 27).
+MODES = 6
+
+#: The smallest gradient norm float64 resolves, over eps times the size of the terms summed
+#: into it (|H| |q| and the loads).
+ROUNDOFF_FACTOR = 16.0
+
+
+@dataclass
+class NewtonReport:
+    """How a reduced solve ended: converged, iterations, the final reduced gradient norm
+    (N per unit of q), and a message saying why it stopped."""
+    converged: bool
+    iterations: int
+    residual: float
+    message: str = ""
+
+
+class ReducedModel:
+    """The reduced model of a scene with the StVK base, with or without fibers.
+
+    Parameters
+    ----------
+    scene : the Scene (mesh, material, fixed vertices, loads). The basis moves its initial
+        positions x0, and its external force is projected on the basis.
+    modes : vibration modes m of the rest Hessian with the lumped mass (default MODES); the
+        basis adds their modal derivatives, so r <= m + m (m + 1) / 2.
+    derivatives : False keeps the linear modes only (r = m; they do not follow large
+        rotations).
+
+    Attributes: basis (3n, r) over all vertex components (0 on fixed ones) in m per unit of q,
+    with basis^T M basis = I; frequencies (m,) of the vibration modes, Hz; polynomial (the
+    reduced energy); external (r,) the scene's projected load, N; build_seconds.
+    """
+
+    def __init__(self, scene, modes=MODES, derivatives=True):
+        check_scene(scene)
+        if (scene.elements.model != STVK).any():
+            raise ValueError("scene: the reduced model needs the StVK base material (its energy "
+                             "is a polynomial in the reduced coordinates); this scene has "
+                             "Neo-Hookean elements")
+        scene.check_static()
+        if not isinstance(modes, (int, np.integer)) or isinstance(modes, bool) or modes < 1:
+            raise ValueError(f"modes: expected a positive integer, got {modes!r}")
+        if modes >= scene.n_free:
+            raise ValueError(f"modes: {modes} modes need more than the scene's {scene.n_free} "
+                             f"unknowns")
+        t0 = time.perf_counter()
+        self.scene = scene
+        self.x0 = scene.initial_positions()
+        free = scene.free_dofs
+        mass = np.repeat(scene.masses, 3)[free]
+        layout = scene.layout("csr")
+        potential = Potential(scene)
+        K = _basis.free_hessian(potential, self.x0, layout)
+        omega2, phi = _basis.vibration_modes(K, mass, modes)
+        self.frequencies = np.sqrt(np.maximum(omega2, 0.0)) / (2.0 * math.pi)
+        columns = [phi]
+        if derivatives:
+            columns.append(_basis.modal_derivatives(potential, self.x0, layout, K, phi, free))
+        U = _basis.mass_orthonormal(np.hstack(columns), mass)
+        self.basis = np.zeros((3 * scene.mesh.n_vertices, U.shape[1]))
+        self.basis[free] = U
+        self.polynomial = polynomial(scene.elements, self.x0, self.basis)
+        self.external = self.project(scene.external_force)
+        self.build_seconds = time.perf_counter() - t0
+
+    @property
+    def r(self):
+        """Number of reduced coordinates."""
+        return self.basis.shape[1]
+
+    def positions(self, q):
+        """Full positions x0 + U q, (n, 3) in m, of reduced coordinates q (r,)."""
+        return self.x0 + (self.basis @ q).reshape(-1, 3)
+
+    def project(self, force):
+        """The reduced force U^T f (r,) of nodal forces f (n, 3) in N."""
+        return self.basis.T @ np.asarray(force, dtype=float).ravel()
+
+    def energy(self, q):
+        """The elastic energy V(q), J."""
+        return self.polynomial.energy(q)
+
+    def force(self, q, hessian=False):
+        """dV/dq (r,) in N (U^T of the full elastic gradient at x0 + U q), and with
+        hessian=True also d2V/dq2 (r, r) in N/m."""
+        return self.polynomial.gradient(q, hessian)
+
+    def solve(self, force=None, q0=None, rtol=1e-8, max_iter=50):
+        """The static equilibrium under the scene's loads plus nodal forces `force` (n, 3), N,
+        from q0 (default 0): returns (q, NewtonReport)."""
+        q = np.zeros(self.r) if q0 is None else np.array(q0, dtype=float)
+        load = self._load(force)
+        return self._newton(load, q, None, 0.0, rtol * _norm(load), rtol, max_iter)
+
+    def step(self, q, v, dt, force=None, rtol=1e-8, max_iter=50):
+        """One backward-Euler step of dt s from the reduced state (q, v) under the scene's
+        loads plus nodal forces `force` (n, 3), N: returns (q_next, v_next, NewtonReport)."""
+        if not dt > 0:
+            raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
+        q_hat = q + dt * v
+        load = self._load(force)
+        q_next, report = self._newton(load, q_hat.copy(), q_hat, 1.0 / dt ** 2,
+                                      rtol * (_norm(load) + _norm(v) / dt), rtol, max_iter)
+        return q_next, (q_next - q) / dt, report
+
+    def _load(self, force):
+        return self.external if force is None else self.external + self.project(force)
+
+    def _newton(self, load, q, q_hat, inertia, tolerance, rtol, max_iter):
+        """Minimize V(q) - load . q + inertia |q - q_hat|^2 / 2 from q (inertia 1/dt^2, or 0
+        for statics) to a gradient norm of tolerance + rtol |dV/dq(q)| (N: rtol times the
+        problem's force size) or the round-off floor (anisofem.reduced.kernels.newton)."""
+        P = self.polynomial
+        q_hat = q if q_hat is None else q_hat
+        q, iterations, residual, status = kernels.newton(
+            P.c1, P.C2, P.S3.reshape(self.r ** 2, self.r), P.W4, load, q,
+            q_hat, inertia, tolerance, rtol, ROUNDOFF_FACTOR, max_iter)
+        return q, NewtonReport(status == kernels.CONVERGED, iterations, residual,
+                               _MESSAGES[status].format(max_iter))
+
+
+_MESSAGES = {kernels.CONVERGED: "converged", kernels.SPENT: "{} iterations spent",
+             kernels.NO_DESCENT: "line search found no decrease",
+             kernels.NOT_FINITE: "non-finite force"}
+
+
+def _norm(v):
+    return math.sqrt(float(np.dot(v, v)))
