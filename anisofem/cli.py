@@ -75,6 +75,21 @@ def _scene(args, mesh):
     return Scene(mesh, material, fixed=_fixed(mesh, args.fixed), gravity=args.gravity)
 
 
+def add_scene_arguments(p):
+    """The positional scene (a mesh file or a shape) and the flags that make a Scene of it
+    (trade here, `python -m export reduced`)."""
+    p.add_argument("scene", help="a mesh file meshio reads, or a shape: "
+                                 f"{', '.join(sorted(_SHAPES))}")
+    _shape_arguments(p)
+    _scene_arguments(p)
+
+
+def scene_of(args):
+    """The Scene that the flags of add_scene_arguments describe."""
+    mesh = _SHAPES[args.scene](args) if args.scene in _SHAPES else read_mesh(args.scene)
+    return _scene(args, mesh)
+
+
 class _ShowDefaults(argparse.ArgumentDefaultsHelpFormatter):
     """Help that names each option's default, where it has one."""
 
@@ -112,10 +127,7 @@ def _parser():
                         "(auto), from the start (always) or never")
     t = sub.add_parser("trade", help="the speed/accuracy trade of every solver rung on a scene "
                                      "(table, JSON, Pareto plot; minutes)", **defaults)
-    t.add_argument("scene", help="a mesh file meshio reads, or a shape: "
-                                 f"{', '.join(sorted(_SHAPES))}")
-    _shape_arguments(t)
-    _scene_arguments(t)
+    add_scene_arguments(t)
     t.add_argument("--steps", type=int, default=100, help="backward-Euler steps from rest")
     t.add_argument("--dt", type=float, default=0.02, help="s")
     t.add_argument("--tolerance", type=float, default=0.01,
@@ -205,8 +217,7 @@ def _trade(args):
     for path in (args.json, args.png):
         if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
             raise FileNotFoundError(f"the folder of {path!r} does not exist")
-    mesh = _SHAPES[args.scene](args) if args.scene in _SHAPES else read_mesh(args.scene)
-    scene = _scene(args, mesh)
+    scene = scene_of(args)
     rungs, notes = ladder.fem_rungs(), []
     if not args.no_surrogates:
         rungs += ladder.registered_rungs(scene, args.dt, notes)

@@ -24,6 +24,17 @@ def end_vertices(mesh, axis=0, side="max"):
     raise ValueError(f"side: expected 'min' or 'max', got {side!r}")
 
 
+#: Vertices whose displacement is within this fraction of the largest form the tip of a state.
+TIP_FRACTION = 0.99
+
+
+def moving_tip(u):
+    """Indices of the vertices whose displacement u (n, 3), m, is within TIP_FRACTION of the
+    largest: a loaded cantilever's free end, on any mesh of it."""
+    size = np.linalg.norm(u, axis=1)
+    return np.flatnonzero(size >= TIP_FRACTION * size.max())
+
+
 def tip_displacement(mesh, x, axis=0):
     """Mean displacement (3,) in m of the vertices at the free (max) end along axis."""
     x = np.asarray(x, dtype=float)

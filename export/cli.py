@@ -1,19 +1,19 @@
 """`python -m export MODEL -o model.onnx` (MODEL: a model.pt / checkpoint.pt file or a shipped
-name), `python -m export bench` (onnxruntime vs torch per step) and `python -m export bake
-SCENE -o PATH` (a scene's constant tensors for an engine)."""
+name), `python -m export bench` (onnxruntime vs torch per step), `python -m export bake
+SCENE -o PATH` (a scene's constant tensors for an engine) and `python -m export reduced SCENE
+-o PATH` (a scene's reduced model for runtime.ReducedSimulator; no torch needed)."""
 import argparse
 import sys
 
 from anisofem.files import result_path
-from anisognn import shipped
-from anisognn.cli import add_galerkin_arguments, stepping
 
-from . import bake, bench, model_path, to_onnx
+from . import bake, model_path
 
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["bench"]:
+        from . import bench
         parser = argparse.ArgumentParser(prog="python -m export bench",
                                          description="onnxruntime vs torch per step")
         parser.add_argument("--json", default=result_path("bench_export.json"),
@@ -41,6 +41,12 @@ def main(argv=None):
         print(f"wrote {args.output}.json and .bin: {header['title']}, {header['n']} vertices, "
               f"{header['m']} tets, fiber angles {header['fiber_angles']}")
         return
+    if argv[:1] == ["reduced"]:
+        return _reduced(argv[1:])
+    from anisognn import shipped
+    from anisognn.cli import add_galerkin_arguments, stepping
+
+    from . import to_onnx
     parser = argparse.ArgumentParser(
         prog="python -m export", description="export a trained anisognn model to ONNX "
         "(`python -m export bench` times it)")
@@ -59,3 +65,31 @@ def main(argv=None):
     c = net.config
     print(f"wrote {args.output}: {c.aggregation} aggregation, {c.latent} wide, {c.steps} steps, "
           f"{c.stepping}, dt = {c.dt} s")
+
+
+def _reduced(argv):
+    """python -m export reduced: build a scene's reduced model and write its arrays files."""
+    from anisofem.cli import add_scene_arguments, scene_of
+    from anisofem.reduced import MODES, ReducedModel
+
+    from . import reduced
+    parser = argparse.ArgumentParser(
+        prog="python -m export reduced", description="build a scene's reduced model "
+        "(anisofem.reduced) and write it as PATH.json + PATH.bin for runtime.ReducedSimulator",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    add_scene_arguments(parser)
+    parser.add_argument("--modes", type=int, default=MODES,
+                        help="vibration modes; the basis adds their modal derivatives")
+    parser.add_argument("-o", "--output", required=True, help="PATH (without extension)")
+    args = parser.parse_args(argv)
+    try:
+        model = ReducedModel(scene_of(args), modes=args.modes)
+    except (ValueError, FileNotFoundError) as err:
+        sys.exit(f"error: {err}")
+    header = reduced.write(model, args.output, title=args.scene, gravity=args.gravity)
+    v = model.validation
+    check = ("" if v is None else f"; static tip {100 * v.tip_error:.2g}% and field "
+             f"{100 * v.field_error:.2g}% off the full FEM")
+    print(f"wrote {args.output}.json and .bin: {header['n']} vertices, {header['m']} tets, "
+          f"r = {header['r']} ({header['modes']} modes), built in {model.build_seconds:.2g} s"
+          f"{check}")

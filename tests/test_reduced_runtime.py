@@ -1,0 +1,95 @@
+"""The reduced model written by export.reduced and stepped by runtime.ReducedSimulator (numpy
+only) moves like the library's stepper, refuses another mesh and another file, and the
+command writes it."""
+import json
+
+import numpy as np
+import pytest
+
+from anisofem.reduced import ReducedModel
+from export import reduced as writer
+from export.bake import write_arrays
+from export.cli import main
+from export.runtime import ReducedSimulator
+from test_reduced import cantilever
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    scene = cantilever()
+    model = ReducedModel(scene, modes=5)
+    path = str(tmp_path_factory.mktemp("reduced") / "cantilever")
+    writer.write(model, path, "cantilever", gravity=(0, 0, -9.81))
+    return scene, model, path
+
+
+def rollouts(scene, model, sim, steps, drag=None):
+    """Largest position difference between the library's and the runtime's rollouts, over the
+    largest displacement."""
+    q, w = np.zeros(model.r), np.zeros(model.r)
+    qs, ws = sim.rest_state()
+    worst = size = 0.0
+    force = scene.external_force if drag is None else scene.external_force + drag
+    for _ in range(steps):
+        q, w, report = model.step(q, w, 0.02, force=drag)
+        assert report.converged
+        qs, ws = sim.step(qs, ws, force, 0.02)
+        x = model.positions(q)
+        worst = max(worst, np.abs(x - sim.positions(qs)).max())
+        size = max(size, np.abs(x - scene.mesh.vertices).max())
+    return worst / size
+
+
+def test_runtime_steps_like_the_library_in_float64_and_close_in_float32(written):
+    scene, model, path = written
+    sim = ReducedSimulator(path, scene.mesh.vertices, scene.mesh.tets)
+    assert rollouts(scene, model, sim, 200) < 1e-6
+    assert rollouts(scene, model, ReducedSimulator(path, dtype=np.float32), 200) < 0.01
+
+
+def test_nodal_forces_per_step_reach_the_runtime_as_in_the_library(written):
+    scene, model, path = written
+    drag = np.zeros((scene.mesh.n_vertices, 3))
+    drag[np.argmax(scene.mesh.vertices[:, 0]), 1] = 0.05
+    sim = ReducedSimulator(path)
+    assert rollouts(scene, model, sim, 20, drag) < 1e-6
+    q, w = sim.step(*sim.rest_state(), scene.external_force + drag, 0.02)
+    assert sim.positions(q)[:, 1].max() > 1e-6  # the drag moved the beam sideways
+
+
+def test_header_holds_the_model_and_its_validation(written):
+    scene, model, path = written
+    with open(path + ".json") as f:
+        header = json.load(f)
+    assert header["r"] == model.r == 20 and header["n"] == scene.mesh.n_vertices
+    assert 0 < header["validation"]["tip_error"] < 0.01
+    assert len(header["frequencies"]) == 5
+
+
+def test_runtime_refuses_another_mesh_and_another_file(written, tmp_path):
+    scene, model, path = written
+    other = cantilever(cells=(5, 2, 2))
+    with pytest.raises(ValueError, match="vertices: not the mesh"):
+        ReducedSimulator(path, other.mesh.vertices)
+    with pytest.raises(ValueError, match="tets: not the mesh"):
+        ReducedSimulator(path, scene.mesh.vertices, scene.mesh.tets[::-1])
+    write_arrays(tmp_path / "baked", {"x": np.zeros(3)}, {"model_format": "anisognn-step-2"})
+    with pytest.raises(ValueError, match="holds no reduced model"):
+        ReducedSimulator(tmp_path / "baked")
+    with pytest.raises(ValueError, match="dt"):
+        ReducedSimulator(path).step(np.zeros(20), np.zeros(20), scene.external_force, 0.0)
+
+
+def test_command_writes_a_scene_the_runtime_steps(tmp_path, capsys):
+    out = str(tmp_path / "box")
+    main(["reduced", "box", "--cells", "10", "2", "2", "--kappa", "1e5", "--modes", "4",
+          "-o", out])
+    assert "r = 14 (4 modes)" in capsys.readouterr().out
+    sim = ReducedSimulator(out)
+    force = sim.masses[:, None] * np.array([0.0, 0.0, -9.81])
+    q, w = sim.rest_state()
+    for _ in range(5):
+        q, w = sim.step(q, w, force, 0.02)
+    assert sim.positions(q)[:, 2].min() < sim.rest_positions[:, 2].min() - 1e-4
+    with pytest.raises(SystemExit, match="Neo-Hookean"):
+        main(["reduced", "box", "--material", "neohookean", "-o", out])
