@@ -1,7 +1,8 @@
 """`python -m export MODEL -o model.onnx` (MODEL: a model.pt / checkpoint.pt file or a shipped
 name), `python -m export bench` (onnxruntime vs torch per step), `python -m export bake
-SCENE -o PATH` (a scene's constant tensors for an engine) and `python -m export reduced SCENE
--o PATH` (a scene's reduced model for runtime.ReducedSimulator; no torch needed)."""
+SCENE -o PATH` (a scene's constant tensors for an engine), `python -m export reduced SCENE
+-o PATH` (a scene's reduced model for runtime.ReducedSimulator; no torch needed) and
+`python -m export bench-reduced` (its build, size and step times)."""
 import argparse
 import sys
 
@@ -43,6 +44,8 @@ def main(argv=None):
         return
     if argv[:1] == ["reduced"]:
         return _reduced(argv[1:])
+    if argv[:1] == ["bench-reduced"]:
+        return _bench_reduced(argv[1:])
     from anisognn import shipped
     from anisognn.cli import add_galerkin_arguments, stepping
 
@@ -93,3 +96,19 @@ def _reduced(argv):
     print(f"wrote {args.output}.json and .bin: {header['n']} vertices, {header['m']} tets, "
           f"r = {header['r']} ({header['modes']} modes), built in {model.build_seconds:.2g} s"
           f"{check}")
+
+
+def _bench_reduced(argv):
+    """python -m export bench-reduced: the reduced model's build, size and step times."""
+    from . import bench_reduced
+    parser = argparse.ArgumentParser(
+        prog="python -m export bench-reduced", description=bench_reduced.__doc__.split("\n")[0],
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--sizes", nargs="+", default=list(bench_reduced.MESHES),
+                        choices=list(bench_reduced.MESHES), help="meshes, by tets")
+    parser.add_argument("--modes", type=int, nargs="+", default=list(bench_reduced.MODES),
+                        help="vibration modes of each model")
+    parser.add_argument("--json", default=result_path("bench_reduced.json"),
+                        help="where to write the JSON")
+    args = parser.parse_args(argv)
+    bench_reduced.run(args.sizes, args.modes, args.json)

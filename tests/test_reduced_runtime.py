@@ -93,3 +93,11 @@ def test_command_writes_a_scene_the_runtime_steps(tmp_path, capsys):
     assert sim.positions(q)[:, 2].min() < sim.rest_positions[:, 2].min() - 1e-4
     with pytest.raises(SystemExit, match="Neo-Hookean"):
         main(["reduced", "box", "--material", "neohookean", "-o", out])
+
+
+def test_bench_row_measures_what_it_names(tmp_path):
+    from export import bench_reduced
+    row = bench_reduced.measure((4, 1, 1), 3, str(tmp_path))
+    assert row["tets"] == 20 and row["r"] == 9 and row["modes"] == 3
+    assert row["file_mb"] > 0 and row["library_ms"] > 0 and row["runtime_ms"] > 0
+    assert 0 <= row["static_tip_error"] < 0.5

@@ -29,20 +29,22 @@ def free_hessian(potential, x, layout):
     return layout.matrix(data).tocsc()
 
 
-def vibration_modes(K, mass, modes):
+def vibration_modes(K, factor, mass, modes):
     """The `modes` lowest (omega^2 (1/s^2), phi (N, modes)) of K phi = omega^2 M phi, M =
-    diag(mass) (kg per free unknown), by shift-invert Lanczos from a fixed start (so a model
-    is built the same way every time). phi is M-orthonormal."""
+    diag(mass) (kg per free unknown), by shift-invert Lanczos on factor (scipy's splu of K)
+    from a fixed start (so a model is built the same way every time). phi is M-orthonormal."""
+    inverse = spla.LinearOperator(K.shape, matvec=factor.solve, dtype=float)
     lam, phi = spla.eigsh(K, k=modes, M=sp.diags(mass).tocsc(), sigma=0.0, which="LM",
-                          v0=np.sqrt(mass))
+                          v0=np.sqrt(mass), OPinv=inverse)
     order = np.argsort(lam)
     return lam[order], phi[:, order]
 
 
-def modal_derivatives(potential, x0, layout, K, phi, free):
-    """Psi_ij = -K^-1 (dK/dphi_i) phi_j for i <= j, (N, m (m + 1) / 2), each dK/dphi_i the
-    central difference of the Hessian along phi_i (exact for StVK and fiber energies)."""
-    solve = spla.splu(K).solve
+def modal_derivatives(potential, x0, layout, factor, phi, free):
+    """Psi_ij = -K^-1 (dK/dphi_i) phi_j for i <= j, (N, m (m + 1) / 2), K^-1 by factor (splu
+    of K), each dK/dphi_i the central difference of the Hessian along phi_i (exact for StVK
+    and fiber energies)."""
+    solve = factor.solve
     n = x0.shape[0]
     size = math.sqrt(float(np.mean(np.sum((x0 - x0.mean(0)) ** 2, axis=1))))
     slopes = []

@@ -15,6 +15,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse.linalg as spla
 
 from ..densities import STVK
 from ..metrics import moving_tip
@@ -97,11 +98,13 @@ class ReducedModel:
         layout = scene.layout("csr")
         potential = Potential(scene)
         K = _basis.free_hessian(potential, self.x0, layout)
-        omega2, phi = _basis.vibration_modes(K, mass, modes)
+        factor = spla.splu(K)
+        omega2, phi = _basis.vibration_modes(K, factor, mass, modes)
         self.frequencies = np.sqrt(np.maximum(omega2, 0.0)) / (2.0 * math.pi)
         columns = [phi]
         if derivatives:
-            columns.append(_basis.modal_derivatives(potential, self.x0, layout, K, phi, free))
+            columns.append(_basis.modal_derivatives(potential, self.x0, layout, factor, phi,
+                                                    free))
         U = _basis.mass_orthonormal(np.hstack(columns), mass)
         self.basis = np.zeros((3 * scene.mesh.n_vertices, U.shape[1]))
         self.basis[free] = U

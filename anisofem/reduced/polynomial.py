@@ -130,13 +130,21 @@ def _whitened_strains(elements, block, x0, U, pi, pj):
     E0 = 0.5 * (np.einsum("eqki,eqkj->eqij", F0, F0) - np.eye(3))
     FB = np.einsum("eqki,eqrkj->eqrij", F0, B)
     L = 0.5 * (FB + np.swapaxes(FB, -1, -2))
-    BB = np.einsum("eqrki,eqskj->eqrsij", B, B)[:, :, pi, pj]
-    M = 0.5 * (BB + np.swapaxes(BB, -1, -2))
-    R = _whitening(elements, block)                          # (e, q, 6, 6)
+    # M_rs = sym(B_r^T B_s), one Voigt component at a time: column i of every B_r is
+    # P_i[r, k] = B_r[k, i], and (B_r^T B_s)_ij = (P_i P_j^T)[r, s] (a batched matrix product)
+    P = [np.ascontiguousarray(B[..., i]) for i in range(3)]  # (e, q, r, 3)
+    M = np.empty(B.shape[:2] + (pi.size, 6))
+    for c, (i, j) in enumerate(_VOIGT):
+        product = P[i] @ np.swapaxes(P[j], -1, -2)           # (e, q, r, r)
+        if i == j:
+            M[..., c] = product[:, :, pi, pj]
+        else:
+            M[..., c] = (_ROOT2 / 2) * (product[:, :, pi, pj] + product[:, :, pj, pi])
+    Rt = np.swapaxes(_whitening(elements, block), -1, -2)    # (e, q, 6, 6), R^T
     r = U.shape[2]
-    e0 = np.einsum("eqst,eqt->eqs", R, _voigt(E0)).reshape(-1)
-    L = np.einsum("eqst,eqrt->eqsr", R, _voigt(L)).reshape(-1, r)
-    M = np.einsum("eqst,eqpt->eqsp", R, _voigt(M)).reshape(-1, pi.size)
+    e0 = (_voigt(E0)[:, :, None, :] @ Rt).reshape(-1)
+    L = np.swapaxes(_voigt(L) @ Rt, -1, -2).reshape(-1, r)
+    M = np.swapaxes(M @ Rt, -1, -2).reshape(-1, pi.size)
     return e0, L, M
 
 
