@@ -72,6 +72,7 @@ def main(argv=None):
 
 def _reduced(argv):
     """python -m export reduced: build a scene's reduced model and write its arrays files."""
+    from anisofem import read_mesh
     from anisofem.cli import add_scene_arguments, scene_of
     from anisofem.reduced import MODES, ReducedModel
 
@@ -83,13 +84,18 @@ def _reduced(argv):
     add_scene_arguments(parser)
     parser.add_argument("--modes", type=int, default=MODES,
                         help="vibration modes; the basis adds their modal derivatives")
+    parser.add_argument("--display", metavar="MESH",
+                        help="a coarser mesh file of the same body: the file moves its vertices "
+                             "(the basis interpolated there) instead of the model's")
     parser.add_argument("-o", "--output", required=True, help="PATH (without extension)")
     args = parser.parse_args(argv)
     try:
+        display = None if args.display is None else read_mesh(args.display)
         model = ReducedModel(scene_of(args), modes=args.modes)
+        header = reduced.write(model, args.output, title=args.scene, gravity=args.gravity,
+                               display=display)
     except (ValueError, FileNotFoundError) as err:
         sys.exit(f"error: {err}")
-    header = reduced.write(model, args.output, title=args.scene, gravity=args.gravity)
     v = model.validation
     check = ("" if v is None else f"; static tip {100 * v.tip_error:.2g}% and field "
              f"{100 * v.field_error:.2g}% off the full FEM")

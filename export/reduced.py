@@ -6,7 +6,8 @@ The arrays (float64 unless said): rest_positions (n, 3) m, the positions the bas
 basis (n, 3, r) m per unit of q, 0 on held components; c1 (r,), C2 (r, r), S3 (r, r, r) and
 W4 (T, r), T = r (r + 1) (r + 2) / 6, the coefficients of the energy (runtime.ReducedSimulator);
 masses (n,) kg; held (n, 3) uint8; tets (m, 4) int32, the mesh it was built on; surface (k, 3)
-int32, the boundary triangles. The header: model_format REDUCED_FORMAT, title, n, m, r, modes,
+int32, the boundary triangles; with a display mesh, the basis interpolated at its vertices
+(physics on the model's mesh, drawing on the display's). The header: model_format REDUCED_FORMAT, title, n, m, r, modes,
 frequencies (Hz), c0 (J), build_seconds, validation (the static tip and field errors against
 the full FEM), gravity (m/s^2) and material.
 """
@@ -18,21 +19,32 @@ from . import runtime
 from .bake import write_arrays
 
 
-def write(model, path, title="", gravity=None):
+def write(model, path, title="", gravity=None, display=None):
     """Write the ReducedModel `model` as path.json and path.bin; returns the header. gravity
-    (3,) m/s^2: the scene's, recorded for a viewer (the runtime takes forces per step)."""
+    (3,) m/s^2: the scene's, recorded for a viewer (the runtime takes forces per step).
+    display: a coarser TetMesh of the same body whose vertices the file moves instead of the
+    model's (its basis interpolated there, its own lumped masses and surface): the model's
+    accuracy at the display mesh's cost."""
     scene, P = model.scene, model.polynomial
-    n, r = scene.mesh.n_vertices, model.r
-    arrays = {"rest_positions": model.x0, "basis": model.basis.reshape(n, 3, r),
+    r = model.r
+    mesh = scene.mesh if display is None else display
+    if display is None:
+        rest, basis, masses = model.x0, model.basis.reshape(-1, 3, r), scene.masses
+        held = scene.fixed_mask
+    else:
+        rest, basis, masses = display.vertices, model.basis_at(display.vertices), \
+            _display_masses(scene, display)
+        held = np.all(basis == 0.0, axis=2)
+    arrays = {"rest_positions": rest, "basis": basis,
               "c1": P.c1, "C2": P.C2, "S3": P.S3, "W4": P.W4,
-              "masses": np.asarray(scene.masses, dtype=np.float64),
-              "held": scene.fixed_mask.astype(np.uint8),
-              "tets": scene.mesh.tets.astype(np.int32),
-              "surface": runtime.surface_triangles(scene.mesh.vertices,
-                                                   scene.mesh.tets).astype(np.int32)}
+              "masses": np.asarray(masses, dtype=np.float64),
+              "held": held.astype(np.uint8),
+              "tets": mesh.tets.astype(np.int32),
+              "surface": runtime.surface_triangles(mesh.vertices, mesh.tets).astype(np.int32)}
     material = scene.material
-    header = {"model_format": runtime.REDUCED_FORMAT, "title": title, "n": n,
-              "m": scene.mesh.n_tets, "r": r, "modes": len(model.frequencies),
+    header = {"model_format": runtime.REDUCED_FORMAT, "title": title, "n": mesh.n_vertices,
+              "m": mesh.n_tets, "physics_tets": scene.mesh.n_tets, "r": r,
+              "modes": len(model.frequencies),
               "frequencies": [float(f) for f in model.frequencies], "c0": float(P.c0),
               "build_seconds": model.build_seconds,
               "validation": (None if model.validation is None
@@ -42,3 +54,13 @@ def write(model, path, title="", gravity=None):
                            for key in ("young", "poisson", "density")}}
     write_arrays(path, arrays, header)
     return header
+
+
+def _display_masses(scene, display):
+    """(n,) kg: the display mesh's lumped masses in the scene's (uniform) density."""
+    density = np.asarray(scene.material.density)
+    if density.size != 1:
+        raise ValueError("display: the material's density must be uniform (per-tet values "
+                         "belong to the model's own mesh)")
+    volumes = display.rest_volumes * float(density.ravel()[0]) / 4.0
+    return np.bincount(display.tets.ravel(), np.repeat(volumes, 4), display.n_vertices)

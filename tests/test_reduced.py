@@ -199,3 +199,21 @@ def test_select_rungs_keeps_exact_and_refuses_unknown_names():
                                                                             "reduced m5"]
     with pytest.raises(ValueError, match="no rung named 'reduced m7'"):
         ladder.select_rungs(rungs, ["reduced m7"])
+
+
+def test_basis_at_points_of_the_same_body_interpolates_it(model):
+    mesh = model.scene.mesh
+    U = model.basis.reshape(mesh.n_vertices, 3, -1)
+    assert np.abs(model.basis_at(mesh.vertices) - U).max() <= 1e-12 * np.abs(U).max()
+    centroids = mesh.vertices[mesh.tets].mean(axis=1)
+    expected = U[mesh.tets].mean(axis=1)
+    assert np.abs(model.basis_at(centroids) - expected).max() <= 1e-12 * np.abs(U).max()
+    coarse = af.box_beam(cells=(5, 1, 1), size=(0.1, 0.02, 0.02))  # its vertices are fine ones
+    q = random_q(model, np.random.default_rng(4))
+    moved = coarse.vertices + model.basis_at(coarse.vertices) @ q
+    fine = model.positions(q)
+    match = [np.flatnonzero(np.all(np.abs(mesh.vertices - v) < 1e-12, axis=1))[0]
+             for v in coarse.vertices]
+    assert np.abs(moved - fine[match]).max() <= 1e-12
+    with pytest.raises(ValueError, match="lies in no tet"):
+        model.basis_at([[0.5, 0.0, 0.0]])

@@ -101,3 +101,25 @@ def test_bench_row_measures_what_it_names(tmp_path):
     assert row["tets"] == 20 and row["r"] == 9 and row["modes"] == 3
     assert row["file_mb"] > 0 and row["library_ms"] > 0 and row["runtime_ms"] > 0
     assert 0 <= row["static_tip_error"] < 0.5
+
+
+def test_display_mesh_file_moves_the_coarse_vertices_by_the_fine_model(tmp_path):
+    fine = cantilever(cells=(20, 4, 4))
+    model = ReducedModel(fine, modes=4, validate=False)
+    coarse = cantilever().mesh
+    writer.write(model, str(tmp_path / "display"), display=coarse)
+    sim = ReducedSimulator(str(tmp_path / "display"), coarse.vertices, coarse.tets)
+    assert sim.positions(np.zeros(model.r)).shape == (coarse.n_vertices, 3)
+    clamped = coarse.vertices[:, 0] <= 1e-12
+    assert sim.held[clamped].all() and not sim.held[~clamped].any()
+    assert abs(sim.masses.sum() - fine.masses.sum()) <= 1e-12 * fine.masses.sum()
+    U = model.basis_at(coarse.vertices)
+    q, w = np.zeros(model.r), np.zeros(model.r)
+    qs, ws = sim.rest_state()
+    force = sim.masses[:, None] * np.array([0.0, 0.0, -9.81])
+    for _ in range(30):
+        q, w, _ = model.step(q, w, 0.02)
+        qs, ws = sim.step(qs, ws, force, 0.02)
+    library = coarse.vertices + U @ q
+    sag = np.abs(library - coarse.vertices).max()
+    assert np.abs(sim.positions(qs) - library).max() < 0.02 * sag

@@ -24,6 +24,7 @@ from ..potential import Potential
 from ..scene import check_scene
 from . import basis as _basis
 from . import kernels
+from .display import interpolate
 from .polynomial import polynomial
 
 #: Default number of vibration modes; the basis holds them and their m (m + 1) / 2 modal
@@ -137,6 +138,12 @@ class ReducedModel:
     def positions(self, q):
         """Full positions x0 + U q, (n, 3) in m, of reduced coordinates q (r,)."""
         return self.x0 + (self.basis @ q).reshape(-1, 3)
+
+    def basis_at(self, points):
+        """The basis at rest points (p, 3), m, of the same body (the vertices of a coarser
+        display mesh), interpolated in the tets holding them: (p, 3, r), so that those points
+        move to points + basis_at(points) @ q (anisofem.reduced.display)."""
+        return interpolate(self.scene.mesh, self.basis, points)
 
     def project(self, force):
         """The reduced force U^T f (r,) of nodal forces f (n, 3) in N."""
