@@ -66,8 +66,13 @@ web/scenes/%.json: export/models/directional.onnx export/bake.py export/runtime.
 	mkdir -p web/scenes
 	$(PY) -m export bake $* -o web/scenes/$*
 
+web/scenes/%-reduced.json: export/reduced.py export/runtime.py anisofem/reduced/*.py $(VENV)/.installed
+	mkdir -p web/scenes
+	$(PY) -m export bake-reduced $* -o web/scenes/$*-reduced --modes 6
+
 web-assets: web/node_modules/.package-lock.json web/models/directional.onnx \
-            web/models/meshgraphnets.onnx $(WEB_SCENES:%=web/scenes/%.json)
+            web/models/meshgraphnets.onnx $(WEB_SCENES:%=web/scenes/%.json) \
+            $(WEB_SCENES:%=web/scenes/%-reduced.json)
 
 web: web-assets
 	@echo "serving the page at http://127.0.0.1:$(WEB_PORT)/index.html (Ctrl-C stops)"

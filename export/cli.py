@@ -44,6 +44,8 @@ def main(argv=None):
         return
     if argv[:1] == ["reduced"]:
         return _reduced(argv[1:])
+    if argv[:1] == ["bake-reduced"]:
+        return _bake_reduced(argv[1:])
     if argv[:1] == ["bench-reduced"]:
         return _bench_reduced(argv[1:])
     from anisognn import shipped
@@ -118,3 +120,28 @@ def _bench_reduced(argv):
                         help="where to write the JSON")
     args = parser.parse_args(argv)
     bench_reduced.run(args.sizes, args.modes, args.json)
+
+
+def _bake_reduced(argv):
+    """python -m export bake-reduced: a baked scene's reduced models, one per fiber angle."""
+    from anisofem.reduced import MODES
+
+    from . import reduced
+    parser = argparse.ArgumentParser(
+        prog="python -m export bake-reduced", description="write the reduced models of a "
+        "baked scene at several fiber angles as PATH.json + PATH.bin (the browser page's)",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("scene", choices=sorted(bake.SCENES))
+    parser.add_argument("-o", "--output", required=True, help="PATH (without extension)")
+    parser.add_argument("--modes", type=int, default=MODES, help="vibration modes")
+    parser.add_argument("--angles", type=float, nargs="+", default=list(bake.ANGLES),
+                        help="fiber angles in degrees from x towards z")
+    args = parser.parse_args(argv)
+    try:
+        header = reduced.bake(args.scene, args.output, args.modes, args.angles)
+    except ValueError as err:
+        sys.exit(f"error: {err}")
+    worst = max(v["tip_error"] for v in header["validation"])
+    print(f"wrote {args.output}.json and .bin: {header['title']}, r = {header['r'][0]}, fiber "
+          f"angles {header['fiber_angles']}; static tip within {100 * worst:.2g}% of the full "
+          f"FEM at every angle")

@@ -10,13 +10,24 @@ int32, the boundary triangles; with a display mesh, the basis interpolated at it
 (physics on the model's mesh, drawing on the display's). The header: model_format REDUCED_FORMAT, title, n, m, r, modes,
 frequencies (Hz), c0 (J), build_seconds, validation (the static tip and field errors against
 the full FEM), gravity (m/s^2) and material.
+
+`python -m export bake-reduced SCENE -o PATH` writes the models of a baked scene (export.bake)
+at several fiber angles in one pair of files, for the browser page: the arrays that depend on
+the fiber once per angle A as NAME@A (runtime.ReducedSimulator(path, angle=A) reads them).
 """
 import dataclasses
 
 import numpy as np
 
+from anisofem import Material, Scene, TetMesh
+from anisofem.reduced import ReducedModel
+from anisofem.scene import GRAVITY
+
 from . import runtime
-from .bake import write_arrays
+from .bake import SCENES, fiber_direction, scene_mesh, write_arrays
+
+#: The time step the page steps a baked reduced model with, s (the shipped networks' dt).
+DT = 0.02
 
 
 def write(model, path, title="", gravity=None, display=None):
@@ -64,3 +75,36 @@ def _display_masses(scene, display):
                          "belong to the model's own mesh)")
     volumes = display.rest_volumes * float(density.ravel()[0]) / 4.0
     return np.bincount(display.tets.ravel(), np.repeat(volumes, 4), display.n_vertices)
+
+
+def bake(name, out, modes, angles):
+    """Write the reduced models of the baked scene `name` (export.bake.SCENES; the trained
+    material: Material.paper with fiber stiffness E, gravity) at each fiber angle (degrees from
+    x towards z) as out.json and out.bin: the mesh arrays once, the model arrays (basis, c1,
+    C2, S3, W4) once per angle as NAME@A; the header lists fiber_angles and r per angle.
+    Returns the header."""
+    if name not in SCENES:
+        raise ValueError(f"scene: expected one of {sorted(SCENES)}, got {name!r}")
+    angles = [float(a) for a in angles]
+    if not angles:
+        raise ValueError("angles: give at least one fiber angle")
+    vertices, tets, held = scene_mesh(name)
+    mesh = TetMesh(vertices, tets)
+    arrays, ranks, checks = {}, [], []
+    for angle in angles:
+        material = Material.paper(fiber_direction(angle), Material.paper().young)
+        model = ReducedModel(Scene(mesh, material, fixed=held, gravity=GRAVITY), modes=modes)
+        P, tag = model.polynomial, f"@{angle:g}"
+        arrays.update({"basis" + tag: model.basis.reshape(-1, 3, model.r), "c1" + tag: P.c1,
+                       "C2" + tag: P.C2, "S3" + tag: P.S3, "W4" + tag: P.W4})
+        ranks.append(model.r)
+        checks.append(dataclasses.asdict(model.validation))
+    arrays.update({"rest_positions": vertices, "masses": np.asarray(model.scene.masses),
+                   "held": held.astype(np.uint8), "tets": tets.astype(np.int32),
+                   "surface": runtime.surface_triangles(vertices, tets).astype(np.int32)})
+    header = {"model_format": runtime.REDUCED_FORMAT, "scene": name, "title": SCENES[name][0],
+              "n": int(vertices.shape[0]), "m": int(tets.shape[0]), "modes": modes,
+              "fiber_angles": angles, "r": ranks, "validation": checks, "dt": DT,
+              "gravity": list(GRAVITY)}
+    write_arrays(out, arrays, header)
+    return header

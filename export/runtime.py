@@ -374,12 +374,14 @@ class ReducedSimulator:
     path: the arrays files without extension. vertices (n, 3), tets (m, 4): when given, the
     mesh the caller steps, refused unless it is the one the model was built for. dtype:
     float64 (the library's numbers) or float32 (the coefficients and the state rounded to it).
+    angle: for a file of models at several fiber angles (`python -m export bake-reduced`),
+    the one to step, degrees.
     A step is Newton on the reduced backward-Euler potential with the Hessian's negative
     eigenvalues clamped and an Armijo search on the exact quartic along the step, to a reduced
     gradient of rtol times the step's force size; it raises where it fails.
     """
 
-    def __init__(self, path, vertices=None, tets=None, dtype=np.float64):
+    def __init__(self, path, vertices=None, tets=None, dtype=np.float64, angle=None):
         header, arrays = read_arrays(path)
         if header.get("model_format") != REDUCED_FORMAT:
             raise ValueError(f"path: {path}.json holds no reduced model (model_format "
@@ -394,12 +396,13 @@ class ReducedSimulator:
         self.held = arrays["held"].astype(bool)
         self.surface = np.array(arrays["surface"])
         _same_mesh(arrays, vertices, tets)
-        self.basis = np.array(arrays["basis"], dtype=dtype)          # (n, 3, r)
+        tag = _angle_tag(header, angle)
+        self.basis = np.array(arrays["basis" + tag], dtype=dtype)    # (n, 3, r)
         r = self.basis.shape[2]
         self.r = r
-        self.c1, self.C2 = (np.array(arrays[k], dtype=dtype) for k in ("c1", "C2"))
-        self.S3 = np.array(arrays["S3"], dtype=dtype).reshape(r * r, r)
-        self.W4 = np.array(arrays["W4"], dtype=dtype)
+        self.c1, self.C2 = (np.array(arrays[k + tag], dtype=dtype) for k in ("c1", "C2"))
+        self.S3 = np.array(arrays["S3" + tag], dtype=dtype).reshape(r * r, r)
+        self.W4 = np.array(arrays["W4" + tag], dtype=dtype)
         self.triples = _triple_rows(r)
 
     def rest_state(self):
@@ -466,6 +469,20 @@ class ReducedSimulator:
             A = A + t * Ap
         raise FloatingPointError(f"step: Newton stopped at a reduced gradient of {residual:.3g} "
                                  f"after {it} iterations (tolerance {tolerance:.3g})")
+
+
+def _angle_tag(header, angle):
+    """The suffix of the model arrays to read: "" for a file of one model, "@A" for the fiber
+    angle A of a file of several."""
+    angles = header.get("fiber_angles")
+    if angles is None:
+        if angle is not None:
+            raise ValueError(f"angle: this file holds one model, for its own fiber; got {angle}")
+        return ""
+    if angle is None or float(angle) not in angles:
+        raise ValueError(f"angle: this file holds models at fiber angles {angles} (degrees); "
+                         f"got {angle}")
+    return f"@{float(angle):g}"
 
 
 def _triple_rows(r):

@@ -1,13 +1,15 @@
-// The page: a baked scene stepped by model.onnx in real time, drawn with three.js, with a
-// force applied by dragging. URL parameters: scene (cantilever, cylinder, t, y), model (the
-// .onnx file, default models/directional.onnx), angle (fiber angle, degrees), paused (1: start
-// paused; the end-to-end test steps it through window.anisognn).
+// The page: a baked scene stepped in real time by model.onnx or by the scene's reduced model,
+// drawn with three.js, with a force applied by dragging. URL parameters: scene (cantilever,
+// cylinder, t, y), stepper (network or reduced), model (the .onnx file, default
+// models/directional.onnx), angle (fiber angle, degrees), paused (1: start paused; the
+// end-to-end test steps it through window.anisognn).
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
+import { loadReduced, ReducedSimulation } from "./reduced.js";
 import { loadModel, loadScene, Simulation } from "./stepper.js";
 
 const params = new URLSearchParams(location.search);
-const ui = { scene: el("scene"), angle: el("angle"), angleValue: el("angle-value"),
+const ui = { scene: el("scene"), stepper: el("stepper"), angle: el("angle"), angleValue: el("angle-value"),
              pause: el("pause"), reset: el("reset"), stats: el("stats"),
              message: el("message") };
 // spring constant of a drag, N/m per kg of the dragged vertices' mass (a 1 cm pull accelerates
@@ -36,10 +38,9 @@ function el(id) { return document.getElementById(id); }
 function say(text) { ui.message.textContent = text; }
 
 async function start() {
-  const modelUrl = params.get("model") || "models/directional.onnx";
   ui.scene.value = params.get("scene") || "cantilever";
+  ui.stepper.value = params.get("stepper") || "network";
   try {
-    state.session = await loadModel(modelUrl);
     await openScene(ui.scene.value, params.get("angle"));
   } catch (err) {
     say(String(err.message || err));
@@ -49,15 +50,24 @@ async function start() {
   window.anisognn.ready = true;
 }
 
+// the scene `name` with the chosen stepper: the network (model.onnx, loaded once) on the baked
+// scene, or the scene's reduced models (scenes/NAME-reduced, one per fiber angle)
 async function openScene(name, angle) {
-  state.sceneData = await loadScene(`scenes/${name}`);
+  const reduced = ui.stepper.value === "reduced";
+  if (!reduced && !state.session) {
+    state.session = await loadModel(params.get("model") || "models/directional.onnx");
+  }
+  state.sceneData = reduced ? await loadReduced(`scenes/${name}-reduced`)
+                            : await loadScene(`scenes/${name}`);
   const angles = state.sceneData.header.fiber_angles;
   ui.angle.max = String(angles.length - 1);
   const wanted = angle === null || angle === undefined ? 45 : Number(angle);
   const index = Math.max(0, angles.findIndex((a) => a === wanted));
   ui.angle.value = String(index);
   ui.angleValue.textContent = String(angles[index]);
-  state.sim = new Simulation(state.session, state.sceneData, angles[index]);
+  state.sim = reduced ? new ReducedSimulation(state.sceneData, angles[index])
+                      : new Simulation(state.session, state.sceneData, angles[index]);
+  state.times = [];
   buildMeshes();
   say("");
 }
@@ -164,7 +174,10 @@ async function frame(now) {
     const ms = msPerStep();
     const speed = (1000 * state.sim.dt) / ms;
     const pace = speed >= 1 ? "real time" : `${speed.toFixed(2)}x real time`;
-    ui.stats.textContent = `${state.sim.steps} steps of ${state.sim.dt} s, ` +
+    const v = state.sim.validation;
+    const model = v ? `reduced model, r = ${state.sim.r}; its static tip within ` +
+      `${(100 * v.tip_error).toPrecision(2)}% of the FEM's. ` : "";
+    ui.stats.textContent = `${model}${state.sim.steps} steps of ${state.sim.dt} s, ` +
       `${ms.toFixed(2)} ms per step (${pace})`;
   }
   resize();
@@ -230,6 +243,13 @@ ui.angle.addEventListener("input", () => {
   ui.angleValue.textContent = String(angle);
   state.sim.setFiberAngle(angle);
 });
+ui.stepper.addEventListener("change", async () => {
+  try {
+    await openScene(ui.scene.value, state.sim ? state.sim.fiberAngle : null);
+  } catch (err) {
+    say(String(err.message || err));
+  }
+});
 ui.scene.addEventListener("change", async () => {
   try {
     await openScene(ui.scene.value, state.sim ? state.sim.fiberAngle : null);
@@ -290,6 +310,7 @@ window.anisognn = {
     return best;
   },
   scene() { return state.sceneData ? state.sceneData.header.scene : null; },
+  stepper() { return state.sim instanceof ReducedSimulation ? "reduced" : "network"; },
   resume() { state.paused = false; state.lastFrame = null; },
   pause() { state.paused = true; },
 };

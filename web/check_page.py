@@ -8,7 +8,10 @@ Chromium), and checks that
 - the page drew: the screenshot (web/out/page.png, kept as an artifact) is not blank;
 - dragging the tip upwards with the mouse raises it by more than 1 mm;
 - the other scenes (cylinder, T, Y), chosen from the menu, step without a message;
-- a file that is not a model and a scene the model cannot step each show a readable message.
+- a file that is not a model and a scene the model cannot step each show a readable message;
+- with the reduced models (the stepper menu): the cantilever's positions at CHECKPOINTS within
+  REDUCED_BOUND of runtime.ReducedSimulator's (the same float64 algorithm in JavaScript), the
+  drag raises its tip, and every scene steps without a message.
 Prints the in-browser and the onnxruntime (CPU) ms per step.
 """
 import functools
@@ -34,6 +37,9 @@ from export import bake, runtime  # noqa: E402
 CHECKPOINTS = (1, 10, 50, 100, 200)
 BOUNDS = (1e-5, 1e-3, 5e-2, 5e-2, 5e-2)
 ANGLE = 45.0
+#: the reduced model in the page against runtime.py's, over the largest displacement: the same
+#: float64 arithmetic in another order
+REDUCED_BOUND = 1e-6
 
 
 class _Quiet(http.server.SimpleHTTPRequestHandler):
@@ -69,6 +75,23 @@ def reference(model):
     return positions[list(CHECKPOINTS)], largest, ms
 
 
+def reduced_reference():
+    """(positions at CHECKPOINTS (k, n, 3), largest displacement (m), ms per step) of
+    runtime.ReducedSimulator's rollout of the cantilever's reduced model at fiber angle ANGLE."""
+    path = os.path.join(HERE, "scenes", "cantilever-reduced")
+    sim = runtime.ReducedSimulator(path, angle=ANGLE)
+    force = sim.masses[:, None] * np.asarray(sim.header["gravity"])
+    q, w = sim.rest_state()
+    positions, start = [], time.perf_counter()
+    for step in range(1, CHECKPOINTS[-1] + 1):
+        q, w = sim.step(q, w, force, sim.header["dt"])
+        if step in CHECKPOINTS:
+            positions.append(sim.positions(q))
+    ms = 1e3 * (time.perf_counter() - start) / CHECKPOINTS[-1]
+    positions = np.asarray(positions)
+    return positions, float(np.linalg.norm(positions - sim.rest_positions, axis=2).max()), ms
+
+
 def drew(png):
     """True when the screenshot png shows a drawing: more than 1% of its pixels differ from
     the background color by more than 0.1."""
@@ -102,6 +125,19 @@ def main():
     for name, scene in page["scenes"].items():
         if scene["message"] or not scene["finite"]:
             failures.append(f"scene {name}: {scene['message'] or 'a non-finite state'}")
+    expected, largest_r, reduced_ms = reduced_reference()
+    got = np.asarray(page["reduced"]["positions"]).reshape(expected.shape)
+    reduced_gap = float(np.abs(got - expected).max() / largest_r)
+    if not reduced_gap <= REDUCED_BOUND:
+        failures.append(f"reduced model in the page against runtime.py: {reduced_gap:.2e} of the "
+                        f"largest displacement, more than {REDUCED_BOUND}")
+    reduced_rise = page["reducedDrag"]["pulled"] - page["reducedDrag"]["before"]
+    if not reduced_rise > 1e-3:
+        failures.append(f"dragging the reduced model's tip up moved it by "
+                        f"{reduced_rise * 1e3:.2f} mm")
+    for name, scene in page["reducedScenes"].items():
+        if scene["message"] or not scene["finite"]:
+            failures.append(f"reduced scene {name}: {scene['message'] or 'a non-finite state'}")
     if "cannot load" not in page["bad_model_message"]:
         failures.append(f"bad model message: {page['bad_model_message']!r}")
     if "cannot step" not in page["cut_scene_message"]:
@@ -115,6 +151,12 @@ def main():
               for k, v in page["scenes"].items()]
     print(f"drag: the tip rose {rise * 1e3:.1f} mm while pulled up; other scenes: "
           + ", ".join(scenes))
+    print(f"reduced model: the page against runtime.py {reduced_gap:.1e} of the largest "
+          f"displacement ({largest_r * 1e3:.1f} mm) over {CHECKPOINTS[-1]} steps; ms per step: "
+          f"browser {page['reduced']['msPerStep']:.3f}, numpy {reduced_ms:.3f}; the drag raised "
+          f"the tip {reduced_rise * 1e3:.1f} mm; scenes "
+          + ", ".join(f"{k} {'failed' if v['message'] or not v['finite'] else 'ok'}"
+                      for k, v in page["reducedScenes"].items()))
     print(f"bad model: {page['bad_model_message']}")
     print(f"cut scene: {page['cut_scene_message']}")
     if failures:

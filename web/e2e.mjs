@@ -5,7 +5,7 @@
 // checkpoint step (comma-separated, default 1,10,50,100,200), the in-browser ms per step, the
 // messages the page shows for a file that is not a model and for a scene the model cannot
 // step, the tip height before and during a drag upwards, and whether the other scenes (chosen
-// from the menu) step.
+// from the menu) step; then the same with the reduced models (OUT_DIR/reduced.png).
 import fs from "node:fs";
 import path from "node:path";
 import { chromium } from "playwright-core";
@@ -40,18 +40,7 @@ try {
   // a drag: press on the front face near the tip (the vertex at rest 1 cm from the free end,
   // mid-height) and pull the pointer 80 pixels up for a second of real time; the tip must rise
   // above where gravity alone holds it
-  const before = await page.evaluate(() => window.anisognn.tip());
-  const at = await page.evaluate(() => window.anisognn.screenOf(
-    window.anisognn.nearest([0.09, -0.01, 0.0])));
-  await page.evaluate(() => window.anisognn.resume());
-  await page.mouse.move(at.x, at.y);
-  await page.mouse.down();
-  await page.mouse.move(at.x, at.y - 80, { steps: 10 });
-  await page.waitForTimeout(1000);
-  const pulled = await page.evaluate(() => window.anisognn.tip());
-  await page.mouse.up();
-  await page.evaluate(() => window.anisognn.pause());
-  result.drag = { before: before.height, pulled: pulled.height };
+  result.drag = await dragUp(page);
 
   // every other scene loads from the scene menu and steps without a message
   result.scenes = {};
@@ -62,6 +51,24 @@ try {
     result.scenes[name] = { n: run.n, message: await page.textContent("#message"),
                             finite: run.positions[0].every(Number.isFinite) };
   }
+
+  // the reduced models, picked from the stepper menu: every scene steps without a message, the
+  // cantilever rolls out from rest (compared with runtime.py's ReducedSimulator) and rises when
+  // dragged up
+  await page.selectOption("#stepper", "reduced");
+  await page.waitForFunction(() => window.anisognn.stepper() === "reduced", null,
+                             { timeout: 60000 });
+  result.reducedScenes = {};
+  for (const name of ["cylinder", "t", "y", "cantilever"]) {
+    await page.selectOption("#scene", name);
+    await page.waitForFunction((n) => window.anisognn.scene() === n, name, { timeout: 60000 });
+    const run = await page.evaluate(() => window.anisognn.run([5]));
+    result.reducedScenes[name] = { n: run.n, message: await page.textContent("#message"),
+                                   finite: run.positions[0].every(Number.isFinite) };
+  }
+  result.reduced = await page.evaluate((k) => window.anisognn.run(k), checkpoints);
+  await page.screenshot({ path: path.join(out, "reduced.png") });
+  result.reducedDrag = await dragUp(page);
 
   // a file that is not a model
   const bad = await browser.newPage();
@@ -89,6 +96,24 @@ try {
   result.cut_scene_message = await cut.textContent("#message");
 } finally {
   await browser.close();
+}
+
+// press on the front face near the cantilever's tip (the vertex at rest 1 cm from the free
+// end, mid-height), pull the pointer 80 pixels up for a second of real time: the tip heights
+// before and while pulled
+async function dragUp(page) {
+  const before = await page.evaluate(() => window.anisognn.tip());
+  const at = await page.evaluate(() => window.anisognn.screenOf(
+    window.anisognn.nearest([0.09, -0.01, 0.0])));
+  await page.evaluate(() => window.anisognn.resume());
+  await page.mouse.move(at.x, at.y);
+  await page.mouse.down();
+  await page.mouse.move(at.x, at.y - 80, { steps: 10 });
+  await page.waitForTimeout(1000);
+  const pulled = await page.evaluate(() => window.anisognn.tip());
+  await page.mouse.up();
+  await page.evaluate(() => window.anisognn.pause());
+  return { before: before.height, pulled: pulled.height };
 }
 fs.writeFileSync(path.join(out, "result.json"), JSON.stringify(result));
 console.log(`in-browser step: ${result.msPerStep.toFixed(2)} ms over ` +
