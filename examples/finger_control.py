@@ -1,5 +1,5 @@
-"""A soft finger driven to a target by a controller, stepped by the exported network with only
-the runtime: the control loop a robot would run.
+"""A soft finger driven to a target by a controller, stepped by the exported network or by the
+finger's reduced model with only the runtime: the control loop a robot would run.
 
 The finger is the 0.1 x 0.02 x 0.02 m fiber-reinforced beam of onnx_cantilever.py (fibers at
 45 degrees in the x-z plane, kappa = 100 kPa), held at x = 0 and hanging under gravity. A
@@ -11,6 +11,10 @@ model. Prints the tip error when each target is settled and the real-time factor
 over wall time), and draws the tip against the target in out/finger_control.png.
 
     python examples/finger_control.py [MODEL.onnx]   (default export/models/directional.onnx)
+    python examples/finger_control.py reduced        (the finger's reduced model, 6 modes)
+
+The reduced model is built once with anisofem into out/finger_reduced.json and .bin (as
+`python -m export reduced` does for a mesh file); the loop steps it with numpy alone.
 """
 import os
 import sys
@@ -24,7 +28,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "export"))  # as if runtime.py were copied here
-from runtime import OnnxSimulator  # noqa: E402
+from runtime import OnnxSimulator, ReducedSimulator  # noqa: E402
 from onnx_cantilever import DEFAULT_MODEL, box_tets, save  # noqa: E402
 
 #: PID gains on the tip height error: N/m, N/(m s), N s/m
@@ -54,17 +58,66 @@ class PID:
         return self.kp * error + self.ki * self.integral - self.kd * velocity
 
 
-def main(model):
+#: the finger's material: density kg/m^3, fiber direction (normalized by the runtime), Pa
+DENSITY, FIBER, KAPPA = 1000.0, (1.0, 0.0, 1.0), 1e5
+DT = 0.02
+
+
+class Network:
+    """The finger stepped by an exported network: step(external (n, 3) N) -> (x, v)."""
+
+    def __init__(self, model, vertices, tets):
+        self.sim = OnnxSimulator(model, vertices, tets, fixed=vertices[:, 0] < 1e-9,
+                                 density=DENSITY, fiber_direction=FIBER, fiber_stiffness=KAPPA)
+        self.masses, self.dt, self.label = self.sim.masses, self.sim.dt, "network"
+        self.x, self.v = self.sim.rest_positions, np.zeros_like(self.sim.rest_positions)
+
+    def step(self, external):
+        self.x, self.v = self.sim.step(self.x, self.v, external)
+        return self.x, self.v
+
+
+class Reduced:
+    """The finger stepped by its reduced model (built on first use): the same interface."""
+
+    def __init__(self, vertices, tets, modes=6):
+        path = os.path.join("out", "finger_reduced")
+        if not os.path.exists(path + ".json"):
+            build_reduced(path, vertices, tets, modes)
+        self.sim = ReducedSimulator(path, vertices, tets)
+        self.masses, self.dt, self.label = self.sim.masses, DT, "reduced model"
+        self.q, self.w = self.sim.rest_state()
+        self.x = self.sim.positions(self.q)
+
+    def step(self, external):
+        self.q, self.w = self.sim.step(self.q, self.w, external, self.dt)
+        x = self.sim.positions(self.q)
+        v, self.x = (x - self.x) / self.dt, x
+        return x, v
+
+
+def build_reduced(path, vertices, tets, modes):
+    """The finger's reduced model written to path (.json, .bin): the one step that needs the
+    library (anisofem) rather than the runtime."""
+    import anisofem as af
+    from export.reduced import write
+    material = af.Material(1e5, 0.48, DENSITY, np.array(FIBER) / np.linalg.norm(FIBER), KAPPA)
+    scene = af.Scene(af.TetMesh(vertices, tets), material,
+                     fixed=np.flatnonzero(vertices[:, 0] < 1e-9), gravity=(0.0, 0.0, -9.81))
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    write(af.reduced.ReducedModel(scene, modes=modes), path)
+
+
+def main(which):
     vertices, tets = box_tets((0.1, 0.02, 0.02), (10, 2, 2))
-    sim = OnnxSimulator(model, vertices, tets, fixed=vertices[:, 0] < 1e-9, density=1000.0,
-                        fiber_direction=(1.0, 0.0, 1.0), fiber_stiffness=1e5)
+    sim = Reduced(vertices, tets) if which == "reduced" else Network(which, vertices, tets)
     gravity = sim.masses[:, None] * np.array([0.0, 0.0, -9.81])  # N per vertex
     tip = vertices[:, 0] > 0.1 - 1e-9
     share = np.where(tip, sim.masses, 0.0) / sim.masses[tip].sum()  # the tip force's split
     rest_height = vertices[tip, 2].mean()
     controller = PID(GAINS, sim.dt)
     steps = int(round(DURATION / sim.dt))
-    x, v = sim.rest_positions, np.zeros_like(sim.rest_positions)
+    x, v = sim.x, np.zeros_like(sim.x)
     times, heights, targets, forces = [], [], [], []
     wall = 0.0
     for k in range(steps):
@@ -74,7 +127,7 @@ def main(model):
         external = gravity.copy()
         external[:, 2] += force * share
         start = time.perf_counter()
-        x, v = sim.step(x, v, external)
+        x, v = sim.step(external)
         wall += time.perf_counter() - start
         times.append(t + sim.dt)
         heights.append(x[tip, 2].mean() - rest_height)
@@ -92,9 +145,9 @@ def main(model):
 
     fig, (ax, bx) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
     ax.step(times, 1e3 * targets, where="post", color="0.5", label="target")
-    ax.plot(times, 1e3 * heights, color="tab:blue", label="tip (network)")
-    ax.set(ylabel="tip height above rest (mm)", title="Soft finger under PID control, stepped "
-           "by the exported network (onnxruntime only)")
+    ax.plot(times, 1e3 * heights, color="tab:blue", label=f"tip ({sim.label})")
+    ax.set(ylabel="tip height above rest (mm)", title=f"Soft finger under PID control, stepped "
+           f"by the {sim.label} (runtime only)")
     ax.legend(loc="lower left")
     bx.plot(times, 1e3 * np.array(forces), color="tab:red")
     bx.set(xlabel="t (s)", ylabel="tip force (mN)")

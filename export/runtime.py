@@ -522,10 +522,14 @@ def _same_mesh(arrays, vertices, tets):
             raise ValueError(f"vertices: not the mesh this reduced model was built on ({rest.shape[0]} "
                              f"vertices at its rest positions; got {vertices.shape[0]})")
     if tets is not None:
-        tets = np.asarray(tets)
-        if tets.shape != arrays["tets"].shape or not np.array_equal(tets, arrays["tets"]):
+        tets = np.sort(np.asarray(tets), axis=1)   # a tet's vertex order is its orientation
+        built = np.sort(arrays["tets"], axis=1)
+        if tets.shape != built.shape or not np.array_equal(tets, built):
+            differ = int((tets != built).any(axis=1).sum()) if tets.shape == built.shape \
+                else tets.shape[0]
             raise ValueError(f"tets: not the mesh this reduced model was built on "
-                             f"({arrays['tets'].shape[0]} tets; got {tets.shape[0]} differing)")
+                             f"({built.shape[0]} tets; got {tets.shape[0]}, {differ} of them "
+                             f"different)")
 
 
 def _real(value, name, shape):
