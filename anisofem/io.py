@@ -18,7 +18,8 @@ from .potential import element_energy
 
 
 def read_mesh(path, **mesh_options):
-    """The tetrahedra of a mesh file as a TetMesh (other cell types are ignored).
+    """The tetrahedra of a mesh file as a TetMesh: linear (tetra) or quadratic (tetra10) cells,
+    one order per file; other cell types are ignored.
 
     mesh_options go to TetMesh (fix_orientation, unreferenced). Lower-dimensional cells
     (surface triangles, lines) are common in .msh files, and the vertices only they use are
@@ -28,12 +29,24 @@ def read_mesh(path, **mesh_options):
     if not os.path.isfile(path):
         raise FileNotFoundError(f"path: no such mesh file {path!r}")
     m = _meshio_read(path)
-    tets = [c.data for c in m.cells if c.type == "tetra"]
-    if not tets:
-        raise ValueError(f"path: {path} holds no tetra cells (found "
-                         f"{sorted({c.type for c in m.cells})})")
+    types = sorted({c.type for c in m.cells})
+    other = [t for t in types if t.startswith("tetra") and t not in TET_TYPES]
+    if other:
+        raise ValueError(f"path: {path} holds {', '.join(other)} cells; anisofem reads linear "
+                         f"(tetra) and quadratic (tetra10) tets")
+    found = [t for t in TET_TYPES if t in types]
+    if not found:
+        raise ValueError(f"path: {path} holds no tetra or tetra10 cells (found {types})")
+    if len(found) > 1:
+        raise ValueError(f"path: {path} mixes linear (tetra) and quadratic (tetra10) tets; a "
+                         f"mesh has one order")
+    tets = [c.data for c in m.cells if c.type == found[0]]
     mesh_options.setdefault("unreferenced", "drop")
     return TetMesh(m.points[:, :3], np.concatenate(tets).astype(np.int64), **mesh_options)
+
+
+#: meshio's cell types of the tets anisofem reads, by order
+TET_TYPES = ("tetra", "tetra10")
 
 
 def _meshio_read(path):
@@ -88,8 +101,8 @@ def write_mesh(path, mesh, x=None, scene=None):
         # Gmsh's own tags (all tets in entity 1); without them meshio warns that it made them up
         ones = np.ones(mesh.n_tets, dtype=np.int32)
         cells.update({"gmsh:physical": [ones], "gmsh:geometrical": [ones]})
-    out = meshio.Mesh(mesh.vertices, [("tetra", np.asarray(mesh.tets))], point_data=points,
-                      cell_data=cells)
+    out = meshio.Mesh(mesh.vertices, [(TET_TYPES[mesh.order - 1], np.asarray(mesh.cells))],
+                      point_data=points, cell_data=cells)
     # XDMF keeps its arrays inline (one file to move around); .msh is binary Gmsh 2.2 (meshio
     # cannot read back the fields of its ASCII .msh output with numpy 2)
     kwargs = {".xdmf": {"data_format": "XML"},

@@ -7,6 +7,7 @@ from numba import njit
 
 from ._validate import as_float_array, as_index_array
 from .elements.tet4 import TET4
+from .elements.tet10 import EDGES, TET10, quadratic_nodes
 
 #: Tets per assembly block: the parallel assembly runs the blocks of one color on all threads
 #: at once, each block's tets in order on one thread (anisofem.kernels). Runs of consecutive
@@ -15,19 +16,31 @@ from .elements.tet4 import TET4
 #: spread over the whole mesh) and 57 ms on one thread (docs/experiments.md).
 ASSEMBLY_BLOCK = 512
 
+#: A quadratic tet's midside node may sit this far (over its edge's length) from the edge's
+#: midpoint; farther, the element would be curved, which the element loop does not model.
+MIDSIDE_TOLERANCE = 1e-6
+
+#: Midside nodes of a tet whose vertices 2 and 3 are swapped, by their old places (4 to 9):
+#: the edges (0,1), (1,3), (0,3), (0,2), (1,2), (3,2) of the old labels.
+_SWAPPED_MIDSIDES = [4, 8, 7, 6, 5, 9]
+
 #: A rest tet is rejected as zero-volume when 6 |V| / l_max^3 is below this (l_max: its
 #: longest edge; 0.707 for a regular tet). Nearly flat elements above it are accepted.
 MIN_SHAPE_QUALITY = 1e-9
 
 
 class TetMesh:
-    """Linear tetrahedral mesh in its rest configuration.
+    """Tetrahedral mesh in its rest configuration: linear (4-node) or quadratic (10-node,
+    straight-sided) tets.
 
     Parameters
     ----------
-    vertices : (n, 3) float array, rest positions in m.
-    tets : (m, 4) integer array of vertex indices. Each tet must be positively oriented:
-        det([X1-X0, X2-X0, X3-X0]) > 0.
+    vertices : (n, 3) float array, rest positions in m (of every node: a quadratic mesh's
+        midside nodes are vertices too).
+    tets : (m, 4) integer array of vertex indices, or (m, 10) for quadratic tets: the four
+        corners, then the midside nodes of the edges (0,1), (1,2), (0,2), (0,3), (1,3), (2,3)
+        (VTK's and meshio's tetra10 order), each at its edge's midpoint and shared by every
+        tet of the edge. Each tet must be positively oriented: det([X1-X0, X2-X0, X3-X0]) > 0.
     fix_orientation : True (default): negatively oriented tets are reordered (two vertices
         swapped: the same element, labelled the other way round, as export/runtime.py reads
         it); False: they are an error.
@@ -35,14 +48,22 @@ class TetMesh:
         Scene holds them in place, they carry no mass), "drop" (remove them and renumber;
         ``kept_vertices`` maps new to old indices) or "error".
 
+    Attributes: tets (m, 4) the corners; cells (m, 4 or 10) every node of each tet; order (1
+    or 2); element (anisofem.elements' TET4 or TET10).
+
     Raises ValueError / TypeError naming the problem: wrong shapes or dtypes, NaN or inf,
-    indices out of range, repeated vertices in a tet, duplicate tets, zero-volume tets, and
-    inverted ones with fix_orientation=False.
+    indices out of range, repeated vertices in a tet, duplicate tets, zero-volume tets,
+    inverted ones with fix_orientation=False, and for quadratic tets midside nodes off their
+    edge's midpoint or not shared along an edge.
     """
 
     def __init__(self, vertices, tets, *, fix_orientation=True, unreferenced="warn"):
         vertices = as_float_array(vertices, "vertices", shape=(None, 3))
-        tets = as_index_array(tets, "tets", shape=(None, 4))
+        cells = as_index_array(tets, "tets", shape=(None, None))
+        if cells.shape[1] not in (4, 10):
+            raise ValueError(f"tets: expected (m, 4) linear or (m, 10) quadratic (tetra10) "
+                             f"tets, got shape {cells.shape}")
+        tets = cells
         n = vertices.shape[0]
         if tets.shape[0] == 0:
             raise ValueError("tets: the mesh has no tetrahedra")
@@ -54,7 +75,8 @@ class TetMesh:
         rep = np.flatnonzero((srt[:, 1:] == srt[:, :-1]).any(1))
         if rep.size:
             raise ValueError(f"tets: tet(s) {rep[:5].tolist()} repeat a vertex (zero volume)")
-        _, first, counts = np.unique(srt, axis=0, return_index=True, return_counts=True)
+        _, first, counts = np.unique(srt[:, :4] if tets.shape[1] == 4 else np.sort(
+            tets[:, :4], axis=1), axis=0, return_index=True, return_counts=True)
         if (counts > 1).any():
             dup = np.sort(first[counts > 1])
             raise ValueError(f"tets: duplicate tets (same four vertices), e.g. tet(s) "
@@ -79,6 +101,7 @@ class TetMesh:
                                  f"{unreferenced!r}")
         self.kept_vertices = np.flatnonzero(used) if unreferenced == "drop" else None
         self.unreferenced = np.flatnonzero(~used) if unreferenced != "drop" else np.empty(0, int)
+        cells, tets = tets, np.ascontiguousarray(tets[:, :4])
         six_vol = _six_volumes(vertices, tets)
         edges = vertices[tets[:, [1, 2, 3, 2, 3, 3]]] - vertices[tets[:, [0, 0, 0, 1, 1, 2]]]
         lmax = np.sqrt((edges ** 2).sum(-1).max(1))
@@ -93,15 +116,54 @@ class TetMesh:
                 raise ValueError(f"tets: {inverted.size} tet(s) are inverted (negative "
                                  f"orientation), e.g. {inverted[:5].tolist()}; reorder them or "
                                  f"pass fix_orientation=True")
-            tets = tets.copy()
-            tets[inverted, 2], tets[inverted, 3] = tets[inverted, 3], tets[inverted, 2].copy()
-        vertices.setflags(write=False)
-        tets.setflags(write=False)
+            cells = cells.copy()
+            cells[inverted, 2], cells[inverted, 3] = cells[inverted, 3], cells[inverted, 2].copy()
+            if cells.shape[1] == 10:
+                cells[inverted, 4:] = cells[inverted][:, _SWAPPED_MIDSIDES]
+            tets = np.ascontiguousarray(cells[:, :4])
+        if cells.shape[1] == 10:
+            _check_midsides(vertices, cells)
+        for arr in (vertices, tets, cells):
+            arr.setflags(write=False)
         self.vertices = vertices
         self.tets = tets
+        self.cells = cells
+        self.order = 1 if cells.shape[1] == 4 else 2
+        self.element = TET4 if self.order == 1 else TET10
 
     def __repr__(self):
-        return f"TetMesh({self.n_vertices} vertices, {self.n_tets} tets)"
+        kind = "" if self.order == 1 else " quadratic"
+        return f"TetMesh({self.n_vertices} vertices, {self.n_tets}{kind} tets)"
+
+    def raised(self):
+        """This mesh with quadratic tets: a node at the middle of every edge, shared by the
+        edge's tets (a quadratic mesh is returned as it is)."""
+        if self.order == 2:
+            return self
+        nodes, cells = quadratic_nodes(self.vertices, self.tets)
+        return TetMesh(nodes, cells, fix_orientation=False)
+
+    def edge_nodes(self, pairs):
+        """(k,) the midside nodes of a quadratic mesh's edges given as vertex pairs (k, 2)
+        (either order); ValueError for a pair that is no edge of the mesh."""
+        if self.order != 2:
+            raise ValueError("edge_nodes: a linear mesh has no midside nodes")
+        keys, nodes = self._edge_table
+        pairs = np.sort(np.asarray(pairs, dtype=np.int64), axis=1)
+        wanted = pairs[:, 0] * self.n_vertices + pairs[:, 1]
+        at = np.minimum(np.searchsorted(keys, wanted), keys.size - 1)
+        if not np.array_equal(keys[at], wanted):
+            bad = pairs[np.flatnonzero(keys[at] != wanted)[0]]
+            raise ValueError(f"pairs: {bad.tolist()} is not an edge of the mesh")
+        return nodes[at]
+
+    @cached_property
+    def _edge_table(self):
+        """(keys, nodes): every edge's key i n + j (i < j), sorted, and its midside node."""
+        pairs = np.sort(self.cells[:, EDGES], axis=2).reshape(-1, 2)
+        keys = pairs[:, 0] * self.n_vertices + pairs[:, 1]
+        keys, first = np.unique(keys, return_index=True)
+        return keys, self.cells[:, 4:].ravel()[first]
 
     @property
     def n_vertices(self):
@@ -123,6 +185,14 @@ class TetMesh:
         Row a is grad N_a; the deformation gradient is F = sum_a x_a grads[a]^T.
         """
         return np.einsum("ak,ekj->eaj", TET4.point_gradients[0], self.inverse_jacobians)
+
+    @cached_property
+    def point_gradients(self):
+        """(m, q, k, 3) material gradients of each tet's k shape functions at its element's q
+        quadrature points, 1/m (straight-sided tets: Dm^-1 maps them from the reference
+        tet). F at point p is sum_a x_a grads[p, a]^T."""
+        return np.einsum("pak,ekj->epaj", self.element.point_gradients,
+                         self.inverse_jacobians)
 
     @cached_property
     def inverse_jacobians(self):
@@ -173,6 +243,38 @@ class TetMesh:
     def size(self):
         """Diagonal of the rest bounding box, m."""
         return float(np.linalg.norm(self.vertices.max(0) - self.vertices.min(0)))
+
+
+def _check_midsides(vertices, cells):
+    """ValueError unless every midside node of the quadratic tets cells (m, 10) sits at its
+    edge's midpoint (within MIDSIDE_TOLERANCE of the edge's length), is no tet's corner, and
+    is the one node of its edge in every tet sharing it."""
+    ends = cells[:, EDGES]                                          # (m, 6, 2)
+    X = vertices[ends]
+    length = np.linalg.norm(X[:, :, 1] - X[:, :, 0], axis=2)
+    off = np.linalg.norm(vertices[cells[:, 4:]] - X.mean(axis=2), axis=2) / length
+    bad = np.argwhere(off > MIDSIDE_TOLERANCE)
+    if bad.size:
+        e, k = bad[0]
+        raise ValueError(f"tets: the midside node {cells[e, 4 + k]} of tet {e} is "
+                         f"{off[e, k]:.3g} edge lengths from the middle of its edge "
+                         f"{ends[e, k].tolist()} ({bad.shape[0]} such nodes; curved quadratic "
+                         f"tets are not supported)")
+    corners = np.isin(cells[:, 4:], cells[:, :4])
+    if corners.any():
+        e, k = np.argwhere(corners)[0]
+        raise ValueError(f"tets: the midside node {cells[e, 4 + k]} of tet {e} is a corner of "
+                         f"another tet")
+    pairs = np.sort(ends, axis=2).reshape(-1, 2)
+    mids = cells[:, 4:].ravel()
+    order = np.lexsort((mids, pairs[:, 1], pairs[:, 0]))
+    pairs, mids = pairs[order], mids[order]
+    same_edge = (pairs[1:] == pairs[:-1]).all(axis=1)
+    clash = np.flatnonzero(same_edge & (mids[1:] != mids[:-1]))
+    if clash.size:
+        i = clash[0]
+        raise ValueError(f"tets: the edge {pairs[i].tolist()} has two midside nodes, "
+                         f"{mids[i]} and {mids[i + 1]}, in the tets that share it")
 
 
 def _six_volumes(vertices, tets):

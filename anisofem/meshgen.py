@@ -91,10 +91,17 @@ def _check_cells(cells, name, count):
     return cells
 
 
-def box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2)):
+def of_order(mesh, order):
+    """mesh with linear (order 1) or quadratic (order 2: TetMesh.raised) tets."""
+    if order not in (1, 2):
+        raise ValueError(f"order: 1 (linear tets) or 2 (quadratic tets), got {order!r}")
+    return mesh if order == 1 else mesh.raised()
+
+
+def box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2), order=1):
     """Box beam [0, L] x [-W/2, W/2] x [-H/2, H/2] with size (L, W, H) in m, split into
-    cells (nx, ny, nz) hexes of 5 tets each (5 nx ny nz tets). Even ny and nz keep the mesh
-    mirror-symmetric about the y = 0 and z = 0 planes."""
+    cells (nx, ny, nz) hexes of 5 tets each (5 nx ny nz tets), linear or (order 2) quadratic.
+    Even ny and nz keep the mesh mirror-symmetric about the y = 0 and z = 0 planes."""
     nx, ny, nz = _check_cells(cells, "cells", 3)
     L, W, H = (float(s) for s in size)
     if min(L, W, H) <= 0:
@@ -103,16 +110,17 @@ def box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2)):
                        indexing="ij")
     section = np.stack([v.ravel(), w.ravel()], axis=1)
     pts, hexes = _extrude(section, _grid_quads(ny, nz), np.linspace(0, L, nx + 1), axis=0)
-    return hexes_to_tets(pts, hexes)
+    return of_order(hexes_to_tets(pts, hexes), order)
 
 
-def cylinder_beam(length=0.1, radius=0.01, cells_along=10, section_cells=2, rings=1):
+def cylinder_beam(length=0.1, radius=0.01, cells_along=10, section_cells=2, rings=1, order=1):
     """Cylinder beam along x from 0 to length, radius in m.
 
     The cross-section is an O-grid: a square core of section_cells^2 quads (half-width
     radius/2) surrounded by `rings` layers of 4 section_cells quads reaching the circle
     (rings=0: the core itself is mapped onto the disk). Tets: 5 cells_along (section_cells^2
-    + 4 section_cells rings). An even section_cells keeps the mesh mirror-symmetric.
+    + 4 section_cells rings). An even section_cells keeps the mesh mirror-symmetric. order 2:
+    quadratic tets (straight-sided: their midside nodes on the chords, not on the circle).
     """
     n = _check_cells(section_cells, "section_cells", 1)[0]
     nx = _check_cells(cells_along, "cells_along", 1)[0]
@@ -142,7 +150,7 @@ def cylinder_beam(length=0.1, radius=0.01, cells_along=10, section_cells=2, ring
             inner, outer = index[t], index[t + 1]
             quads.append(np.stack([inner, np.roll(inner, -1), np.roll(outer, -1), outer], 1))
     pts, hexes = _extrude(section, np.concatenate(quads), np.linspace(0, length, nx + 1), 0)
-    return hexes_to_tets(pts, hexes)
+    return of_order(hexes_to_tets(pts, hexes), order)
 
 
 def _masked_section(width, height, cell, inside):
@@ -162,24 +170,25 @@ def _masked_section(width, height, cell, inside):
     return section, quads.reshape(-1, 4)
 
 
-def t_shape(width=0.1, height=0.08, flange=0.02, stem=0.02, depth=0.02, cell=0.01):
+def t_shape(width=0.1, height=0.08, flange=0.02, stem=0.02, depth=0.02, cell=0.01, order=1):
     """A T in the x-z plane extruded along y over [-depth/2, depth/2]: a top flange of the given
     width and thickness `flange` on a stem of width `stem`, standing on z = 0. Cubic cells of
-    edge `cell` (m); keep width / cell and stem / cell even for x-mirror symmetry."""
+    edge `cell` (m); keep width / cell and stem / cell even for x-mirror symmetry. order 2:
+    quadratic tets."""
     section, quads = _masked_section(
         width, height, cell, lambda x, z: (z > height - flange) | (np.abs(x) < stem / 2))
     ny = max(1, int(round(depth / cell)))
     pts, hexes = _extrude(section, quads, np.linspace(-depth / 2, depth / 2, ny + 1), axis=1)
-    return hexes_to_tets(pts, hexes)
+    return of_order(hexes_to_tets(pts, hexes), order)
 
 
 def y_shape(width=0.1, height=0.08, flange=0.02, stem=0.02, depth=0.02, cell=0.01,
-            angle=35.0):
+            angle=35.0, order=1):
     """A Y: the T of t_shape with both arms bent upward by `angle` degrees from the horizontal
-    (vertices with |x| > stem/2 rise by (|x| - stem/2) tan(angle))."""
+    (vertices with |x| > stem/2 rise by (|x| - stem/2) tan(angle)). order 2: quadratic tets."""
     if not 0 <= angle < 80:
         raise ValueError(f"angle: expected degrees in [0, 80), got {angle}")
     mesh = t_shape(width, height, flange, stem, depth, cell)
     X = mesh.vertices.copy()
     X[:, 2] += np.maximum(np.abs(X[:, 0]) - stem / 2, 0.0) * np.tan(np.radians(angle))
-    return TetMesh(X, mesh.tets)
+    return of_order(TetMesh(X, mesh.tets), order)

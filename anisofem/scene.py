@@ -11,7 +11,6 @@ from .assembly import BandedLayout, CsrLayout, DenseLayout
 from .inversion import volume_change
 from .kernels import MAX_NODES
 from .densities import STVK
-from .elements.tet4 import TET4
 from .material import Material
 from .mesh import TetMesh
 
@@ -75,7 +74,7 @@ class Scene:
         self.fixed_mask = self._fixed_mask(fixed)
         self.fixed_positions = self._fixed_positions(fixed, fixed_positions)
         vol = mesh.rest_volumes
-        self.masses = _to_vertices(mesh, self._params["density"] * vol / 4.0)
+        self.masses = _to_nodes(mesh, self._params["density"] * vol, LUMPED[mesh.order])
         b = np.zeros((m, 3))
         if gravity is not None:
             g = as_float_array(gravity, "gravity", shape=(3,))
@@ -84,7 +83,7 @@ class Scene:
             b += per_element(body_force, "body_force", m, width=3)
         f = np.zeros((n, 3))
         for i in range(3):
-            f[:, i] = _to_vertices(mesh, b[:, i] * vol / 4.0)
+            f[:, i] = _to_nodes(mesh, b[:, i] * vol, CONSISTENT[mesh.order])
         if nodal_force is not None:
             f += as_float_array(nodal_force, "nodal_force", shape=(n, 3))
         if traction is not None or traction_faces is not None:
@@ -183,8 +182,7 @@ class Scene:
 
     @cached_property
     def elements(self):
-        return element_data(TET4, self.mesh.tets, self.mesh.inverse_jacobians,
-                            self.mesh.rest_volumes, self._params, self.mesh.coloring)
+        return element_data(self.mesh, self._params)
 
     def layout(self, kind):
         """The Hessian layout over the free DOFs: kind "csr", "dense" or "banded" (cached)."""
@@ -263,27 +261,38 @@ class Scene:
         return int((volume_change(self.mesh, x)[self.neohookean] <= -1.0).sum())
 
 
-def element_data(element, tets, inverse_jacobians, volumes, params, coloring):
-    """The ElementData of elements of type `element` (anisofem.elements) with node indices
-    tets (m, k), inverse Jacobians Dm^-1 (m, 3, 3) in 1/m, rest volumes (m,) in m^3, material
-    parameters `params` (Material.per_element) and assembly coloring (TetMesh.coloring)."""
+def element_data(mesh, params):
+    """The ElementData of a TetMesh's elements (its element type, cells and quadrature point
+    gradients) with material parameters `params` (Material.per_element)."""
+    element = mesh.element
     if element.n_nodes > MAX_NODES:
         raise ValueError(f"element: {element.name} has {element.n_nodes} nodes; the element "
                          f"loop holds at most {MAX_NODES}")
     kappa = params["kappa"]
-    starts, ptr = coloring
+    starts, ptr = mesh.coloring
     return ElementData(
-        tets=np.ascontiguousarray(tets, dtype=np.int64),
-        grads=np.einsum("pak,ekj->epaj", element.point_gradients, inverse_jacobians),
-        weights=volumes[:, None] * element.weights, model=params["model"], mu=params["mu"],
-        lam=params["lam"], kappa=kappa, fiber=params["fiber"],
+        tets=np.ascontiguousarray(mesh.cells, dtype=np.int64), grads=mesh.point_gradients,
+        weights=mesh.rest_volumes[:, None] * element.weights, model=params["model"],
+        mu=params["mu"], lam=params["lam"], kappa=kappa, fiber=params["fiber"],
         has_fiber=bool((kappa > 0).any()), block_starts=starts, color_ptr=ptr)
 
 
-def _to_vertices(mesh, per_tet):
-    """Sum a per-tet scalar (m,) onto its four vertices: (n,)."""
+#: A tet's lumped mass on its nodes, as shares of density times volume, by mesh order: linear
+#: tets a quarter each; quadratic tets by HRZ (the consistent mass matrix's diagonal scaled to
+#: the element's mass: 1/36 at each corner, 4/27 at each midside node), positive where
+#: row-sum lumping gives the corners negative masses.
+LUMPED = {1: np.full(4, 0.25), 2: np.array([1 / 36] * 4 + [4 / 27] * 6)}
+
+#: The integrals of a tet's shape functions over its volume, as shares of the volume, by mesh
+#: order: a uniform body force b puts b V share on each node (the consistent load; a quadratic
+#: tet's corners get -1/20, its midside nodes 1/5).
+CONSISTENT = {1: np.full(4, 0.25), 2: np.array([-1 / 20] * 4 + [1 / 5] * 6)}
+
+
+def _to_nodes(mesh, per_tet, shares):
+    """Sum a per-tet quantity (m,) onto each tet's nodes with shares (k,) of it: (n,)."""
     out = np.zeros(mesh.n_vertices)
-    np.add.at(out, mesh.tets.ravel(), np.repeat(per_tet, 4))
+    np.add.at(out, mesh.cells.ravel(), np.outer(per_tet, shares).ravel())
     return out
 
 
@@ -301,8 +310,13 @@ def _traction_force(mesh, traction, faces):
     X = mesh.vertices[faces]
     area = 0.5 * np.linalg.norm(np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), axis=1)
     f = np.zeros((mesh.n_vertices, 3))
+    if mesh.order == 1:
+        nodes, shares = faces, np.full(3, 1 / 3)
+    else:  # the 6-node triangle's shape functions integrate to 0 at corners, 1/3 at midsides
+        nodes = mesh.edge_nodes(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)).reshape(-1, 3)
+        shares = np.full(3, 1 / 3)
     for c in range(3):
-        np.add.at(f[:, c], faces.ravel(), np.repeat(t[:, c] * area / 3.0, 3))
+        np.add.at(f[:, c], nodes.ravel(), np.outer(t[:, c] * area, shares).ravel())
     return f
 
 

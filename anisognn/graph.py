@@ -87,6 +87,9 @@ def from_scene(scene, dtype=torch.float32):
     conditions."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected an anisofem.Scene, got {type(scene).__name__}")
+    if scene.mesh.order != 1:
+        raise ValueError(f"scene: the network steps linear tets (the paper's setting); this "
+                         f"mesh has quadratic tets (order {scene.mesh.order})")
     mesh, el = scene.mesh, scene.elements
     t = runtime.mesh_tensors(mesh.vertices, mesh.tets, scene.masses, scene.fixed_mask,
                              scene.fixed_positions, el.fiber, el.kappa, el.mu, el.lam)

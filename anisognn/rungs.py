@@ -98,6 +98,10 @@ def surrogate_rungs(scene, dt, notes):
         notes.append(f"surrogate rungs skipped: the shipped models step dt = {trained_dt} s, "
                      f"the trade runs dt = {dt} s")
         return []
+    if scene.mesh.order != 1:
+        notes.append(f"surrogate rungs skipped: the shipped models step linear tets, and this "
+                     f"mesh has quadratic ones (order {scene.mesh.order})")
+        return []
     if scene.neohookean.any():
         notes.append("surrogate rungs skipped: the shipped models were trained on the StVK "
                      "base material, and this scene uses Neo-Hookean elements")

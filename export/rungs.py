@@ -36,6 +36,9 @@ def _unlike_runtime(scene, dt, metadata):
     """Why the runtime of a model with this ONNX metadata cannot step scene at dt (s): its dt,
     the trained StVK material, held vertices at rest; None when it can."""
     trained_dt = float(metadata["dt"])
+    if scene.mesh.order != 1:
+        return (f"the model steps linear tets, and this mesh has quadratic ones (order "
+                f"{scene.mesh.order})")
     if not np.isclose(dt, trained_dt, rtol=1e-9, atol=0):
         return f"the model steps dt = {trained_dt} s, the trade runs dt = {dt} s"
     trained = json.loads(metadata["trained_material"])

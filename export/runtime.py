@@ -553,6 +553,9 @@ def _tets(tets, vertices):
     arr = np.asarray(tets)
     if not np.issubdtype(arr.dtype, np.integer):
         raise TypeError(f"tets: expected integer vertex indices, got dtype {arr.dtype}")
+    if arr.ndim == 2 and arr.shape[1] == 10:
+        raise ValueError("tets: the network steps linear tets (m, 4); these are quadratic "
+                         "(m, 10, order 2)")
     if arr.ndim != 2 or arr.shape[1] != 4 or arr.shape[0] == 0:
         raise ValueError(f"tets: expected shape (m, 4) with m >= 1, got {arr.shape}")
     if arr.min() < 0 or arr.max() >= n:

@@ -76,9 +76,9 @@ class Quadratic:
     the element loop."""
 
     def __init__(self, mesh, material):
-        self.nodes, self.tets = quadratic_nodes(mesh.vertices, mesh.tets)
-        self.elements = element_data(TET10, self.tets, mesh.inverse_jacobians, mesh.rest_volumes,
-                                     material.per_element(mesh.n_tets), mesh.coloring)
+        raised = mesh.raised()
+        self.nodes, self.tets = raised.vertices, raised.cells
+        self.elements = element_data(raised, material.per_element(mesh.n_tets))
         n = self.nodes.shape[0]
         self.layout = DenseLayout(self.tets, np.arange(3 * n).reshape(n, 3))
 

@@ -21,7 +21,7 @@ def test_valid_mesh_is_accepted():
     (X, [[0, 1, 2, 7]], ValueError, "out of range"),
     (X, [[0, 1, 2, -1]], ValueError, "out of range"),
     (X, [[0, 1, 2, 3], [1, 0, 3, 2]], ValueError, "duplicate"),
-    (X, [[0, 1, 2]], ValueError, r"tets: expected shape \(\*, 4\)"),
+    (X, [[0, 1, 2]], ValueError, r"tets: expected \(m, 4\) linear or \(m, 10\) quadratic"),
     (X[:, :2], T, ValueError, r"vertices: expected shape \(\*, 3\)"),
     (X, T.astype(float), TypeError, "tets: expected an integer array"),
     (X.astype(str), T, TypeError, "vertices"),
