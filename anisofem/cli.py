@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 
-from . import bench, bench_large, ladder, meshgen, methods, robustness
+from . import bench, bench_large, convergence, ladder, meshgen, methods, robustness
 from .files import write_json
 from .io import check_output_path, read_mesh, write_mesh
 from .inversion import inversion
@@ -28,6 +28,22 @@ _SHAPES = {"box": lambda a: meshgen.box_beam(a.size, a.cells),
                                                        a.cells[1], a.rings),
            "t": lambda a: meshgen.t_shape(),
            "y": lambda a: meshgen.y_shape()}
+
+
+def _order_argument(p):
+    p.add_argument("--order", type=int, choices=(1, 2), default=None,
+                   help="1: linear tets; 2: quadratic (10-node) tets, a linear mesh raised by "
+                        "its edge midpoints (default: a file's own order, linear for a shape)")
+
+
+def _of_order(mesh, order):
+    """mesh at the --order asked (None: as it is); a quadratic file cannot be lowered."""
+    if order is None or order == mesh.order:
+        return mesh
+    if order == 1:
+        raise ValueError("--order 1: the mesh has quadratic tets; a quadratic mesh is not "
+                         "lowered (read it as it is, or mesh it again)")
+    return mesh.raised()
 
 
 def _fixed(mesh, spec):
@@ -46,6 +62,7 @@ def _shape_arguments(p):
     p.add_argument("--cells", type=int, nargs="+", default=(10, 2, 2),
                    help="box: nx ny nz; cylinder: along section")
     p.add_argument("--rings", type=int, default=1, help="cylinder: O-grid rings")
+    _order_argument(p)
 
 
 def _scene_arguments(s):
@@ -87,7 +104,7 @@ def add_scene_arguments(p):
 def scene_of(args):
     """The Scene that the flags of add_scene_arguments describe."""
     mesh = _SHAPES[args.scene](args) if args.scene in _SHAPES else read_mesh(args.scene)
-    return _scene(args, mesh)
+    return _scene(args, _of_order(mesh, args.order))
 
 
 class _ShowDefaults(argparse.ArgumentDefaultsHelpFormatter):
@@ -112,6 +129,7 @@ def _parser():
     s.add_argument("mesh", help="a mesh file meshio reads (.msh, .vtu, .xdmf, ...)")
     s.add_argument("-o", "--output", required=True, help="result file (.vtu, .xdmf, .msh)")
     _scene_arguments(s)
+    _order_argument(s)
     s.add_argument("--steps", type=int, default=0,
                    help="backward-Euler steps instead of statics (writes the last state)")
     s.add_argument("--dt", type=float, default=0.02, help="s")
@@ -147,6 +165,9 @@ def _parser():
                    help="static solves and backward-Euler steps at 10^4 and 10^5 tets by "
                         "each large-mesh path, peak memory included (minutes)")
     b.add_argument("--huge", action="store_true", help="with --large: 10^6 tets too (minutes)")
+    b.add_argument("--convergence", action="store_true",
+                   help="the cantilever's static sag with linear and quadratic tets, refined "
+                        "1, 2 and 4 times, against the extrapolated limit (minutes)")
     b.add_argument("--crossover", action="store_true",
                    help="exact Newton against multigrid CG from 4,800 to 19,200 tets, where "
                         "method='auto' switches (minutes)")
@@ -160,7 +181,7 @@ def _parser():
                    help="where to write the results (default: results/bench_anisofem.json, "
                         "with --large results/bench_large.json, with --crossover "
                         "results/bench_crossover.json, with --robustness "
-                        "results/robustness.json)")
+                        "results/robustness.json, with --convergence results/convergence.json)")
     return p
 
 
@@ -177,7 +198,7 @@ def main(argv=None):
 
 def _mesh(args):
     check_output_path(args.output)
-    mesh = _SHAPES[args.shape](args)
+    mesh = _of_order(_SHAPES[args.shape](args), args.order)
     write_mesh(args.output, mesh)
     print(f"{mesh} -> {args.output}")
     return 0
@@ -185,7 +206,7 @@ def _mesh(args):
 
 def _solve(args):
     check_output_path(args.output)
-    mesh = read_mesh(args.mesh)
+    mesh = _of_order(read_mesh(args.mesh), args.order)
     scene = _scene(args, mesh)
     how = {"method": args.method, "rtol": args.rtol, "iterations": args.iterations}
     methods.make(n_unknowns=scene.n_free, **how)  # bad options fail here, before the solve
@@ -239,12 +260,14 @@ def _trade(args):
 def _bench(args):
     if args.huge and not args.large:
         raise ValueError("--huge: goes with --large")
-    if sum((args.large, args.crossover, args.robustness)) > 1:
-        raise ValueError("--large, --crossover, --robustness: one at a time")
+    if sum((args.large, args.crossover, args.robustness, args.convergence)) > 1:
+        raise ValueError("--large, --crossover, --robustness, --convergence: one at a time")
     if args.dynamics and not args.robustness:
         raise ValueError("--dynamics: goes with --robustness")
     out = {} if args.json is None else {"out": args.json}
-    if args.robustness:
+    if args.convergence:
+        convergence.run(**out)
+    elif args.robustness:
         robustness.run(args.dynamics, **out)
     elif args.large:
         bench_large.run(args.huge, **out)

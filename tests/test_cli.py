@@ -103,3 +103,22 @@ def test_help_names_the_defaults_the_commands_rely_on(tmp_path):
     for default in ("(default: x-min)", "(default: (0.0, 0.0, -9.81))", "(default: 0.0)",
                     "(default: stvk)", "(default: auto)"):
         assert default in said
+
+
+def test_order_two_meshes_solves_and_trades_quadratic_tets(tmp_path):
+    r = run("mesh", "box", "--cells", "4", "2", "2", "--order", "2", "-o", "q.msh",
+            cwd=tmp_path)
+    assert r.returncode == 0 and "quadratic tets" in r.stdout, r.stderr
+    assert "tetra10" in {c.type for c in meshio.read(tmp_path / "q.msh").cells}
+    run("mesh", "box", "--cells", "4", "2", "2", "-o", "l.msh", cwd=tmp_path)
+    quadratic = run("solve", "q.msh", "-o", "q.vtu", cwd=tmp_path)
+    raised = run("solve", "l.msh", "--order", "2", "-o", "r.vtu", cwd=tmp_path)
+    assert "converged: True" in quadratic.stdout
+    tip = [line for line in quadratic.stdout.splitlines() if line.startswith("tip")]
+    assert tip == [line for line in raised.stdout.splitlines() if line.startswith("tip")]
+    r = run("solve", "q.msh", "--order", "1", "-o", "x.vtu", cwd=tmp_path)
+    assert r.returncode == 2 and "--order 1: the mesh has quadratic tets" in r.stderr
+    r = run("trade", "box", "--cells", "4", "2", "2", "--order", "2", "--steps", "10",
+            "--rungs", "cg amg", "reduced m5", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "quadratic" in r.stdout  # the note on the network's rungs
