@@ -143,6 +143,21 @@ class TetMesh:
         nodes, cells = quadratic_nodes(self.vertices, self.tets)
         return TetMesh(nodes, cells, fix_orientation=False)
 
+    def refined(self):
+        """This linear mesh with every tet split into eight (Bey's red refinement: new vertices
+        at the edge midpoints, the inner octahedron cut along one diagonal). The vertices keep
+        their indices; the midpoints follow. (Refine a linear mesh, then raise it, for a finer
+        quadratic one.)"""
+        if self.order != 1:
+            raise ValueError("refined: this mesh has quadratic tets; refine the linear mesh, "
+                             "then raise it")
+        nodes, cells = quadratic_nodes(self.vertices, self.tets)
+        v0, v1, v2, v3, m01, m12, m02, m03, m13, m23 = cells.T
+        children = np.array([[v0, m01, m02, m03], [m01, v1, m12, m13], [m02, m12, v2, m23],
+                             [m03, m13, m23, v3], [m01, m02, m03, m13], [m01, m02, m12, m13],
+                             [m02, m03, m13, m23], [m02, m12, m13, m23]])   # (8, 4, m)
+        return TetMesh(nodes, children.transpose(2, 0, 1).reshape(-1, 4))
+
     def edge_nodes(self, pairs):
         """(k,) the midside nodes of a quadratic mesh's edges given as vertex pairs (k, 2)
         (either order); ValueError for a pair that is no edge of the mesh."""

@@ -176,3 +176,16 @@ def test_the_network_and_its_runtime_refuse_quadratic_tets(beam):
     result = af.trade(scene, steps=10, progress=False)
     assert any("quadratic" in note for note in result["notes"])
     assert {r["kind"] for r in result["rungs"]} == {"fem", "reduced"}
+
+
+def test_red_refinement_splits_each_tet_into_eight_of_the_same_body():
+    mesh = af.box_beam(cells=(3, 2, 2))
+    fine = mesh.refined()
+    assert fine.n_tets == 8 * mesh.n_tets
+    assert np.array_equal(fine.vertices[:mesh.n_vertices], mesh.vertices)
+    assert abs(fine.rest_volumes.sum() - mesh.rest_volumes.sum()) < 1e-15
+    assert fine.rest_volumes.min() > 0 and np.isclose(fine.rest_volumes.sum() / fine.n_tets,
+                                                      mesh.rest_volumes.sum() / mesh.n_tets / 8)
+    assert fine.boundary_faces.shape[0] == 4 * mesh.boundary_faces.shape[0]
+    with pytest.raises(ValueError, match="refine the linear mesh"):
+        mesh.raised().refined()
