@@ -30,6 +30,13 @@ _SHAPES = {"box": lambda a: meshgen.box_beam(a.size, a.cells),
            "y": lambda a: meshgen.y_shape()}
 
 
+#: the finer meshes of the same body the trade can measure against (--bodies): name ->
+#: (row label, the finer mesh of a linear mesh)
+_BODIES = {"quadratic": ("exact, quadratic tets", lambda m: m.raised()),
+           "refined": ("exact, refined mesh", lambda m: m.refined()),
+           "refined-quadratic": ("exact, refined quadratic", lambda m: m.refined().raised())}
+
+
 def _order_argument(p):
     p.add_argument("--order", type=int, choices=(1, 2), default=None,
                    help="1: linear tets; 2: quadratic (10-node) tets, a linear mesh raised by "
@@ -153,6 +160,10 @@ def _parser():
                         "the static deflection")
     t.add_argument("--no-surrogates", action="store_true",
                    help="only the FEM rungs (skip the shipped networks)")
+    t.add_argument("--bodies", nargs="+", choices=list(_BODIES), default=[],
+                   help="the same body on finer meshes (quadratic tets, the mesh refined once, "
+                        "both), each rolled out exactly as a row; every rung's error against "
+                        "the finest (the body) is added, and the plot shows it (minutes)")
     t.add_argument("--rungs", nargs="+", metavar="NAME",
                    help="run only these rungs besides the exact one (names as in the table, "
                         "quoted: --rungs 'reduced m5' 'cg amg')")
@@ -244,8 +255,11 @@ def _trade(args):
         rungs += ladder.registered_rungs(scene, args.dt, notes)
     if args.rungs:
         rungs = ladder.select_rungs(rungs, args.rungs)
+    if args.bodies and scene.mesh.order != 1:
+        raise ValueError("--bodies: the scene has quadratic tets already; give its linear mesh")
+    bodies = [(_BODIES[b][0], _scene(args, _BODIES[b][1](scene.mesh))) for b in args.bodies]
     result = ladder.trade(scene, args.steps, args.dt, tolerance=args.tolerance, rungs=rungs,
-                          name=args.scene)
+                          name=args.scene, bodies=bodies)
     result["notes"][:0] = notes
     print(ladder.trade_table(result))
     if args.json:

@@ -17,6 +17,12 @@ in the same process; what is compared:
   the tip is the set of vertices whose static displacement is within 1% of the largest (for a
   cantilever: its free end) and u_static the converged static solution;
 - field_errors: max over vertices |u - u_exact| over the largest static displacement;
+- tip: the tip's mean displacement (3,) in m at each checked time;
+- continuum_errors (with bodies: the same body on finer meshes, e.g. quadratic or refined):
+  at each checked time |tip - tip of the reference| over the reference's static tip
+  deflection, the reference being the exact rollout of the finest body; the error a user
+  gets against the body rather than against the same mesh. The bodies' own rows (kind
+  "discretization") have for errors their tip's difference from the scene's exact rollout;
 - ms_per_step: wall time per step of the scene's dt, all steps but the first (which holds
   one-time set-up and compilation) averaged, so amortized refactorizations count; a rung with a
   larger step reports its time per dt of simulated time (ms per own step / dt_factor);
@@ -155,7 +161,8 @@ def checked_steps(steps, multiple):
     return sorted(k for k in picks | {steps} if k <= steps)
 
 
-def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, progress=True, name=""):
+def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, progress=True, name="",
+          bodies=()):
     """Run every rung on scene and compare it with the exact rollout.
 
     scene: an anisofem.Scene (held enough for a static solve: its static deflection is the
@@ -163,6 +170,12 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, progress=True, 
     registered_rungs(); fem_rungs() alone leaves the surrogates out). tolerance: recommend the
     cheapest stable rung whose errors are all within it. progress: report each
     rung's progress on stderr. name: what the scene is called in tables and plots.
+    bodies: the same body on finer meshes, [(name, Scene)], each mesh nested in the scene's
+    (its first n vertices are the scene's, as TetMesh.raised and TetMesh.refined keep them):
+    each is rolled out exactly as a row of kind "discretization" (its errors: its tip's
+    difference from the scene's exact rollout), and the one with the most unknowns is the
+    continuum reference. Every row then gains continuum_errors and max_continuum_error
+    (module docstring), and the result "reference" and "recommended_continuum".
 
     Returns a dict: {"scene": {...}, "times": [s], "rungs": [{"name", "kind", "ms_per_step",
     "errors", "max_error", "stable", "on_front", ...}], "recommended": name or None,
@@ -206,14 +219,57 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, progress=True, 
     for i, rung in enumerate(rungs[1:], 2):
         label = f"[{i}/{len(rungs)}] {rung.name}"
         rows.append(row(rung, _roll(rung, scene, dt, steps, label if progress else None)))
+    result = {"scene": {"name": name, "tets": scene.mesh.n_tets,
+                        "vertices": scene.mesh.n_vertices, "unknowns": scene.n_free, "dt": dt,
+                        "steps": steps, "deflection": deflection, "tip_vertices": tip.size},
+              "times": [k * dt for k in check], "tolerance": tolerance, "rungs": rows,
+              "notes": notes}
+    if bodies:
+        _against_the_body(result, scene, bodies, ref, check, tip, dt, steps, progress)
     mark_front(rows)
     good = [r for r in rows if r["stable"] and r["max_error"] <= tolerance]
-    recommended = min(good, key=lambda r: r["ms_per_step"])["name"] if good else None
-    return {"scene": {"name": name, "tets": scene.mesh.n_tets, "vertices": scene.mesh.n_vertices,
-                      "unknowns": scene.n_free, "dt": dt, "steps": steps,
-                      "deflection": deflection, "tip_vertices": tip.size},
-            "times": [k * dt for k in check], "tolerance": tolerance, "rungs": rows,
-            "recommended": recommended, "notes": notes}
+    result["recommended"] = min(good, key=lambda r: r["ms_per_step"])["name"] if good else None
+    return result
+
+
+def _against_the_body(result, scene, bodies, ref, check, tip, dt, steps, progress):
+    """Roll out each (name, Scene) of bodies exactly, add their rows, and give every row its
+    continuum errors against the finest (trade's bodies)."""
+    n = scene.mesh.n_vertices
+    for label, body in bodies:
+        if body.mesh.n_vertices < n or not np.allclose(body.mesh.vertices[:n], scene.mesh.vertices,
+                                                       rtol=0, atol=1e-12 * scene.mesh.size):
+            raise ValueError(f"bodies: {label!r} is not the scene's mesh refined or raised "
+                             f"(its first {n} vertices must be the scene's)")
+    runs = []
+    for i, (label, body) in enumerate(bodies, 1):
+        run = _roll(fem_rung(label), body, dt, steps,
+                    f"[body {i}/{len(bodies)}] {label}" if progress else None)
+        static = solve(body)
+        rung = Rung(label, "discretization", None)
+        row = _row(rung, run, ref, check, tip, result["scene"]["deflection"],
+                   float(np.linalg.norm(static.x - body.mesh.vertices, axis=1).max()),
+                   abs(Potential(body).energy(static.x)), body, dt, shared=n)
+        row.update(tets=body.mesh.n_tets, unknowns=body.n_free, order=body.mesh.order)
+        result["rungs"].append(row)
+        runs.append((body, run, static))
+    body, run, static = max(runs, key=lambda b: b[0].n_free)
+    reference = {k: run["positions"][k][0][tip].mean(0) - body.mesh.vertices[tip].mean(0)
+                 for k in check if k in run["positions"]}
+    deflection = float(np.linalg.norm((static.x - body.mesh.vertices)[tip].mean(0)))
+    for row in result["rungs"]:
+        row["continuum_errors"] = [
+            float(np.linalg.norm(np.asarray(t) - reference[k])) / deflection
+            if t is not None and k in reference else float("inf")
+            for k, t in zip(check, row["tip"])]
+        row["max_continuum_error"] = max(row["continuum_errors"])
+    name = next(label for label, b in bodies if b is body)
+    result["reference"] = {"name": name, "tets": body.mesh.n_tets, "order": body.mesh.order,
+                           "unknowns": body.n_free, "deflection": deflection}
+    good = [r for r in result["rungs"]
+            if r["stable"] and r["max_continuum_error"] <= result["tolerance"]]
+    result["recommended_continuum"] = (min(good, key=lambda r: r["ms_per_step"])["name"]
+                                       if good else None)
 
 
 def mark_front(rows):
@@ -299,18 +355,23 @@ def _roll(rung, scene, dt, steps, label):
     return {"positions": states, "seconds": seconds, "infos": infos, "completed": completed}
 
 
-def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt):
-    """One rung's table row (see the module docstring for the quantities)."""
+def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt, shared=None):
+    """One rung's table row (see the module docstring for the quantities); shared: compare the
+    first `shared` vertices only (a finer mesh of the same body), default all."""
     states = run["positions"]
-    errors, field_errors = [], []
+    errors, field_errors, tips = [], [], []
+    rest = scene.mesh.vertices[tip].mean(0)
     for k in check:
         if k not in states:
             errors.append(float("inf"))
             field_errors.append(float("inf"))
+            tips.append(None)
             continue
-        d = states[k][0] - ref[k][0]
+        x = states[k][0]
+        d = x[:shared] - ref[k][0]
         errors.append(float(np.linalg.norm(d[tip].mean(0))) / deflection)
         field_errors.append(float(np.linalg.norm(d, axis=1).max()) / u_max)
+        tips.append((x[tip].mean(0) - rest).tolist())
     pot = Potential(scene)
     mass = scene.masses
     energies = [pot.energy(x) + 0.5 * float((mass[:, None] * v * v).sum())
@@ -329,7 +390,7 @@ def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt
            "energy_drift": drift, "min_volume_ratio": ratio, "inverted": inverted,
            "max_volume_change": max(float(np.abs(c).max()) for c in change),
            "stable": bool(run["completed"] and drift <= ENERGY_GAIN_MAX),
-           "steps_taken": len(secs)}
+           "steps_taken": len(secs), "tip": tips}
     setup = [info["setup_seconds"] for info in run["infos"] if "setup_seconds" in info]
     if setup:
         row["setup_seconds"] = setup[0]
@@ -343,15 +404,18 @@ def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt
 def trade_table(result):
     """The trade result as a text table."""
     times = "/".join(f"{t:g}" for t in result["times"])
+    body = "reference" in result
+    vs_body = f"{'vs body':>9}" if body else ""
     head = (f"{'rung':<27} {'ms/step':>8} {'x exact':>8} {'tip error at t = ' + times + ' s':<36}"
-            f" {'its':>5} {'drift':>8} {'min J':>6} stable")
+            f"{vs_body} {'its':>5} {'drift':>8} {'min J':>6} stable")
     exact = result["rungs"][0]["ms_per_step"]
     lines = [head, "-" * len(head)]
     for r in result["rungs"]:
         errs = " / ".join(f"{e:.2g}" for e in r["errors"])
         its = r.get("iterations_per_step")
+        vs_body = f" {r['max_continuum_error']:8.2g}" if body else ""
         lines.append(f"{r['name']:<27} {r['ms_per_step']:8.3g} {exact / r['ms_per_step']:8.2f} "
-                     f"{errs:<36} {'' if its is None else f'{its:.1f}':>5} "
+                     f"{errs:<36}{vs_body} {'' if its is None else f'{its:.1f}':>5} "
                      f"{r['energy_drift']:8.1e} {r['min_volume_ratio']:6.2f} {r['stable']}")
     s = result["scene"]
     lines.append(f"{s['tets']} tets, {s['unknowns']} unknowns, dt = {s['dt']} s, {s['steps']} "
@@ -359,11 +423,18 @@ def trade_table(result):
     rec = result["recommended"]
     lines.append(f"cheapest stable rung within {result['tolerance']:g} at every checked time: "
                  f"{rec if rec else 'none'}")
+    if body:
+        ref = result["reference"]
+        rec = result["recommended_continuum"]
+        lines.append(f"vs body: the largest tip error against {ref['name']} ({ref['tets']} tets, "
+                     f"order {ref['order']}, {ref['unknowns']} unknowns), over its static "
+                     f"deflection {ref['deflection']:.4g} m; cheapest within "
+                     f"{result['tolerance']:g} of it: {rec if rec else 'none'}")
     lines += [f"note: {n}" for n in result["notes"]]
     return "\n".join(lines)
 
 
-def _label_positions(ax, rows, y_of, xlim, ylim):
+def _label_positions(ax, rows, y_of, xlim, ylim, reference="exact"):
     """Where the plot's rung labels go, lowest rung first, each moved up while it would overlap
     a label already placed or another rung's marker: ([(text, (x, y) of the rung, (x, y) of
     the label, moved)], the y of the highest label's top), in data coordinates of the log-log
@@ -378,7 +449,7 @@ def _label_positions(ax, rows, y_of, xlim, ylim):
     placed, labels = [], []
     for r in sorted(rows, key=y_of):
         x, y = r["ms_per_step"], y_of(r)
-        text = r["name"] + (" (reference)" if r["name"] == "exact" else "")
+        text = r["name"] + (" (reference)" if r["name"] == reference else "")
         lx, ly, w = math.log10(x) + 1.2 * mark_x, math.log10(y) - 0.4 * line_h, len(text) * char_w
 
         def hits(ly):
@@ -407,27 +478,33 @@ def plot(result, path):
     import matplotlib.ticker
 
     rows = result["rungs"]
-    finite = [r["max_error"] for r in rows if 0 < r["max_error"] < math.inf]
+    # against the body where the trade has a continuum reference, else against exact
+    error = "max_continuum_error" if "reference" in result else "max_error"
+    finite = [r[error] for r in rows if 0 < r[error] < math.inf]
     floor = min(finite) / 10 if finite else 1e-6
     ceiling = max(finite) * 10 if finite else 1.0
     fig, ax = plt.subplots(figsize=(10, 5.5))
     ax.axhline(result["tolerance"], color="0.6", lw=0.8, ls="--")
     def y_of(r):
-        return min(max(r["max_error"], floor), ceiling)
+        return min(max(r[error], floor), ceiling)
 
     # the front in this plot's two numbers: stable rungs no other is faster and more exact than
     front, best = [], math.inf
     for r in sorted((r for r in rows if r["stable"]), key=lambda r: (r["ms_per_step"],
-                                                                     r["max_error"])):
-        if r["max_error"] < best:
+                                                                     r[error])):
+        if r[error] < best:
             front.append(r)
-            best = r["max_error"]
+            best = r[error]
     xs = [r["ms_per_step"] for r in front]
     ys = [y_of(r) for r in front]
     ax.step(xs, ys, where="post", color="tab:green", lw=6, alpha=0.25,
             solid_capstyle="round", label="Pareto front")
     styles = {"fem": ("o", "tab:blue", "anisofem"), "reduced": ("D", "tab:purple", "reduced model"),
-              "surrogate": ("s", "tab:orange", "surrogate")}
+              "surrogate": ("s", "tab:orange", "surrogate"),
+              "discretization": ("^", "tab:brown", "finer mesh, exact")}
+    recommended = result.get("recommended_continuum") if error != "max_error" else \
+        result["recommended"]
+    reference = result["reference"]["name"] if error != "max_error" else "exact"
     ax.set_xscale("log")
     ax.set_yscale("log")
     ms = [r["ms_per_step"] for r in rows]
@@ -448,23 +525,27 @@ def plot(result, path):
         ax.scatter(r["ms_per_step"], y_of(r), marker=marker, color=color, s=50, zorder=3,
                    label=None if label in shown else label)
         shown.add(label)
-        if r["name"] == result["recommended"]:
+        if r["name"] == recommended:
             ax.scatter(r["ms_per_step"], y_of(r), marker="o", s=220, facecolors="none",
                        edgecolors="tab:green", linewidths=2, zorder=4,
-                       label=f"recommended (within {result['tolerance']:g})")
-    labels, top = _label_positions(ax, rows, y_of, xlim, ylim)
+                       label=f"recommended (within {result['tolerance']:g}"
+                             f"{' of the body' if error != 'max_error' else ''})")
+    labels, top = _label_positions(ax, rows, y_of, xlim, ylim, reference)
     for _ in range(3):  # the axes grow to hold the highest label; the labels are placed anew
         if top <= ylim[1]:
             break
         ylim = (ylim[0], top)
         ax.set_ylim(*ylim)
-        labels, top = _label_positions(ax, rows, y_of, xlim, ylim)
+        labels, top = _label_positions(ax, rows, y_of, xlim, ylim, reference)
     for text, xy, xytext, moved in labels:
         ax.annotate(text, xy, xytext=xytext, fontsize=7.5, va="bottom",
                     arrowprops={"arrowstyle": "-", "color": "0.7", "lw": 0.5} if moved else None)
     ax.set_xlabel("ms per step of dt (this machine, one process)")
     times = ", ".join(f"{t:g}" for t in result["times"])
-    ax.set_ylabel(f"largest tip error at t = {times} s\n(fraction of the static deflection)")
+    against = (f"against {result['reference']['name']}" if error != "max_error"
+               else "against the exact step")
+    ax.set_ylabel(f"largest tip error {against}\nat t = {times} s (fraction of the static "
+                  f"deflection)")
     sc = result["scene"]
     ax.set_title(f"{os.path.basename(sc['name']) or 'scene'}: {sc['tets']:,} tets, "
                  f"dt = {sc['dt']:g} s, {sc['steps']} steps", fontsize=10)

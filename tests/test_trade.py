@@ -121,7 +121,6 @@ def test_surrogate_rungs_at_the_extremes_report_instead_of_returning_nan(beam, m
 @pytest.mark.filterwarnings("ignore::anisofem.InversionWarning")
 def test_surrogates_are_not_scored_against_an_inverted_or_foreign_reference():
     mesh = af.box_beam(cells=(10, 2, 2))
-    x = mesh.vertices[:, 0]
 
     def scene(model):
         return af.Scene(mesh, af.Material(1e5, 0.48, 1000.0, (1, 0, 0), 1e5, model=model),
@@ -165,3 +164,32 @@ def test_plot_labels_of_crowded_rungs_stack_up_inside_the_axes():
     assert all(b > a for a, b in zip(ys, ys[1:]))  # each moved above the one before
     assert [moved for *_, moved in labels][1:] == [True] * 5
     assert top > ys[-1] > ylim[1]  # six labels stacked above 1 rise past 2: the plot grows
+
+
+def test_bodies_measure_every_rung_against_the_finest_mesh_of_the_body():
+    mesh = af.box_beam(cells=(4, 2, 2))
+
+    def cantilever(mesh):
+        return af.Scene(mesh, af.Material(1e5, 0.48, 1000.0, (1, 0, 0), 1e5),
+                        fixed=np.flatnonzero(mesh.vertices[:, 0] <= 1e-9),
+                        gravity=(0, 0, -9.81))
+    scene = cantilever(mesh)
+    bodies = [("order 2", cantilever(mesh.raised())),
+              ("refined, order 2", cantilever(mesh.refined().raised()))]
+    result = af.trade(scene, steps=10, rungs=[ladder.fem_rung("exact"),
+                                              ladder.fem_rung("newton x1", "newton",
+                                                              iterations=1)],
+                      progress=False, bodies=bodies, tolerance=0.05)
+    rows = {r["name"]: r for r in result["rungs"]}
+    assert result["reference"]["name"] == "refined, order 2"
+    assert rows["refined, order 2"]["continuum_errors"] == [0.0, 0.0, 0.0, 0.0]
+    assert rows["order 2"]["kind"] == "discretization"
+    # linear tets lock: the exact rollout is far from the body, the quadratic one near it
+    assert rows["exact"]["max_continuum_error"] > 0.3 > 0.05 > rows["order 2"][
+        "max_continuum_error"]
+    assert rows["exact"]["max_error"] == 0.0 and rows["order 2"]["max_error"] > 0.3
+    assert result["recommended_continuum"] == "order 2"
+    assert "vs body" in ladder.trade_table(result)
+    with pytest.raises(ValueError, match="bodies"):
+        af.trade(scene, steps=10, rungs=[ladder.fem_rung("exact")], progress=False,
+                 bodies=[("other", cantilever(af.box_beam(cells=(5, 2, 2))))])
