@@ -121,6 +121,7 @@ def test_surrogate_rungs_at_the_extremes_report_instead_of_returning_nan(beam, m
 @pytest.mark.filterwarnings("ignore::anisofem.InversionWarning")
 def test_surrogates_are_not_scored_against_an_inverted_or_foreign_reference():
     mesh = af.box_beam(cells=(10, 2, 2))
+    x = mesh.vertices[:, 0]
 
     def scene(model):
         return af.Scene(mesh, af.Material(1e5, 0.48, 1000.0, (1, 0, 0), 1e5, model=model),
