@@ -122,3 +122,16 @@ def test_order_two_meshes_solves_and_trades_quadratic_tets(tmp_path):
             "--rungs", "cg amg", "reduced m5", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert "quadratic" in r.stdout  # the note on the network's rungs
+
+
+def test_bodies_flag_adds_the_continuum_column_and_refuses_a_quadratic_scene(tmp_path):
+    r = run("trade", "box", "--cells", "4", "2", "2", "--steps", "10", "--no-surrogates",
+            "--rungs", "reduced m5", "--bodies", "quadratic", "--json", "t.json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "vs body" in r.stdout and "exact, quadratic tets" in r.stdout
+    import json
+    result = json.loads((tmp_path / "t.json").read_text())
+    assert result["reference"]["order"] == 2
+    assert all("continuum_errors" in row for row in result["rungs"])
+    r = run("trade", "box", "--order", "2", "--bodies", "quadratic", cwd=tmp_path)
+    assert r.returncode == 2 and "quadratic tets already" in r.stderr
