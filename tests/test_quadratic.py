@@ -189,3 +189,13 @@ def test_red_refinement_splits_each_tet_into_eight_of_the_same_body():
     assert fine.boundary_faces.shape[0] == 4 * mesh.boundary_faces.shape[0]
     with pytest.raises(ValueError, match="refine the linear mesh"):
         mesh.raised().refined()
+
+
+def test_neo_hookean_quadratic_tets_solve_and_step_at_ten_g():
+    mesh = af.box_beam(cells=(6, 2, 2), order=2)
+    scene = af.Scene(mesh, af.Material(E, 0.48, 1000.0, (1, 0, 0), E, model="neohookean"),
+                     fixed=af.metrics.end_vertices(mesh, 0, "min"), gravity=(0, 0, -98.1))
+    result = af.solve(scene)
+    assert result.converged and result.inversion.physical
+    rollout = af.simulate(scene, 5)
+    assert rollout.completed and rollout.converged
