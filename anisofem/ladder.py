@@ -439,12 +439,12 @@ def _label_positions(ax, rows, y_of, xlim, ylim, reference="exact"):
     a label already placed or another rung's marker: ([(text, (x, y) of the rung, (x, y) of
     the label, moved)], the y of the highest label's top), in data coordinates of the log-log
     axes ax with limits xlim, ylim."""
-    # sizes in decades: about 5.5 and 11 pixels per character width and line height, markers
+    # sizes in decades: about 6.5 and 11 pixels per character width and line height, markers
     # about 5 pixels across from their centre
     box = ax.get_window_extent()
-    char_w = 5.5 * math.log10(xlim[1] / xlim[0]) / box.width
+    char_w = 6.5 * math.log10(xlim[1] / xlim[0]) / box.width
     line_h = 11.0 * math.log10(ylim[1] / ylim[0]) / box.height
-    mark_x, mark_y = 5.0 * char_w / 5.5, 5.0 * line_h / 11.0
+    mark_x, mark_y = 5.0 * char_w / 6.5, 5.0 * line_h / 11.0
     markers = [(math.log10(r["ms_per_step"]), math.log10(y_of(r))) for r in rows]
     placed, labels = [], []
     for r in sorted(rows, key=y_of):
