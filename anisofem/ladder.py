@@ -252,8 +252,8 @@ def _against_the_body(result, scene, bodies, ref, check, tip, dt, steps, progres
                    abs(Potential(body).energy(static.x)), body, dt, shared=n)
         row.update(tets=body.mesh.n_tets, unknowns=body.n_free, order=body.mesh.order)
         result["rungs"].append(row)
-        runs.append((body, run, static))
-    body, run, static = max(runs, key=lambda b: b[0].n_free)
+        runs.append((label, body, run, static))
+    name, body, run, static = max(runs, key=lambda b: b[1].n_free)
     reference = {k: run["positions"][k][0][tip].mean(0) - body.mesh.vertices[tip].mean(0)
                  for k in check if k in run["positions"]}
     deflection = float(np.linalg.norm((static.x - body.mesh.vertices)[tip].mean(0)))
@@ -263,7 +263,6 @@ def _against_the_body(result, scene, bodies, ref, check, tip, dt, steps, progres
             if t is not None and k in reference else float("inf")
             for k, t in zip(check, row["tip"])]
         row["max_continuum_error"] = max(row["continuum_errors"])
-    name = next(label for label, b in bodies if b is body)
     result["reference"] = {"name": name, "tets": body.mesh.n_tets, "order": body.mesh.order,
                            "unknowns": body.n_free, "deflection": deflection}
     good = [r for r in result["rungs"]

@@ -310,13 +310,12 @@ def _traction_force(mesh, traction, faces):
     X = mesh.vertices[faces]
     area = 0.5 * np.linalg.norm(np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), axis=1)
     f = np.zeros((mesh.n_vertices, 3))
-    if mesh.order == 1:
-        nodes, shares = faces, np.full(3, 1 / 3)
-    else:  # the 6-node triangle's shape functions integrate to 0 at corners, 1/3 at midsides
-        nodes = mesh.edge_nodes(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)).reshape(-1, 3)
-        shares = np.full(3, 1 / 3)
+    # a third of each face's load on three nodes: its corners (linear), or its midside nodes
+    # (the 6-node triangle's shape functions integrate to 0 at corners, 1/3 at midsides)
+    nodes = faces if mesh.order == 1 else mesh.edge_nodes(
+        faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)).reshape(-1, 3)
     for c in range(3):
-        np.add.at(f[:, c], nodes.ravel(), np.outer(t[:, c] * area, shares).ravel())
+        np.add.at(f[:, c], nodes.ravel(), np.repeat(t[:, c] * area / 3.0, 3))
     return f
 
 

@@ -5,14 +5,13 @@
 files, the mean time of a backward-Euler step (dt = 0.02 s, 100 steps from rest, the first left
 out) in the library (numba) and in runtime.ReducedSimulator (numpy), and its static tip error
 against the full FEM. Prints a table and writes JSON (atomically). Run alone."""
-import math
 import os
 import tempfile
 import time
 
 import numpy as np
 
-from anisofem import Material, Scene, box_beam, metrics
+from anisofem.convergence import cantilever
 from anisofem.files import publish
 from anisofem.reduced import ReducedModel
 
@@ -26,15 +25,6 @@ STEPS = 100
 DT = 0.02
 
 
-def cantilever(cells):
-    """The trade's 0.1 m cantilever on box_beam(cells)."""
-    mesh = box_beam(size=(0.1, 0.02, 0.02), cells=cells)
-    angle = math.radians(40.0)
-    material = Material(1e5, 0.48, 1000.0, (math.cos(angle), 0.0, math.sin(angle)), 1e5)
-    return Scene(mesh, material, fixed=metrics.end_vertices(mesh, 0, "min"),
-                 gravity=(0.0, 0.0, -9.81))
-
-
 def _step_times(step, state):
     """Mean seconds of STEPS - 1 steps after the first; step(state) -> state."""
     state = step(state)
@@ -46,7 +36,7 @@ def _step_times(step, state):
 
 def measure(cells, modes, folder):
     """One row: the model of cantilever(cells) with `modes` modes."""
-    scene = cantilever(cells)
+    scene = cantilever(cells, 1)
     model = ReducedModel(scene, modes=modes)
     path = os.path.join(folder, "model")
     reduced.write(model, path)

@@ -22,9 +22,9 @@ import numpy as np
 
 import anisofem as af
 from anisofem.files import publish, result_path
+from anisofem.convergence import cantilever
 from anisofem.reduced import ReducedModel
 from export import reduced as writer
-from export.bench_reduced import cantilever
 from export.runtime import ReducedSimulator
 
 FINE, COARSE = (40, 8, 8), (10, 2, 2)
@@ -66,7 +66,7 @@ def rollout(step, positions, rest, end, r):
 
 
 def run(modes, out):
-    fine, coarse = cantilever(FINE), cantilever(COARSE)
+    fine, coarse = cantilever(FINE, 1), cantilever(COARSE, 1)
     reference, fine_ms = exact(fine)
     static = af.solve(fine)
     end_fine = tip(fine.mesh)
