@@ -23,7 +23,7 @@ from .metrics import end_vertices, tip_displacement
 from .scene import Scene
 from .solve import CONTINUATION, simulate, solve
 
-_SHAPES = {"box": lambda a: meshgen.box_beam(a.size, a.cells),
+_SHAPES = {"box": lambda a: meshgen.box_beam(a.size, a.cells, tets_per_cell=a.tets_per_cell),
            "cylinder": lambda a: meshgen.cylinder_beam(a.size[0], a.size[1] / 2, a.cells[0],
                                                        a.cells[1], a.rings),
            "t": lambda a: meshgen.t_shape(),
@@ -69,7 +69,17 @@ def _shape_arguments(p):
     p.add_argument("--cells", type=int, nargs="+", default=(10, 2, 2),
                    help="box: nx ny nz; cylinder: along section")
     p.add_argument("--rings", type=int, default=1, help="cylinder: O-grid rings")
+    p.add_argument("--tets-per-cell", type=int, choices=(5, 6), default=5,
+                   help="box: tets per hex cell (6: the more accurate split for quadratic "
+                        "tets, docs/fem.md)")
     _order_argument(p)
+
+
+def _shape(args, name):
+    """The mesh of the shape called name that the shape flags describe."""
+    if args.tets_per_cell != 5 and name != "box":
+        raise ValueError(f"--tets-per-cell {args.tets_per_cell}: only the box has a 6-tet split")
+    return _SHAPES[name](args)
 
 
 def _scene_arguments(s):
@@ -110,7 +120,7 @@ def add_scene_arguments(p):
 
 def scene_of(args):
     """The Scene that the flags of add_scene_arguments describe."""
-    mesh = _SHAPES[args.scene](args) if args.scene in _SHAPES else read_mesh(args.scene)
+    mesh = _shape(args, args.scene) if args.scene in _SHAPES else read_mesh(args.scene)
     return _scene(args, _of_order(mesh, args.order))
 
 
@@ -177,8 +187,15 @@ def _parser():
                         "each large-mesh path, peak memory included (minutes)")
     b.add_argument("--huge", action="store_true", help="with --large: 10^6 tets too (minutes)")
     b.add_argument("--convergence", action="store_true",
-                   help="the cantilever's static sag with linear and quadratic tets, refined "
-                        "1, 2 and 4 times, against the extrapolated limit (minutes)")
+                   help="the cantilever's static sag and step time with linear and quadratic "
+                        "tets, 5 or 6 per cell, on refined meshes, against the extrapolated "
+                        "limit, and the cheapest mesh within 2%% of it (about ten minutes)")
+    b.add_argument("--refinements", type=int, nargs="+", default=None,
+                   help="with --convergence: the refinements of its 10 x 2 x 2 cells (default "
+                        f"{' '.join(map(str, convergence.REFINEMENTS))})")
+    b.add_argument("--max-unknowns", type=int, default=None,
+                   help="with --convergence: leave out meshes with more unknowns (default "
+                        f"{convergence.MAX_UNKNOWNS:,})")
     b.add_argument("--crossover", action="store_true",
                    help="exact Newton against multigrid CG from 4,800 to 19,200 tets, where "
                         "method='auto' switches (minutes)")
@@ -209,7 +226,7 @@ def main(argv=None):
 
 def _mesh(args):
     check_output_path(args.output)
-    mesh = _of_order(_SHAPES[args.shape](args), args.order)
+    mesh = _of_order(_shape(args, args.shape), args.order)
     write_mesh(args.output, mesh)
     print(f"{mesh} -> {args.output}")
     return 0
@@ -278,9 +295,13 @@ def _bench(args):
         raise ValueError("--large, --crossover, --robustness, --convergence: one at a time")
     if args.dynamics and not args.robustness:
         raise ValueError("--dynamics: goes with --robustness")
+    if not args.convergence and (args.refinements or args.max_unknowns is not None):
+        raise ValueError("--refinements, --max-unknowns: go with --convergence")
     out = {} if args.json is None else {"out": args.json}
     if args.convergence:
-        convergence.run(**out)
+        convergence.run(refinements=args.refinements or convergence.REFINEMENTS,
+                        max_unknowns=(convergence.MAX_UNKNOWNS if args.max_unknowns is None
+                                      else args.max_unknowns), **out)
     elif args.robustness:
         robustness.run(args.dynamics, **out)
     elif args.large:

@@ -25,8 +25,9 @@ from numba import njit, prange
 from .densities import fiber, point_hessian, point_stress
 from .mesh import ASSEMBLY_BLOCK
 
-#: Below this many elements the assembly runs on one thread (parallel launches cost more).
-PARALLEL_MIN_ELEMENTS = 4000
+#: Below this many quadrature points (elements times points per element) the assembly runs on
+#: one thread (parallel launches cost more).
+PARALLEL_MIN_POINTS = 4000
 
 #: Most nodes per element, and the shape of the densities' scratch array.
 MAX_NODES = 10
@@ -191,7 +192,7 @@ def assemble(x, elements, *, want_grad=False, want_hess=False, project=False, he
             elements.lam, elements.kappa, elements.fiber, elements.has_fiber, e_iso, e_fib, grad,
             want_grad, want_hess, project, hess_map, hess_data)
     linear = elements.tets.shape[1] == 4 and elements.weights.shape[1] == 1
-    if m < PARALLEL_MIN_ELEMENTS:
+    if m * elements.weights.shape[1] < PARALLEL_MIN_POINTS:
         (_run_linear if linear else _run_general)(0, m, *args)
     else:
         _run_colors(elements.block_starts, elements.color_ptr, linear, *args)

@@ -6,8 +6,13 @@ central tet joins its four color-0 corners, so neighboring hexes split their sha
 the same diagonal and the split alternates (mirrors) from cell to cell. Unlike the 6-tet split
 with all diagonals one way, this keeps the symmetry of the cell grid: a beam with an even
 number of cells across a mid-plane is mirror-symmetric about it, so a symmetric load gives a
-symmetric answer. Lengths are in m; beams run along +x from x = 0.
+symmetric answer. The box beam can also split each cell into 6 tets around a body diagonal
+(`tets_per_cell=6`), the diagonals mirrored from cell to cell in the same way (each runs from the
+cell's corner with even grid indices to the opposite one): for quadratic tets it is the more
+accurate split of the two (docs/fem.md). Lengths are in m; beams run along +x from x = 0.
 """
+import itertools
+
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import breadth_first_order
@@ -98,19 +103,43 @@ def of_order(mesh, order):
     return mesh if order == 1 else mesh.raised()
 
 
-def box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2), order=1):
+def box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2), order=1, tets_per_cell=5):
     """Box beam [0, L] x [-W/2, W/2] x [-H/2, H/2] with size (L, W, H) in m, split into
-    cells (nx, ny, nz) hexes of 5 tets each (5 nx ny nz tets), linear or (order 2) quadratic.
-    Even ny and nz keep the mesh mirror-symmetric about the y = 0 and z = 0 planes."""
+    cells (nx, ny, nz) hexes of tets_per_cell (5 or 6) tets each, linear or (order 2)
+    quadratic. Even ny and nz keep the mesh mirror-symmetric about the y = 0 and z = 0 planes,
+    with either split."""
     nx, ny, nz = _check_cells(cells, "cells", 3)
     L, W, H = (float(s) for s in size)
     if min(L, W, H) <= 0:
         raise ValueError(f"size: all dimensions must be > 0 m, got {size}")
+    if tets_per_cell not in (5, 6):
+        raise ValueError(f"tets_per_cell: 5 or 6, got {tets_per_cell!r}")
     v, w = np.meshgrid(np.linspace(-W / 2, W / 2, ny + 1), np.linspace(-H / 2, H / 2, nz + 1),
                        indexing="ij")
     section = np.stack([v.ravel(), w.ravel()], axis=1)
     pts, hexes = _extrude(section, _grid_quads(ny, nz), np.linspace(0, L, nx + 1), axis=0)
-    return of_order(hexes_to_tets(pts, hexes), order)
+    if tets_per_cell == 5:
+        return of_order(hexes_to_tets(pts, hexes), order)
+    return of_order(TetMesh(pts, _six_tets((nx, ny, nz)), fix_orientation=True), order)
+
+
+def _six_tets(cells):
+    """Tets (6 nx ny nz, 4) of a grid of cells (nx, ny, nz) with vertex (i, j, k) at index
+    (i (ny + 1) + j) (nz + 1) + k (as _extrude numbers box_beam's): each cell split into the 6
+    tets along the monotone paths from its corner with even indices to the opposite corner."""
+    idx = np.stack(np.meshgrid(*(np.arange(n) for n in cells), indexing="ij"), -1).reshape(-1, 3)
+    start = idx + idx % 2                       # the cell's corner with even indices
+    step = 1 - 2 * (idx % 2)                    # towards the opposite corner
+    ny, nz = cells[1] + 1, cells[2] + 1
+    tets = []
+    for axes in itertools.permutations(range(3)):
+        path = [start.copy()]
+        for a in axes:
+            corner = path[-1].copy()
+            corner[:, a] += step[:, a]
+            path.append(corner)
+        tets.append(np.stack([(c[:, 0] * ny + c[:, 1]) * nz + c[:, 2] for c in path], axis=1))
+    return np.stack(tets, axis=1).reshape(-1, 4)
 
 
 def cylinder_beam(length=0.1, radius=0.01, cells_along=10, section_cells=2, rings=1, order=1):

@@ -433,7 +433,7 @@ class NewtonCG(_KeptFactor):
             raise ValueError(f"refactor_after: must be >= 1, got {refactor_after}")
         self.cg_iter, self.forcing = int(cg_iter), float(forcing)
         self.preconditioner, self.refactor_after = preconditioner, int(refactor_after)
-        self._frames = self._built = None
+        self._frames = self._built = self._nested = None
 
     def start(self, potential):
         super().start(potential)
@@ -445,6 +445,8 @@ class NewtonCG(_KeptFactor):
         if self.preconditioner == "amg":
             scene = potential.scene
             self._frames = VertexFrames(scene.mesh, scene.free_dofs)
+            self._nested = (multigrid.corner_prolongation(scene.mesh, scene.free_dofs)
+                            if scene.mesh.order == 2 else (None, scene.free_dofs))
 
     def threads(self):
         """One BLAS thread unless a factorization is kept (anisofem.linsolve.one_blas_thread):
@@ -493,8 +495,9 @@ class NewtonCG(_KeptFactor):
                     data = self.potential.hessian_data(x, self.csr, project=True,
                                                        want_grad=False)[2]
                 self.counts["factorizations"] += 1  # hierarchies built
-                modes = multigrid.rigid_body_modes(x, self.potential.scene.free_dofs)
-                self._solve = multigrid.preconditioner(self.csr.matrix(data), modes)
+                nested, coarse_dofs = self._nested
+                modes = multigrid.rigid_body_modes(x, coarse_dofs)
+                self._solve = multigrid.preconditioner(self.csr.matrix(data), modes, nested)
                 self._built = self._frames.rotations(x)
                 return self._solve  # made here: nothing to carry
             return self._frames.carry(self._solve, self._built, x)

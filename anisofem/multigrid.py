@@ -9,8 +9,14 @@ kernels on every core (anisofem.sparse), in float32. A preconditioner needs no m
 (conjugate gradients, in float64, correct what it leaves): at 10^5 tets the float32 V-cycle
 took 12 ms against 14-15 ms for the same kernels in float64, with the same 56 CG iterations to
 1e-8; pyamg's own V-cycle, float64 on one core, took 28-33 ms (docs/experiments.md).
+
+Quadratic tets get one geometric level first: their space holds the linear tets' on the same
+corners exactly (a midside node takes the mean of its edge's ends), so the V-cycle smooths the
+quadratic system and hands its residual to the linear tets' Galerkin operator P^T A P, whose
+smoothed-aggregation hierarchy is built as above (p-multigrid).
 """
 import contextlib
+from types import SimpleNamespace
 
 import numba as nb
 import numpy as np
@@ -71,10 +77,40 @@ def hierarchy(A, near_null):
                                                  postsmoother=None)
 
 
-def preconditioner(A, near_null):
+def preconditioner(A, near_null, nested=None):
     """r -> M^-1 r (float64 (m,) in and out) for the symmetric positive definite sparse A:
-    one V-cycle of its hierarchy (see hierarchy and VCycle)."""
-    return VCycle(hierarchy(A, near_null))
+    one V-cycle of its hierarchy (see hierarchy and VCycle). nested: a sparse prolongation
+    (m, c) from a nested coarser space (corner_prolongation) whose Galerkin operator gets the
+    hierarchy; near_null (c, k) is then that space's."""
+    if nested is None:
+        return VCycle(hierarchy(A, near_null).levels)
+    P = sp.csr_matrix(nested)
+    R = P.T.tocsr()
+    coarse = hierarchy((R @ A @ P).tocsr(), near_null)
+    return VCycle([SimpleNamespace(A=sp.csr_matrix(A), P=P, R=R)] + coarse.levels)
+
+
+def corner_prolongation(mesh, free_dofs):
+    """(P, corner_dofs) of a quadratic mesh: P (k, c) sparse interpolates the linear tets' field
+    on its corners, given at the free corner DOFs corner_dofs (c,), to the free DOFs free_dofs
+    (k,) (flat indices 3 i + d): a corner keeps its value, a midside node takes the mean of its
+    edge's ends."""
+    from .elements.tet10 import EDGES
+    corners = np.unique(mesh.tets)
+    column = np.full(mesh.n_vertices, -1)
+    column[corners] = np.arange(corners.size)
+    mids, first = np.unique(mesh.cells[:, 4:], return_index=True)
+    ends = mesh.cells[:, EDGES].reshape(-1, 2)[first]               # (midside nodes, 2)
+    rows = np.concatenate([corners, mids, mids])
+    cols = column[np.concatenate([corners, ends[:, 0], ends[:, 1]])]
+    vals = np.concatenate([np.ones(corners.size), np.full(2 * mids.size, 0.5)])
+    nodal = sp.csr_matrix((vals, (rows, cols)), shape=(mesh.n_vertices, corners.size))
+    dofs = sp.kron(nodal, sp.identity(3), format="csr")
+    corner_dofs = (3 * corners[:, None] + np.arange(3)).ravel()
+    free = np.zeros(3 * mesh.n_vertices, bool)
+    free[free_dofs] = True
+    keep = free[corner_dofs]
+    return dofs[free_dofs][:, np.flatnonzero(keep)], corner_dofs[keep]
 
 
 @contextlib.contextmanager
@@ -91,15 +127,16 @@ def _seeded():
 
 
 class VCycle:
-    """One V-cycle from zero of a pyamg hierarchy (its levels' A, P, R and its coarsest
-    level), with this module's smoothers, in float32 on numba's threads: call it with a
-    right-hand side b (m,) to get the approximate solution (m,) in float64."""
+    """One V-cycle from zero of the levels of a hierarchy (pyamg's levels: each level's A, P
+    and R, the last level's A alone), with this module's smoothers, in float32 on numba's
+    threads: call it with a right-hand side b (m,) to get the approximate solution (m,) in
+    float64."""
 
-    def __init__(self, ml):
+    def __init__(self, levels):
         from pyamg.relaxation.chebyshev import chebyshev_polynomial_coefficients
         from pyamg.util.linalg import approximate_spectral_radius
         self.operators, self.prolongators, self.restrictors, self.smoothers = [], [], [], []
-        for k, level in enumerate(ml.levels[:-1]):
+        for k, level in enumerate(levels[:-1]):
             self.operators.append(SparseOperator.of(level.A))
             self.prolongators.append(SparseOperator.of(level.P))
             self.restrictors.append(SparseOperator.of(level.R))
@@ -111,9 +148,9 @@ class VCycle:
                 self.smoothers.append(-chebyshev_polynomial_coefficients(
                     rho / CHEBYSHEV_LOWER, rho * CHEBYSHEV_UPPER,
                     CHEBYSHEV_DEGREE)[:-1].astype(np.float32))
-        coarsest = ml.levels[-1].A.toarray()
+        coarsest = levels[-1].A.toarray()
         self.coarse_inverse = np.linalg.pinv(coarsest).astype(np.float32)
-        self._diagonal = ml.levels[0].A.diagonal().astype(np.float32)
+        self._diagonal = levels[0].A.diagonal().astype(np.float32)
 
     def __call__(self, b):
         return self._cycle(0, np.asarray(b, dtype=np.float32)).astype(np.float64)

@@ -89,6 +89,10 @@ def folder(tmp_path_factory):
      "argument --material: invalid choice: 'rubber'"),
     (("trade", "box", "--steps", "10", "--json", "nowhere/t.json"),
      "the folder of 'nowhere/t.json' does not exist"),
+    (("mesh", "cylinder", "--tets-per-cell", "6", "-o", "c.msh"),
+     "--tets-per-cell 6: only the box has a 6-tet split"),
+    (("bench", "--refinements", "1", "2", "4"), "--refinements, --max-unknowns: go with"),
+    (("bench", "--convergence", "--refinements", "1", "2"), "refinements: at least three"),
 ])
 def test_bad_input_is_one_line_before_any_work(folder, args, says):
     r = run(*args, cwd=folder)
@@ -116,6 +120,10 @@ def test_order_two_meshes_solves_and_trades_quadratic_tets(tmp_path):
     assert "converged: True" in quadratic.stdout
     tip = [line for line in quadratic.stdout.splitlines() if line.startswith("tip")]
     assert tip == [line for line in raised.stdout.splitlines() if line.startswith("tip")]
+    r = run("mesh", "box", "--cells", "4", "2", "2", "--order", "2", "--tets-per-cell", "6",
+            "-o", "q6.msh", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert meshio.read(tmp_path / "q6.msh").cells[0].data.shape == (96, 10)
     r = run("solve", "q.msh", "--order", "1", "-o", "x.vtu", cwd=tmp_path)
     assert r.returncode == 2 and "--order 1: the mesh has quadratic tets" in r.stderr
     r = run("trade", "box", "--cells", "4", "2", "2", "--order", "2", "--steps", "10",

@@ -11,6 +11,7 @@ from anisofem import mesh as mesh_module
 @pytest.mark.parametrize("make,volume", [
     (lambda: af.box_beam((0.1, 0.02, 0.03), (6, 2, 4)), 0.1 * 0.02 * 0.03),
     (lambda: af.box_beam(cells=(3, 2, 2)), 0.1 * 0.02 * 0.02),
+    (lambda: af.box_beam((0.1, 0.02, 0.03), (5, 3, 2), tets_per_cell=6), 0.1 * 0.02 * 0.03),
     (lambda: af.t_shape(), 0.02 * (0.1 * 0.02 + 0.02 * 0.06)),
     (lambda: af.y_shape(), 0.02 * (0.1 * 0.02 + 0.02 * 0.06)),  # a shear keeps the volume
 ])
@@ -37,6 +38,7 @@ def test_training_sizes(cells, tets):
 
 @pytest.mark.parametrize("make,axes", [
     (lambda: af.box_beam(cells=(4, 2, 4)), (1, 2)),
+    (lambda: af.box_beam(cells=(3, 4, 2), tets_per_cell=6), (1, 2)),
     (lambda: af.cylinder_beam(section_cells=4, rings=1), (1, 2)),
     (lambda: af.t_shape(), (0, 1)),
 ])
@@ -46,6 +48,23 @@ def test_alternating_split_is_mirror_symmetric(make, axes):
     for axis in axes:
         j = mirror_partner(mesh.vertices, axis)
         assert {tuple(sorted(t)) for t in j[mesh.tets].tolist()} == tets
+
+
+@pytest.mark.parametrize("tets_per_cell", [5, 6])
+def test_box_splits_are_conforming(tets_per_cell):
+    """Every face inside the box is shared by exactly two tets, every face on its boundary lies
+    on one of the box's six planes."""
+    mesh = af.box_beam((0.1, 0.02, 0.02), (3, 3, 2), tets_per_cell=tets_per_cell)
+    assert mesh.n_tets == tets_per_cell * 18
+    faces = np.sort(mesh.tets[:, [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]]].reshape(-1, 3), 1)
+    _, count = np.unique(faces, axis=0, return_counts=True)
+    assert count.max() == 2
+    lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
+    X = mesh.vertices[mesh.boundary_faces]
+    on_plane = (np.isclose(X, lo).all(axis=1) | np.isclose(X, hi).all(axis=1)).any(axis=1)
+    assert on_plane.all()
+    with pytest.raises(ValueError, match="tets_per_cell"):
+        af.box_beam(tets_per_cell=4)
 
 
 def test_coloring_separates_blocks_sharing_a_vertex(monkeypatch):

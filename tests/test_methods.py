@@ -129,6 +129,28 @@ def test_multigrid_with_rigid_modes_beats_the_diagonal():
     assert amg.factorizations <= 3  # hierarchies built, kept across iterations
 
 
+def test_quadratic_multigrid_goes_through_the_linear_tets_on_the_corners(monkeypatch):
+    """The corner prolongation reproduces every linear field at every free node; CG with the
+    V-cycle through it reaches the same Hessian solve to 1e-8 in fewer iterations than with
+    smoothed aggregation on the quadratic matrix itself."""
+    mesh = af.box_beam(cells=(12, 3, 3), order=2)
+    scene = af.default_scene(mesh)
+    free = scene.free_dofs
+    P, corner_dofs = multigrid.corner_prolongation(mesh, free)
+    field = np.outer(mesh.vertices[:, 0], [1.0, 2.0, -1.0])  # linear, zero at the clamped end
+    assert np.abs(P @ field.ravel()[corner_dofs] - field.ravel()[free]).max() < 1e-15
+    A = af.hessian(scene, mesh.vertices).tocsr()[free][:, free]
+    g = np.random.default_rng(0).standard_normal(free.size)
+    plain = multigrid.preconditioner(A, multigrid.rigid_body_modes(mesh.vertices, free))
+    nested = multigrid.preconditioner(A, multigrid.rigid_body_modes(mesh.vertices, corner_dofs),
+                                      P)
+    (p1, its1), (p2, its2) = (methods.truncated_cg(A, g, M, 1e-8, 1000) for M in (plain, nested))
+    print("CG iterations: smoothed aggregation", its1, "through the corners", its2)
+    for p in (p1, p2):
+        assert np.linalg.norm(A @ p + g) <= 1e-8 * np.linalg.norm(g)
+    assert its2 < its1
+
+
 @pytest.mark.parametrize("preconditioner, one_thread", [("jacobi", True), ("amg", True),
                                                        ("factor", False)])
 def test_cg_without_a_factorization_runs_on_one_blas_thread(preconditioner, one_thread):
@@ -192,7 +214,7 @@ def test_multigrid_v_cycle_is_pyamgs_own_in_single_precision():
     A = af.hessian(scene, scene.mesh.vertices).tocsr()[free][:, free]
     hierarchy = multigrid.hierarchy(A, multigrid.rigid_body_modes(scene.mesh.vertices, free))
     assert len(hierarchy.levels) >= 3
-    ours = multigrid.VCycle(hierarchy)  # caches each level's spectral radius for pyamg's
+    ours = multigrid.VCycle(hierarchy.levels)  # caches each level's spectral radius for pyamg's
     chebyshev = ("chebyshev", {"degree": multigrid.CHEBYSHEV_DEGREE,
                                "lower_bound": 1 / multigrid.CHEBYSHEV_LOWER,
                                "upper_bound": multigrid.CHEBYSHEV_UPPER})

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import anisofem as af
+from anisofem import convergence
 from anisofem.inversion import volume_change
 from test_derivatives import random_tet
 
@@ -199,3 +200,40 @@ def test_neo_hookean_quadratic_tets_solve_and_step_at_ten_g():
     assert result.converged and result.inversion.physical
     rollout = af.simulate(scene, 5)
     assert rollout.completed and rollout.converged
+
+
+@pytest.mark.parametrize("ks", [(1, 2, 4), (3, 4, 6)])
+def test_richardson_recovers_limit_and_order(ks):
+    limit, p = convergence.richardson(ks, [0.028 - 0.004 * k ** -1.7 for k in ks])
+    assert abs(limit - 0.028) < 1e-14 and abs(p - 1.7) < 1e-9
+    with pytest.raises(ValueError, match="monotonically"):
+        convergence.richardson(ks, [1.0, 2.0, 1.5])
+    with pytest.raises(ValueError, match="asymptotic"):  # differences that grow
+        convergence.richardson(ks, [1.0, 2.0, 3.5])
+
+
+def test_convergence_command_measures_each_sequence(monkeypatch, tmp_path):
+    """A small run (cells 4 x 1 x 1 refined 1, 2, 3 times): every sequence sags more when
+    refined, quadratic tets sag more than linear ones on the same cells, the limit lies above
+    every sag, and the cheapest rows are within the asked error of it."""
+    monkeypatch.setattr(convergence, "BASE_CELLS", (4, 1, 1))
+    monkeypatch.setattr(convergence, "TIMED_STEPS", 1)
+    report = convergence.run(out=tmp_path / "c.json", refinements=(1, 2, 3))
+    rows = report["rows"]
+    assert len(rows) == 12 and len(report["sequences"]) == 4
+    assert report["sequences"]["order 2, 6 tets per cell"]["observed_order"] > 0
+    for order in (1, 2):
+        for split in (5, 6):
+            sags = [r["sag"] for r in rows if (r["order"], r["tets_per_cell"]) == (order, split)]
+            assert sags == sorted(sags)
+    linear = {(r["tets_per_cell"], r["refinement"]): r["sag"] for r in rows if r["order"] == 1}
+    assert all(r["sag"] > linear[r["tets_per_cell"], r["refinement"]] for r in rows
+               if r["order"] == 2)
+    assert all(0 < r["error"] < 1 and r["ms_per_step"] > 0 for r in rows)
+    for order, best in report["cheapest"].items():
+        within = [r for r in rows if r["order"] == int(order) and r["error"] <= 0.02]
+        assert (best is None) == (not within)
+        if best:
+            assert best["ms_per_step"] == min(r["ms_per_step"] for r in within)
+    with pytest.raises(ValueError, match="reference sequence"):
+        convergence.run(out=tmp_path / "d.json", refinements=(1, 2, 3), max_unknowns=1000)
