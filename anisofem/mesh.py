@@ -249,10 +249,7 @@ class TetMesh:
         """(starts, ptr): the assembly blocks (runs of ASSEMBLY_BLOCK consecutive tets, the
         last one shorter) grouped by color, no two blocks of a color sharing a vertex. Color
         c holds the blocks that start at tets starts[ptr[c]:ptr[c+1]]."""
-        colors = _greedy_block_colors(self.tets, self.n_vertices, ASSEMBLY_BLOCK)
-        order = np.argsort(colors, kind="stable")
-        ptr = np.searchsorted(colors[order], np.arange(colors.max() + 2))
-        return (order * ASSEMBLY_BLOCK).astype(np.int64), ptr.astype(np.int64)
+        return block_coloring(self.tets, self.n_vertices)
 
     @property
     def size(self):
@@ -296,6 +293,15 @@ def _six_volumes(vertices, tets):
     X = vertices[tets]
     a, b, c = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]
     return np.einsum("ij,ij->i", a, np.cross(b, c))
+
+
+def block_coloring(tets, n_vertices):
+    """(starts, ptr) of TetMesh.coloring for the corners tets (m, 4) of any set of tets over
+    n_vertices vertices."""
+    colors = _greedy_block_colors(tets, n_vertices, ASSEMBLY_BLOCK)
+    order = np.argsort(colors, kind="stable")
+    ptr = np.searchsorted(colors[order], np.arange(colors.max() + 2))
+    return (order * ASSEMBLY_BLOCK).astype(np.int64), ptr.astype(np.int64)
 
 
 @njit(cache=True)

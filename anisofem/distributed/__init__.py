@@ -1,0 +1,123 @@
+"""anisofem's solves on PETSc across MPI ranks (`mpirun -n 4 python -m anisofem solve part.msh
+--engine petsc`, or these functions under mpirun).
+
+PETSc does what a distributed solver needs beyond the element kernels: PT-Scotch splits the
+mesh, the matrix is PETSc's parallel AIJ (block size 3 where whole nodes are held), and its
+KSP solves the Newton systems, MUMPS for exact Newton and CG with GAMG (rigid-body modes as
+near-null space) for the inexact one. anisofem contributes the element loop, the Newton
+iteration's test and line search (anisofem.distributed.newton) and the split of the work
+(anisofem.distributed.partition). Every rank holds the whole scene; each evaluates the elements
+touching its nodes and owns their rows. Every material and element order runs.
+
+    import anisofem as af
+    from anisofem import distributed
+    result = distributed.solve(scene)            # under mpirun: the same answer on every rank
+
+Needs petsc4py and mpi4py (`make install-mpi`); without them, any call raises ImportError
+saying what to install.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..scene import check_scene
+from .newton import METHODS, RankResult, minimize
+from .partition import partition
+from .system import RankSystem
+
+MISSING = ("the petsc engine needs petsc4py and mpi4py: run `make install-mpi` (Debian's PETSc "
+           "3.18 and Open MPI, petsc4py built against them, mpi4py)")
+
+__all__ = ["solve", "simulate", "available", "DistributedResult", "RankResult", "METHODS"]
+
+
+def available():
+    """Whether petsc4py and mpi4py import."""
+    try:
+        _petsc()
+    except ImportError:
+        return False
+    return True
+
+
+def _petsc():
+    try:
+        import petsc4py
+        import mpi4py  # noqa: F401
+    except ImportError as err:
+        raise ImportError(f"{MISSING} ({err})") from None
+    import sys
+    petsc4py.init(sys.argv[:1])
+    from petsc4py import PETSc
+    return PETSc
+
+
+@dataclass
+class DistributedResult:
+    """x: (n, 3) positions in m, the same on every rank. newton: how the solve ended (or the
+    last step's, for a rollout). ranks: how many took part."""
+    x: np.ndarray
+    newton: RankResult
+    ranks: int
+
+    @property
+    def converged(self):
+        return self.newton.converged
+
+
+def _context(scene, comm):
+    PETSc = _petsc()
+    check_scene(scene)
+    comm = PETSc.COMM_WORLD if comm is None else comm
+    _agree(comm, scene)
+    return comm, partition(scene, comm)
+
+
+def _agree(comm, scene, *options):
+    """ValueError on every rank unless every rank has the same scene size and options (a
+    mismatch would otherwise hang in a collective call)."""
+    mine = (scene.mesh.n_vertices, scene.mesh.n_tets, scene.n_free) + tuple(map(repr, options))
+    every = comm.tompi4py().allgather(mine)
+    if any(theirs != mine for theirs in every):
+        raise ValueError(f"ranks disagree on the scene or options: {every}")
+
+
+def solve(scene, method="newton", rtol=1e-8, atol=None, max_iter=100, comm=None):
+    """Static equilibrium of scene over the ranks of comm (default PETSc.COMM_WORLD), from its
+    initial positions. method: "newton" (exact, MUMPS) or "cg" (inexact, CG + GAMG); rtol,
+    atol, max_iter: Newton's test as in anisofem.solve. Returns a DistributedResult."""
+    comm, part = _context(scene, comm)
+    _agree(comm, scene, method, rtol, atol, max_iter)
+    system = RankSystem(scene, part, comm)
+    x, info = minimize(system, scene.initial_positions(), method, rtol, atol, max_iter)
+    return DistributedResult(system.gather(x), info, comm.getSize())
+
+
+def simulate(scene, steps, dt=0.02, x0=None, v0=None, method="newton", rtol=1e-8, atol=None,
+             max_iter=100, comm=None):
+    """steps backward-Euler steps of dt (s) from x0, v0 (n, 3; default rest), each solved over
+    the ranks as solve does, started from the inertial predictor x + dt v. Returns
+    (positions (steps + 1, n, 3), velocities (steps + 1, n, 3), the last step's
+    DistributedResult), the same on every rank; stops at a step that does not converge."""
+    comm, part = _context(scene, comm)
+    _agree(comm, scene, steps, dt, method, rtol, atol, max_iter)
+    if not dt > 0:
+        raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
+    x = scene.initial_positions() if x0 is None else scene.with_fixed(x0)
+    v = np.zeros_like(x) if v0 is None else np.array(v0, dtype=float)
+    xs, vs = [x], [v]
+    result = None
+    system = RankSystem(scene, part, comm)
+    for _ in range(int(steps)):
+        x_hat = x + dt * v
+        system.at_step(x_hat, dt)
+        y, info = minimize(system, scene.with_fixed(x_hat), method, rtol, atol, max_iter,
+                           x_start=x)
+        result = DistributedResult(system.gather(y), info, comm.getSize())
+        if not info.converged:
+            break
+        v = (result.x - x) / dt
+        x = result.x
+        xs.append(x)
+        vs.append(v)
+    return np.stack(xs), np.stack(vs), result

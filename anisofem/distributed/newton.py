@@ -1,0 +1,177 @@
+"""Newton's method over MPI ranks: the serial loop's test and line search (anisofem.newton),
+with energies and norms summed over ranks and the linear systems solved by PETSc's KSP.
+
+method "newton": exact Newton. The true Hessian is factored by MUMPS (Cholesky, LDL^T); it is
+used when its inertia shows it positive definite and its step makes progress, else the
+PSD-projected Hessian is (the serial "adaptive" choice). method "cg": inexact Newton, conjugate
+gradients preconditioned by PETSc's smoothed-aggregation multigrid (GAMG) with the rigid-body
+modes as near-null space, stopped at the serial method's forcing tolerance; a direction of
+negative curvature of the true Hessian sends the iteration to the projected one.
+"""
+import math
+from dataclasses import dataclass
+
+from ..methods import forcing_tolerance
+from ..newton import ARMIJO, ENERGY_NOISE, MIN_STEP, NOISE_PROGRESS
+
+METHODS = ("newton", "cg")
+#: MUMPS's controls for the inertia of its LDL^T factor (MatGetInertia): null pivots detected
+#: (ICNTL 24), and the root front factored on one rank rather than by ScaLAPACK (ICNTL 13),
+#: whose pivots MUMPS cannot count
+MUMPS_OPTIONS = {"mat_mumps_icntl_24": 1, "mat_mumps_icntl_13": 1}
+
+
+@dataclass
+class RankResult:
+    """How a distributed minimization ended (the same on every rank)."""
+    converged: bool
+    iterations: int
+    linear_iterations: int
+    gradient_norm: float    # N, over the free DOFs
+    tolerance: float        # N
+    message: str
+
+
+def minimize(system, x0, method="newton", rtol=1e-8, atol=None, max_iter=100, x_start=None):
+    """Minimize system's G from positions x0 (n, 3); returns (x, RankResult) with x up to date
+    at the nodes this rank reads (RankSystem.gather for all of them). Converged: the gradient
+    norm over free DOFs at most max(rtol * force scale, atol), the force scale taken at
+    x_start (default x0), atol default Scene.gradient_roundoff."""
+    if method not in METHODS:
+        raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+    atol = system.scene.gradient_roundoff if atol is None else float(atol)
+    tolerance = float(max(rtol * system.force_scale(x0 if x_start is None else x_start), atol))
+    solver = _Solver(system, method)
+    x = x0
+    energy, g = system.energy_gradient(x)
+    gnorm = g.norm()
+    iterations = linear = 0
+    message = "converged"
+    try:
+        while gnorm > tolerance:
+            if iterations == max_iter:
+                message = f"no convergence in {max_iter} iterations"
+                break
+            iterations += 1
+            step = None
+            for project in (False, True):
+                p, its = solver.direction(x, g, gnorm, tolerance, project)
+                linear += its
+                if p is None:
+                    continue
+                step = _line_search(system, x, energy, g, gnorm, p)
+                if step is not None:
+                    break
+            if step is None:
+                message = "line search failed along both Hessians' directions"
+                break
+            x, energy, g_new, gnorm_new = step
+            solver.accepted(g, g_new, gnorm)
+            g, gnorm = g_new, gnorm_new
+    finally:
+        solver.destroy()
+    converged = bool(gnorm <= tolerance)
+    return x, RankResult(converged, iterations, linear, gnorm, tolerance,
+                         "converged" if converged else message)
+
+
+class _Solver:
+    """PETSc's KSP for one method, and the forcing tolerance of the "cg" one."""
+
+    def __init__(self, system, method):
+        from petsc4py import PETSc
+        self.PETSc, self.system, self.method = PETSc, system, method
+        self.ksp = PETSc.KSP().create(comm=system.comm)
+        self.ksp.setOptionsPrefix("anisofem_")
+        if method == "newton":
+            options = PETSc.Options()
+            for name, value in MUMPS_OPTIONS.items():
+                if not options.hasName("anisofem_" + name):
+                    options["anisofem_" + name] = value
+            self.ksp.setType("preonly")
+            pc = self.ksp.getPC()
+            pc.setType("cholesky")
+            pc.setFactorSolverType("mumps")
+        else:
+            self.ksp.setType("cg")
+            self.ksp.getPC().setType("gamg")
+            self.ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
+        self.ksp.setFromOptions()
+        self._eta = self._miss = None
+        self._H = self._p = None
+
+    def direction(self, x, g, gnorm, tolerance, project):
+        """(Newton direction as a parallel vector, or None where this Hessian gives none;
+        Krylov iterations)."""
+        PETSc = self.PETSc
+        self._release()
+        H = self.system.hessian(x, project)
+        modes = self.system.rigid_body_modes(x)
+        if modes is not None:
+            H.setNearNullSpace(modes)
+        self.ksp.setOperators(H)
+        if self.method == "cg":
+            self._eta = forcing_tolerance(0.1, self._eta, self._miss, gnorm, tolerance)
+            self.ksp.setTolerances(rtol=self._eta, atol=0.0, max_it=1000)
+        rhs = g.duplicate()
+        g.copy(rhs)
+        rhs.scale(-1.0)
+        p = g.duplicate()
+        try:
+            self.ksp.solve(rhs, p)
+        except PETSc.Error:  # a factorization that breaks down: no direction from this Hessian
+            H.destroy()
+            return None, 0
+        its = self.ksp.getIterationNumber()
+        self._H, self._p = H, p
+        if self.ksp.getConvergedReason() < 0 or not p.dot(g) < 0:
+            return None, its
+        if self.method == "newton" and not project:
+            negative, zero, _ = self.ksp.getPC().getFactorMatrix().getInertia()
+            if negative or zero:
+                return None, its
+        self.system.spread(p)
+        return p, its
+
+    def accepted(self, g, g_new, gnorm):
+        """After a step s = t p: how far the quadratic model missed the new gradient,
+        |g_new - g - H s| / |g| (the next forcing tolerance's measure)."""
+        if self.method != "cg":
+            return
+        Hs = self._p.duplicate()
+        self._H.mult(self._p, Hs)
+        Hs.scale(self.system.last_step)
+        Hs.axpy(1.0, g)
+        Hs.aypx(-1.0, g_new)
+        self._miss = Hs.norm() / gnorm
+
+    def _release(self):
+        if self._H is not None:
+            self._H.destroy()
+            self._H = None
+
+    def destroy(self):
+        self._release()
+        self.ksp.destroy()
+
+
+def _line_search(system, x, energy, g, gnorm, p):
+    """Backtracking to the Armijo condition on G from x along p (spread already), the serial
+    loop's rules (anisofem.newton): a trial with G = +inf or NaN is rejected, and a trial whose
+    energy change is round-off is taken where the gradient norm falls to NOISE_PROGRESS of its
+    value. Returns (x_new, G, gradient, its norm), or None below MIN_STEP."""
+    slope = p.dot(g)
+    t = 1.0
+    while t >= MIN_STEP:
+        y = system.moved(x, p, t)
+        trial, g_trial = system.energy_gradient(y)
+        if math.isfinite(trial):
+            gnorm_trial = g_trial.norm()
+            if trial <= energy + ARMIJO * t * slope or (
+                    abs(trial - energy) <= ENERGY_NOISE * abs(energy)
+                    and gnorm_trial <= NOISE_PROGRESS * gnorm):
+                system.last_step = t
+                return y, trial, g_trial, gnorm_trial
+            g_trial.destroy()
+        t *= 0.5
+    return None
