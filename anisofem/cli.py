@@ -157,6 +157,9 @@ def _parser():
                    help="a fixed budget of iterations per solve instead of a tolerance")
     s.add_argument("--rtol", type=float, default=1e-8,
                    help="relative tolerance of each solve's gradient norm")
+    s.add_argument("--engine", default="serial", choices=["serial", "petsc"],
+                   help="petsc: over the MPI ranks of `mpirun -n K python -m anisofem solve "
+                        "...` (methods auto, newton and cg; needs `make install-mpi`)")
     s.add_argument("--continuation", default="auto", choices=CONTINUATION,
                    help="static solve: ramp the load in increments where the whole load fails "
                         "(auto), from the start (always) or never")
@@ -220,7 +223,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         return _COMMANDS[args.command](args)
-    except (ValueError, TypeError, FileNotFoundError) as err:
+    except (ValueError, TypeError, FileNotFoundError, ImportError) as err:
         parser.exit(2, f"{parser.prog} {args.command}: error: {err}\n")
 
 
@@ -236,6 +239,11 @@ def _solve(args):
     check_output_path(args.output)
     mesh = _of_order(read_mesh(args.mesh), args.order)
     scene = _scene(args, mesh)
+    if args.engine == "petsc":
+        from .distributed import command
+        command.check(args)
+        command.method_of(args.method, scene.n_free)
+        return command.run(args, scene)
     how = {"method": args.method, "rtol": args.rtol, "iterations": args.iterations}
     methods.make(n_unknowns=scene.n_free, **how)  # bad options fail here, before the solve
     if args.steps:

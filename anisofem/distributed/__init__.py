@@ -69,8 +69,20 @@ def _context(scene, comm):
     PETSc = _petsc()
     check_scene(scene)
     comm = PETSc.COMM_WORLD if comm is None else comm
+    _share_cores(comm)
     _agree(comm, scene)
     return comm, partition(scene, comm)
+
+
+def _share_cores(comm):
+    """Give each rank its share of the machine's cores for numba's threads (the ranks on one
+    machine otherwise run cores x ranks threads, and a rank waiting in a collective call
+    spins against the others' threads: a 2-rank solve ran 90x slower)."""
+    import numba
+    from mpi4py import MPI
+    local = comm.tompi4py().Split_type(MPI.COMM_TYPE_SHARED)
+    numba.set_num_threads(max(1, numba.config.NUMBA_NUM_THREADS // local.Get_size()))
+    local.Free()
 
 
 def _agree(comm, scene, *options):
