@@ -8,7 +8,7 @@ TORCH_SPEC ?= torch==2.13.0
 PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
 
-.PHONY: demo test bench pretrained clean web web-assets test-web
+.PHONY: demo test bench pretrained clean web web-assets test-web install-mpi test-mpi
 
 $(VENV)/.fem: setup.cfg setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -25,7 +25,18 @@ demo: $(VENV)/.fem
 	$(PY) examples/cantilever.py
 
 test: $(VENV)/.installed
-	$(PY) -m pytest -q $(PYTEST_ARGS) tests
+	$(PY) -m pytest -q $(PYTEST_ARGS) --ignore=tests/mpi tests
+
+# The petsc engine (anisofem.distributed): PETSc, Open MPI, petsc4py and mpi4py (apt as root or
+# with sudo; a few minutes), then its tests on 1 and 2 MPI ranks.
+$(VENV)/.mpi: $(VENV)/.installed scripts/install_mpi.sh
+	scripts/install_mpi.sh $(PY)
+	touch $@
+
+install-mpi: $(VENV)/.mpi
+
+test-mpi: $(VENV)/.mpi
+	$(PY) -m pytest -q $(PYTEST_ARGS) tests/mpi
 
 bench: $(VENV)/.installed
 	$(PY) -m anisofem bench

@@ -143,3 +143,12 @@ def test_bodies_flag_adds_the_continuum_column_and_refuses_a_quadratic_scene(tmp
     assert all("continuum_errors" in row for row in result["rungs"])
     r = run("trade", "box", "--order", "2", "--bodies", "quadratic", cwd=tmp_path)
     assert r.returncode == 2 and "quadratic tets already" in r.stderr
+
+
+def test_petsc_engine_without_petsc4py_says_what_to_install(folder):
+    """With petsc4py missing, --engine petsc is a one-line error naming the make target."""
+    code = ("import sys; sys.modules['petsc4py'] = None; from anisofem.cli import main; "
+            "sys.exit(main(['solve', 'beam.msh', '--engine', 'petsc', '-o', 'o.vtu']))")
+    r = subprocess.run([sys.executable, "-c", code], cwd=folder, capture_output=True, text=True)
+    assert r.returncode == 2
+    assert "make install-mpi" in r.stderr and len(r.stderr.strip().splitlines()) == 1

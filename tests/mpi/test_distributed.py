@@ -1,0 +1,106 @@
+"""The petsc engine (anisofem.distributed) on 1 and 2 MPI ranks against the serial solver: the
+static answer and 10 backward-Euler steps of several scenes, and its bad input. Each case runs
+under mpirun in a subprocess (`make test-mpi`)."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import anisofem as af
+from cases import scene
+
+pytest.importorskip("petsc4py")
+pytest.importorskip("mpi4py")
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+STEPS = 10
+RTOL = 1e-10
+#: the distributed answer against the serial one, relative to the largest displacement
+AGREE = 1e-8
+MPIRUN = ["mpirun", "--oversubscribe"] + (["--allow-run-as-root"] if os.geteuid() == 0 else [])
+
+
+def mpirun(ranks, *args, cwd=HERE, timeout=300):
+    return subprocess.run([*MPIRUN, "-n", str(ranks), sys.executable, *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory):
+    """name -> (scene, static positions, rollout positions) by the serial solver."""
+    folder = tmp_path_factory.mktemp("serial")
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            s = scene(name, folder)
+            static = af.solve(s, rtol=RTOL, warn=False)
+            roll = af.simulate(s, STEPS, 0.02, rtol=RTOL, warn=False)
+            assert static.converged and roll.converged
+            cache[name] = s, static.x, roll.positions
+        return cache[name]
+    return get
+
+
+@pytest.mark.parametrize("name, method", [
+    ("cantilever", "newton"), ("cantilever", "cg"), ("t", "newton"), ("cylinder", "newton"),
+    ("part", "newton"), ("part", "cg"), ("quadratic", "newton"), ("neohookean", "newton")])
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_ranks_give_the_serial_answer(name, method, ranks, serial, tmp_path):
+    s, static, rollout = serial(name)
+    out = tmp_path / "out.npz"
+    r = mpirun(ranks, "run_case.py", name, method, str(STEPS), str(out), str(RTOL),
+               str(tmp_path))
+    assert r.returncode == 0, r.stderr[-3000:]
+    got = np.load(out)
+    assert bool(got["converged"]) and int(got["ranks"]) == ranks
+    scale = np.abs(static - s.mesh.vertices).max()
+    assert np.abs(got["static"] - static).max() <= AGREE * scale
+    tip = af.metrics.tip_displacement(s.mesh, static)
+    assert np.linalg.norm(af.metrics.tip_displacement(s.mesh, got["static"]) - tip) <= \
+        AGREE * np.linalg.norm(tip)
+    assert got["rollout"].shape == rollout.shape
+    assert np.abs(got["rollout"] - rollout).max() <= AGREE * scale
+
+
+def test_the_command_line_engine_writes_the_gathered_result(tmp_path):
+    mesh = tmp_path / "beam.msh"
+    af.write_mesh(mesh, af.box_beam(cells=(10, 2, 2)))
+    r = mpirun(2, "-m", "anisofem", "solve", str(mesh), "--engine", "petsc", "--fiber", "1",
+               "0", "1", "--kappa", "1e5", "--rtol", "1e-10", "-o", str(tmp_path / "p.vtu"))
+    assert r.returncode == 0, r.stderr
+    assert "on 2 ranks (newton)" in r.stdout
+    serial = subprocess.run([sys.executable, "-m", "anisofem", "solve", str(mesh), "--fiber",
+                             "1", "0", "1", "--kappa", "1e5", "--rtol", "1e-10", "-o",
+                             str(tmp_path / "s.vtu")], capture_output=True, text=True)
+    p, s = (af.read_mesh(tmp_path / f) for f in ("p.vtu", "s.vtu"))
+    import meshio
+    up, us = (meshio.read(tmp_path / f).point_data["displacement"] for f in ("p.vtu", "s.vtu"))
+    assert serial.returncode == 0 and p.n_tets == s.n_tets
+    assert np.abs(up - us).max() <= AGREE * np.abs(us).max()
+
+
+def test_fewer_elements_than_ranks_is_one_clear_error(tmp_path):
+    mesh = tmp_path / "one.msh"
+    af.write_mesh(mesh, af.TetMesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]),
+                                   np.array([[0, 1, 2, 3]])))
+    r = mpirun(2, "-m", "anisofem", "solve", str(mesh), "--engine", "petsc", "-o",
+               str(tmp_path / "o.vtu"), timeout=60)
+    assert r.returncode != 0
+    assert "1 elements cannot be split over 2 ranks" in r.stderr
+
+
+def test_ranks_that_disagree_on_options_fail_on_every_rank(tmp_path):
+    script = tmp_path / "disagree.py"
+    script.write_text(
+        "import anisofem as af\nfrom anisofem import distributed\n"
+        "from petsc4py import PETSc\n"
+        "s = af.default_scene(af.box_beam(cells=(4, 2, 2)))\n"
+        "rtol = 1e-8 if PETSc.COMM_WORLD.getRank() == 0 else 1e-6\n"
+        "try:\n    distributed.solve(s, rtol=rtol)\n"
+        "except ValueError as err:\n    print('refused:', err)\n")
+    r = mpirun(2, str(script), cwd=tmp_path, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.count("refused: ranks disagree") == 2
