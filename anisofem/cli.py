@@ -188,7 +188,11 @@ def _parser():
     b.add_argument("--large", action="store_true",
                    help="static solves and backward-Euler steps at 10^4 and 10^5 tets by "
                         "each large-mesh path, peak memory included (minutes)")
-    b.add_argument("--huge", action="store_true", help="with --large: 10^6 tets too (minutes)")
+    b.add_argument("--huge", action="store_true",
+                   help="with --large or --distributed: 10^6 tets too (minutes)")
+    b.add_argument("--distributed", action="store_true",
+                   help="the petsc engine on 1 and 2 MPI ranks against one process, 10^5 tets "
+                        "(needs `make install-mpi`; minutes)")
     b.add_argument("--convergence", action="store_true",
                    help="the cantilever's static sag and step time with linear and quadratic "
                         "tets, 5 or 6 per cell, on refined meshes, against the extrapolated "
@@ -212,7 +216,8 @@ def _parser():
                    help="where to write the results (default: results/bench_anisofem.json, "
                         "with --large results/bench_large.json, with --crossover "
                         "results/bench_crossover.json, with --robustness "
-                        "results/robustness.json, with --convergence results/convergence.json)")
+                        "results/robustness.json, with --convergence results/convergence.json, "
+                        "with --distributed results/bench_distributed.json)")
     return p
 
 
@@ -297,16 +302,22 @@ def _trade(args):
 
 
 def _bench(args):
-    if args.huge and not args.large:
-        raise ValueError("--huge: goes with --large")
-    if sum((args.large, args.crossover, args.robustness, args.convergence)) > 1:
-        raise ValueError("--large, --crossover, --robustness, --convergence: one at a time")
+    if args.huge and not (args.large or args.distributed):
+        raise ValueError("--huge: goes with --large or --distributed")
+    if sum((args.large, args.crossover, args.robustness, args.convergence,
+            args.distributed)) > 1:
+        raise ValueError("--large, --crossover, --robustness, --convergence, --distributed: one "
+                         "at a time")
     if args.dynamics and not args.robustness:
         raise ValueError("--dynamics: goes with --robustness")
     if not args.convergence and (args.refinements or args.max_unknowns is not None):
         raise ValueError("--refinements, --max-unknowns: go with --convergence")
     out = {} if args.json is None else {"out": args.json}
-    if args.convergence:
+    if args.distributed:
+        from .distributed import _petsc, bench as distributed_bench
+        _petsc()  # says what to install before any work
+        distributed_bench.run(args.huge, **out)
+    elif args.convergence:
         convergence.run(refinements=args.refinements or convergence.REFINEMENTS,
                         max_unknowns=(convergence.MAX_UNKNOWNS if args.max_unknowns is None
                                       else args.max_unknowns), **out)

@@ -16,7 +16,9 @@ touching its nodes and owns their rows. Every material and element order runs.
 Needs petsc4py and mpi4py (`make install-mpi`); without them, any call raises ImportError
 saying what to install.
 """
-from dataclasses import dataclass
+import resource
+import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -55,10 +57,14 @@ def _petsc():
 @dataclass
 class DistributedResult:
     """x: (n, 3) positions in m, the same on every rank. newton: how the solve ended (or the
-    last step's, for a rollout). ranks: how many took part."""
+    last step's, for a rollout). ranks: how many took part. seconds: wall time of the split
+    ("partition"), this solve's assembly and KSP ("assembly", "linear"), each the slowest
+    rank's. peak_memory_gb: each rank's peak resident memory so far."""
     x: np.ndarray
     newton: RankResult
     ranks: int
+    seconds: dict = field(default_factory=dict)
+    peak_memory_gb: list = field(default_factory=list)
 
     @property
     def converged(self):
@@ -71,7 +77,20 @@ def _context(scene, comm):
     comm = PETSc.COMM_WORLD if comm is None else comm
     _share_cores(comm)
     _agree(comm, scene)
-    return comm, partition(scene, comm)
+    start = time.perf_counter()
+    part = partition(scene, comm)
+    return comm, part, time.perf_counter() - start
+
+
+def _result(system, x, info, comm, partition_seconds):
+    """The DistributedResult of a minimization on every rank."""
+    mpi = comm.tompi4py()
+    from mpi4py import MPI
+    seconds = {"partition": partition_seconds, "assembly": system.assembly_seconds,
+               "linear": info.linear_seconds}
+    seconds = {k: mpi.allreduce(v, op=MPI.MAX) for k, v in seconds.items()}
+    memory = mpi.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20)
+    return DistributedResult(system.gather(x), info, comm.getSize(), seconds, memory)
 
 
 def _share_cores(comm):
@@ -98,11 +117,11 @@ def solve(scene, method="newton", rtol=1e-8, atol=None, max_iter=100, comm=None)
     """Static equilibrium of scene over the ranks of comm (default PETSc.COMM_WORLD), from its
     initial positions. method: "newton" (exact, MUMPS) or "cg" (inexact, CG + GAMG); rtol,
     atol, max_iter: Newton's test as in anisofem.solve. Returns a DistributedResult."""
-    comm, part = _context(scene, comm)
+    comm, part, split = _context(scene, comm)
     _agree(comm, scene, method, rtol, atol, max_iter)
     system = RankSystem(scene, part, comm)
     x, info = minimize(system, scene.initial_positions(), method, rtol, atol, max_iter)
-    return DistributedResult(system.gather(x), info, comm.getSize())
+    return _result(system, x, info, comm, split)
 
 
 def simulate(scene, steps, dt=0.02, x0=None, v0=None, method="newton", rtol=1e-8, atol=None,
@@ -111,7 +130,7 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, method="newton", rtol=1e-8
     the ranks as solve does, started from the inertial predictor x + dt v. Returns
     (positions (steps + 1, n, 3), velocities (steps + 1, n, 3), the last step's
     DistributedResult), the same on every rank; stops at a step that does not converge."""
-    comm, part = _context(scene, comm)
+    comm, part, split = _context(scene, comm)
     _agree(comm, scene, steps, dt, method, rtol, atol, max_iter)
     if not dt > 0:
         raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
@@ -125,7 +144,7 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, method="newton", rtol=1e-8
         system.at_step(x_hat, dt)
         y, info = minimize(system, scene.with_fixed(x_hat), method, rtol, atol, max_iter,
                            x_start=x)
-        result = DistributedResult(system.gather(y), info, comm.getSize())
+        result = _result(system, y, info, comm, split)
         if not info.converged:
             break
         v = (result.x - x) / dt

@@ -5,10 +5,13 @@ method "newton": exact Newton. The true Hessian is factored by MUMPS (Cholesky, 
 used when its inertia shows it positive definite and its step makes progress, else the
 PSD-projected Hessian is (the serial "adaptive" choice). method "cg": inexact Newton, conjugate
 gradients preconditioned by PETSc's smoothed-aggregation multigrid (GAMG) with the rigid-body
-modes as near-null space, stopped at the serial method's forcing tolerance; a direction of
-negative curvature of the true Hessian sends the iteration to the projected one.
+modes as near-null space, stopped at the serial method's forcing tolerance; the hierarchy of an
+earlier Hessian is kept while CG converges with it in at most RENEW_AFTER iterations (GAMG's
+set-up, its Galerkin products above all, costs several CG solves); a direction of negative
+curvature of the true Hessian sends the iteration to the projected one.
 """
 import math
+import time
 from dataclasses import dataclass
 
 from ..methods import forcing_tolerance
@@ -18,6 +21,9 @@ METHODS = ("newton", "cg")
 #: MUMPS's controls for the inertia of its LDL^T factor (MatGetInertia): null pivots detected
 #: (ICNTL 24), and the root front factored on one rank rather than by ScaLAPACK (ICNTL 13),
 #: whose pivots MUMPS cannot count
+#: "cg" keeps the multigrid hierarchy of an earlier Hessian (as the serial "amg" method does)
+#: and renews it after a solve that needed more CG iterations than this with it
+RENEW_AFTER = 60
 MUMPS_OPTIONS = {"mat_mumps_icntl_24": 1, "mat_mumps_icntl_13": 1}
 
 
@@ -30,6 +36,7 @@ class RankResult:
     gradient_norm: float    # N, over the free DOFs
     tolerance: float        # N
     message: str
+    linear_seconds: float   # this rank's wall time in PETSc's KSP (set-up and solves), s
 
 
 def minimize(system, x0, method="newton", rtol=1e-8, atol=None, max_iter=100, x_start=None):
@@ -72,7 +79,7 @@ def minimize(system, x0, method="newton", rtol=1e-8, atol=None, max_iter=100, x_
         solver.destroy()
     converged = bool(gnorm <= tolerance)
     return x, RankResult(converged, iterations, linear, gnorm, tolerance,
-                         "converged" if converged else message)
+                         "converged" if converged else message, solver.seconds)
 
 
 class _Solver:
@@ -99,6 +106,8 @@ class _Solver:
         self.ksp.setFromOptions()
         self._eta = self._miss = None
         self._H = self._p = None
+        self._kept = self._renew = False
+        self.seconds = 0.0
 
     def direction(self, x, g, gnorm, tolerance, project):
         """(Newton direction as a parallel vector, or None where this Hessian gives none;
@@ -109,6 +118,8 @@ class _Solver:
         modes = self.system.rigid_body_modes(x)
         if modes is not None:
             H.setNearNullSpace(modes)
+        reuse = self.method == "cg" and self._kept and not self._renew
+        self.ksp.getPC().setReusePreconditioner(reuse)
         self.ksp.setOperators(H)
         if self.method == "cg":
             self._eta = forcing_tolerance(0.1, self._eta, self._miss, gnorm, tolerance)
@@ -117,13 +128,20 @@ class _Solver:
         g.copy(rhs)
         rhs.scale(-1.0)
         p = g.duplicate()
+        start = time.perf_counter()
         try:
             self.ksp.solve(rhs, p)
         except PETSc.Error:  # a factorization that breaks down: no direction from this Hessian
             H.destroy()
             return None, 0
+        finally:
+            self.seconds += time.perf_counter() - start
         its = self.ksp.getIterationNumber()
         self._H, self._p = H, p
+        if self.method == "cg":
+            # a kept hierarchy is renewed after a solve that needed too many iterations with it
+            self._renew = reuse and its > RENEW_AFTER
+            self._kept = True
         if self.ksp.getConvergedReason() < 0 or not p.dot(g) < 0:
             return None, its
         if self.method == "newton" and not project:

@@ -6,6 +6,7 @@ Positions live in a full (n, 3) array on every rank, of which a rank keeps up to
 its elements read (its own and their neighbours across the split): a Newton step's direction
 comes back from PETSc as the owned part of a parallel vector and is scattered to those nodes.
 """
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -35,6 +36,8 @@ class RankSystem:
         owned = part.owned_nodes
         self.owned = owned
         self.f_ext = np.ascontiguousarray(scene.external_force[owned])
+        #: wall time spent in this rank's assembly (energies, gradients, Hessians), s
+        self.assembly_seconds = 0.0
         self.at_step(x_hat, dt)
         self.owned_free = part.dof[owned] >= 0                       # (k, 3)
         self._layout()
@@ -104,12 +107,14 @@ class RankSystem:
 
     def energy_gradient(self, x, want_grad=True):
         """(G(x) in J, summed over ranks; the gradient as a parallel vector, or None)."""
+        start = time.perf_counter()
         e_iso, e_fib, grad = kernels.assemble(x, self.elements, want_grad=want_grad)
         local = float((e_iso + e_fib)[self.part.counted].sum())
         grad_owned = grad[self.owned] if want_grad else kernels.EMPTY_GRAD
         external, kinetic = kernels.loads_and_inertia(
             np.ascontiguousarray(x[self.owned]), self.f_ext, self.mass_over_dt2, self.x_hat,
             grad_owned)
+        self.assembly_seconds += time.perf_counter() - start
         total = self.comm.tompi4py().allreduce(local + external + kinetic)
         if not want_grad:
             return total, None
@@ -121,6 +126,7 @@ class RankSystem:
         """This rank's rows of d2G/dx2 at x (N/m) as a PETSc AIJ matrix (PSD-projected element
         Hessians where project)."""
         PETSc = self.PETSc
+        start = time.perf_counter()
         data = np.zeros(self.indices.size)
         kernels.assemble(x, self.elements, want_hess=True, project=project,
                          hess_map=self.hess_map, hess_data=data)
@@ -132,6 +138,7 @@ class RankSystem:
                                        self.indices.astype(PETSc.IntType), data),
                                   comm=self.comm)
         H.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        self.assembly_seconds += time.perf_counter() - start
         return H
 
     def rigid_body_modes(self, x):
