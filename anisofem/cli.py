@@ -314,8 +314,9 @@ def _bench(args):
         raise ValueError("--refinements, --max-unknowns: go with --convergence")
     out = {} if args.json is None else {"out": args.json}
     if args.distributed:
-        from .distributed import _petsc, bench as distributed_bench
-        _petsc()  # says what to install before any work
+        from .distributed import MISSING, available, bench as distributed_bench
+        if not available():
+            raise ImportError(MISSING)
         distributed_bench.run(args.huge, **out)
     elif args.convergence:
         convergence.run(refinements=args.refinements or convergence.REFINEMENTS,

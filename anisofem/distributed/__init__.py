@@ -34,12 +34,10 @@ __all__ = ["solve", "simulate", "available", "DistributedResult", "RankResult", 
 
 
 def available():
-    """Whether petsc4py and mpi4py import."""
-    try:
-        _petsc()
-    except ImportError:
-        return False
-    return True
+    """Whether petsc4py and mpi4py are installed (found, not imported: importing them starts
+    MPI in this process, after which it cannot launch mpirun)."""
+    from importlib.util import find_spec
+    return find_spec("petsc4py") is not None and find_spec("mpi4py") is not None
 
 
 def _petsc():
@@ -65,6 +63,7 @@ class DistributedResult:
     ranks: int
     seconds: dict = field(default_factory=dict)
     peak_memory_gb: list = field(default_factory=list)
+    partition: object = None  # this rank's anisofem.distributed.partition.Partition
 
     @property
     def converged(self):
@@ -90,7 +89,8 @@ def _result(system, x, info, comm, partition_seconds):
                "linear": info.linear_seconds}
     seconds = {k: mpi.allreduce(v, op=MPI.MAX) for k, v in seconds.items()}
     memory = mpi.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20)
-    return DistributedResult(system.gather(x), info, comm.getSize(), seconds, memory)
+    return DistributedResult(system.gather(x), info, comm.getSize(), seconds, memory,
+                             system.part)
 
 
 def _share_cores(comm):

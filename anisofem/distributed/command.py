@@ -1,5 +1,6 @@
-"""`python -m anisofem solve ... --engine petsc` under mpirun: the scene solved over the ranks,
-the result gathered and written by rank 0. A rank that fails prints its error and stops every
+"""`python -m anisofem solve ... --engine petsc` under mpirun: the scene solved over the ranks
+and its result written, by every rank into an XDMF file over HDF5 where the output is .xdmf
+(anisofem.distributed.output), else gathered and written by rank 0. A rank that fails prints its error and stops every
 rank (MPI_Abort), so that no rank is left waiting in a collective call."""
 import sys
 
@@ -7,6 +8,7 @@ from .. import methods
 from ..inversion import inversion
 from ..io import write_mesh
 from ..metrics import tip_displacement
+from .output import write_xdmf
 
 
 def method_of(name, n_free):
@@ -43,6 +45,8 @@ def run(args, scene):
             said = (f"{n.iterations} Newton iterations, {n.linear_iterations} Krylov "
                     f"iterations, converged: {n.converged}, gradient {n.gradient_norm:.3g} N "
                     f"(tolerance {n.tolerance:.3g} N)")
+        if args.output.endswith(".xdmf"):
+            write_xdmf(args.output, scene, result.partition, comm, x)
         if comm.getRank() == 0:
             mesh = scene.mesh
             print(f"{said} on {comm.getSize()} ranks ({method})")
@@ -51,8 +55,11 @@ def run(args, scene):
             if not inv.physical:
                 print(f"not physical: {inv.inverted} of {mesh.n_tets} elements turned inside "
                       f"out (smallest det F {inv.min_volume_ratio:.3g})")
-            write_mesh(args.output, mesh, x, scene)
-            print(f"-> {args.output}")
+            if args.output.endswith(".xdmf"):
+                print(f"-> {args.output} (written by the {comm.getSize()} ranks)")
+            else:
+                write_mesh(args.output, mesh, x, scene)
+                print(f"-> {args.output} (gathered on rank 0)")
         return 0 if result.converged else 1
     except Exception as err:  # one rank's failure must not leave the others waiting
         if comm.getSize() == 1:
