@@ -70,7 +70,8 @@ def minimize(system, x0, method="newton", rtol=1e-8, atol=None, max_iter=100, x_
                 if step is not None:
                     break
             if step is None:
-                message = "line search failed along both Hessians' directions"
+                message = (f"no step made progress along either Hessian's direction (PETSc's "
+                           f"last KSP reason: {solver.reason})")
                 break
             x, energy, g_new, gnorm_new = step
             solver.accepted(g, g_new, gnorm)
@@ -108,6 +109,7 @@ class _Solver:
         self._H = self._p = None
         self._kept = self._renew = False
         self.seconds = 0.0
+        self.reason = None
 
     def direction(self, x, g, gnorm, tolerance, project):
         """(Newton direction as a parallel vector, or None where this Hessian gives none;
@@ -122,7 +124,8 @@ class _Solver:
         self.ksp.getPC().setReusePreconditioner(reuse)
         self.ksp.setOperators(H)
         if self.method == "cg":
-            self._eta = forcing_tolerance(0.1, self._eta, self._miss, gnorm, tolerance)
+            if not project:  # one forcing tolerance per Newton iteration, set at its first try
+                self._eta = forcing_tolerance(0.1, self._eta, self._miss, gnorm, tolerance)
             self.ksp.setTolerances(rtol=self._eta, atol=0.0, max_it=1000)
         rhs = g.duplicate()
         g.copy(rhs)
@@ -131,12 +134,14 @@ class _Solver:
         start = time.perf_counter()
         try:
             self.ksp.solve(rhs, p)
-        except PETSc.Error:  # a factorization that breaks down: no direction from this Hessian
+        except PETSc.Error as err:  # a factorization that breaks down: no direction here
+            self.reason = f"error {err.ierr}"
             H.destroy()
             return None, 0
         finally:
             self.seconds += time.perf_counter() - start
         its = self.ksp.getIterationNumber()
+        self.reason = self.ksp.getConvergedReason()
         self._H, self._p = H, p
         if self.method == "cg":
             # a kept hierarchy is renewed after a solve that needed too many iterations with it

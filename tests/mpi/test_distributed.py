@@ -22,9 +22,10 @@ RTOL = 1e-10
 AGREE = 1e-8
 
 
-def mpirun(ranks, *args, cwd=HERE, timeout=300):
+def mpirun(ranks, *args, cwd=HERE, timeout=300, env=None):
     return subprocess.run([*MPIRUN, "-n", str(ranks), sys.executable, *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=timeout)
+                          capture_output=True, text=True, timeout=timeout,
+                          env=None if env is None else {**os.environ, **env})
 
 
 @pytest.fixture(scope="module")
@@ -132,3 +133,23 @@ def test_ranks_that_disagree_on_options_fail_on_every_rank(tmp_path):
     assert r.returncode == 0, r.stderr
     for rank in (0, 1):
         assert (tmp_path / f"rank{rank}.txt").read_text().startswith("refused: ranks disagree")
+
+
+def test_a_preconditioner_that_breaks_cg_ends_unconverged_with_petscs_reason(tmp_path):
+    """PETSc options reach the solver (prefix anisofem_): a non-symmetric smoother breaks CG on
+    both Hessians, and the solve says so on every rank instead of hanging or returning NaN."""
+    script = tmp_path / "broken.py"
+    script.write_text(
+        "import numpy as np\nimport anisofem as af\nfrom anisofem import distributed\n"
+        "from petsc4py import PETSc\n"
+        "r = distributed.solve(af.default_scene(af.box_beam(cells=(10, 4, 4))), method='cg')\n"
+        "assert np.isfinite(r.x).all()\n"
+        "open(f'rank{PETSc.COMM_WORLD.getRank()}.txt', 'w').write(f'{r.converged} "
+        "{r.newton.message}')\n")
+    r = mpirun(2, str(script), cwd=tmp_path, timeout=120, env={
+        "PETSC_OPTIONS": "-anisofem_mg_levels_ksp_type richardson "
+                         "-anisofem_mg_levels_pc_type sor"})
+    assert r.returncode == 0, r.stderr
+    for rank in (0, 1):
+        said = (tmp_path / f"rank{rank}.txt").read_text()
+        assert said.startswith("False no step made progress") and "KSP reason" in said
