@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..potential import check_positions
 from ..scene import check_scene
 from .newton import METHODS, RankResult, minimize
 from .partition import partition
@@ -70,12 +71,14 @@ class DistributedResult:
         return self.newton.converged
 
 
-def _context(scene, comm):
+def _context(scene, comm, *options):
+    """(comm, this rank's Partition, seconds the split took) once every rank has checked that
+    all ranks hold the same scene size and options."""
     PETSc = _petsc()
     check_scene(scene)
     comm = PETSc.COMM_WORLD if comm is None else comm
     _share_cores(comm)
-    _agree(comm, scene)
+    _agree(comm, scene, *options)
     start = time.perf_counter()
     part = partition(scene, comm)
     return comm, part, time.perf_counter() - start
@@ -117,8 +120,7 @@ def solve(scene, method="newton", rtol=1e-8, atol=None, max_iter=100, comm=None)
     """Static equilibrium of scene over the ranks of comm (default PETSc.COMM_WORLD), from its
     initial positions. method: "newton" (exact, MUMPS) or "cg" (inexact, CG + GAMG); rtol,
     atol, max_iter: Newton's test as in anisofem.solve. Returns a DistributedResult."""
-    comm, part, split = _context(scene, comm)
-    _agree(comm, scene, method, rtol, atol, max_iter)
+    comm, part, split = _context(scene, comm, method, rtol, atol, max_iter)
     system = RankSystem(scene, part, comm)
     x, info = minimize(system, scene.initial_positions(), method, rtol, atol, max_iter)
     return _result(system, x, info, comm, split)
@@ -130,12 +132,12 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, method="newton", rtol=1e-8
     the ranks as solve does, started from the inertial predictor x + dt v. Returns
     (positions (steps + 1, n, 3), velocities (steps + 1, n, 3), the last step's
     DistributedResult), the same on every rank; stops at a step that does not converge."""
-    comm, part, split = _context(scene, comm)
-    _agree(comm, scene, steps, dt, method, rtol, atol, max_iter)
     if not dt > 0:
         raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
-    x = scene.initial_positions() if x0 is None else scene.with_fixed(x0)
-    v = np.zeros_like(x) if v0 is None else np.array(v0, dtype=float)
+    x = scene.initial_positions() if x0 is None else scene.with_fixed(
+        check_positions(scene, x0, "x0"))
+    v = np.zeros_like(x) if v0 is None else check_positions(scene, v0, "v0")
+    comm, part, split = _context(scene, comm, steps, dt, method, rtol, atol, max_iter)
     xs, vs = [x], [v]
     result = None
     system = RankSystem(scene, part, comm)

@@ -73,8 +73,8 @@ def minimize(system, x0, method="newton", rtol=1e-8, atol=None, max_iter=100, x_
                 message = (f"no step made progress along either Hessian's direction (PETSc's "
                            f"last KSP reason: {solver.reason})")
                 break
-            x, energy, g_new, gnorm_new = step
-            solver.accepted(g, g_new, gnorm)
+            x, energy, g_new, gnorm_new, t = step
+            solver.accepted(g, g_new, gnorm, t)
             g, gnorm = g_new, gnorm_new
     finally:
         solver.destroy()
@@ -156,14 +156,14 @@ class _Solver:
         self.system.spread(p)
         return p, its
 
-    def accepted(self, g, g_new, gnorm):
-        """After a step s = t p: how far the quadratic model missed the new gradient,
+    def accepted(self, g, g_new, gnorm, t):
+        """After the step s = t p: how far the quadratic model missed the new gradient,
         |g_new - g - H s| / |g| (the next forcing tolerance's measure)."""
         if self.method != "cg":
             return
         Hs = self._p.duplicate()
         self._H.mult(self._p, Hs)
-        Hs.scale(self.system.last_step)
+        Hs.scale(t)
         Hs.axpy(1.0, g)
         Hs.aypx(-1.0, g_new)
         self._miss = Hs.norm() / gnorm
@@ -182,7 +182,7 @@ def _line_search(system, x, energy, g, gnorm, p):
     """Backtracking to the Armijo condition on G from x along p (spread already), the serial
     loop's rules (anisofem.newton): a trial with G = +inf or NaN is rejected, and a trial whose
     energy change is round-off is taken where the gradient norm falls to NOISE_PROGRESS of its
-    value. Returns (x_new, G, gradient, its norm), or None below MIN_STEP."""
+    value. Returns (x_new, G, gradient, its norm, step length t), or None below MIN_STEP."""
     slope = p.dot(g)
     t = 1.0
     while t >= MIN_STEP:
@@ -193,8 +193,7 @@ def _line_search(system, x, energy, g, gnorm, p):
             if trial <= energy + ARMIJO * t * slope or (
                     abs(trial - energy) <= ENERGY_NOISE * abs(energy)
                     and gnorm_trial <= NOISE_PROGRESS * gnorm):
-                system.last_step = t
-                return y, trial, g_trial, gnorm_trial
+                return y, trial, g_trial, gnorm_trial, t
             g_trial.destroy()
         t *= 0.5
     return None
