@@ -24,7 +24,7 @@ import numpy as np
 
 from ..potential import check_positions
 from ..scene import check_scene
-from .newton import METHODS, RankResult, minimize
+from .newton import METHODS, RankResult, Solver, minimize
 from .partition import partition
 from .system import RankSystem
 
@@ -141,16 +141,20 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, method="newton", rtol=1e-8
     xs, vs = [x], [v]
     result = None
     system = RankSystem(scene, part, comm)
-    for _ in range(int(steps)):
-        x_hat = x + dt * v
-        system.at_step(x_hat, dt)
-        y, info = minimize(system, scene.with_fixed(x_hat), method, rtol, atol, max_iter,
-                           x_start=x)
-        result = _result(system, y, info, comm, split)
-        if not info.converged:
-            break
-        v = (result.x - x) / dt
-        x = result.x
-        xs.append(x)
-        vs.append(v)
+    solver = Solver(system, method)  # kept from step to step, and its hierarchy with it
+    try:
+        for _ in range(int(steps)):
+            x_hat = x + dt * v
+            system.at_step(x_hat, dt)
+            y, info = minimize(system, scene.with_fixed(x_hat), method, rtol, atol, max_iter,
+                               x_start=x, solver=solver)
+            result = _result(system, y, info, comm, split)
+            if not info.converged:
+                break
+            v = (result.x - x) / dt
+            x = result.x
+            xs.append(x)
+            vs.append(v)
+    finally:
+        solver.destroy()
     return np.stack(xs), np.stack(vs), result

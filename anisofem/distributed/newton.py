@@ -39,16 +39,22 @@ class RankResult:
     linear_seconds: float   # this rank's wall time in PETSc's KSP (set-up and solves), s
 
 
-def minimize(system, x0, method="newton", rtol=1e-8, atol=None, max_iter=100, x_start=None):
+def minimize(system, x0, method="newton", rtol=1e-8, atol=None, max_iter=100, x_start=None,
+             solver=None):
     """Minimize system's G from positions x0 (n, 3); returns (x, RankResult) with x up to date
     at the nodes this rank reads (RankSystem.gather for all of them). Converged: the gradient
     norm over free DOFs at most max(rtol * force scale, atol), the force scale taken at
-    x_start (default x0), atol default Scene.gradient_roundoff."""
+    x_start (default x0), atol default Scene.gradient_roundoff. solver: a Solver(system,
+    method) kept from an earlier minimization of the same system (a rollout's steps keep its
+    multigrid hierarchy), which the caller then destroys; default a new one, destroyed here."""
     if method not in METHODS:
         raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
     atol = system.scene.gradient_roundoff if atol is None else float(atol)
     tolerance = float(max(rtol * system.force_scale(x0 if x_start is None else x_start), atol))
-    solver = _Solver(system, method)
+    own = solver is None
+    solver = Solver(system, method) if own else solver
+    solver.restart()
+    seconds = solver.seconds
     x = x0
     energy, g = system.energy_gradient(x)
     gnorm = g.norm()
@@ -77,14 +83,16 @@ def minimize(system, x0, method="newton", rtol=1e-8, atol=None, max_iter=100, x_
             solver.accepted(g, g_new, gnorm, t)
             g, gnorm = g_new, gnorm_new
     finally:
-        solver.destroy()
+        if own:
+            solver.destroy()
     converged = bool(gnorm <= tolerance)
     return x, RankResult(converged, iterations, linear, gnorm, tolerance,
-                         "converged" if converged else message, solver.seconds)
+                         "converged" if converged else message, solver.seconds - seconds)
 
 
-class _Solver:
-    """PETSc's KSP for one method, and the forcing tolerance of the "cg" one."""
+class Solver:
+    """PETSc's KSP for one method on one RankSystem, the "cg" method's kept multigrid
+    hierarchy and its forcing tolerance."""
 
     def __init__(self, system, method):
         from petsc4py import PETSc
@@ -110,6 +118,10 @@ class _Solver:
         self._kept = self._renew = False
         self.seconds = 0.0
         self.reason = None
+
+    def restart(self):
+        """Start a new minimization: its first forcing tolerance is the largest again."""
+        self._eta = self._miss = None
 
     def direction(self, x, g, gnorm, tolerance, project):
         """(Newton direction as a parallel vector, or None where this Hessian gives none;
