@@ -17,6 +17,7 @@ Needs petsc4py and mpi4py (`make install-mpi`); without them, any call raises Im
 saying what to install.
 """
 import resource
+import sys
 import time
 from dataclasses import dataclass, field
 
@@ -47,7 +48,6 @@ def _petsc():
         import mpi4py  # noqa: F401
     except ImportError as err:
         raise ImportError(f"{MISSING} ({err})") from None
-    import sys
     petsc4py.init(sys.argv[:1])
     from petsc4py import PETSc
     return PETSc
