@@ -246,9 +246,7 @@ def _solve(args):
     scene = _scene(args, mesh)
     if args.engine == "petsc":
         from .distributed import command
-        command.check(args)
-        command.method_of(args.method, scene.n_free)
-        return command.run(args, scene)
+        return command.run(args, scene, command.check(args, scene))
     how = {"method": args.method, "rtol": args.rtol, "iterations": args.iterations}
     methods.make(n_unknowns=scene.n_free, **how)  # bad options fail here, before the solve
     if args.steps:

@@ -172,6 +172,15 @@ class TetMesh:
             raise ValueError(f"pairs: {bad.tolist()} is not an edge of the mesh")
         return nodes[at]
 
+    @property
+    def midside_edges(self):
+        """(nodes (e,), ends (e, 2)): each midside node of a quadratic mesh and the two corners
+        of its edge."""
+        if self.order != 2:
+            raise ValueError("midside_edges: a linear mesh has no midside nodes")
+        keys, nodes = self._edge_table
+        return nodes, np.stack([keys // self.n_vertices, keys % self.n_vertices], axis=1)
+
     @cached_property
     def _edge_table(self):
         """(keys, nodes): every edge's key i n + j (i < j), sorted, and its midside node."""

@@ -95,12 +95,10 @@ def corner_prolongation(mesh, free_dofs):
     on its corners, given at the free corner DOFs corner_dofs (c,), to the free DOFs free_dofs
     (k,) (flat indices 3 i + d): a corner keeps its value, a midside node takes the mean of its
     edge's ends."""
-    from .elements.tet10 import EDGES
     corners = np.unique(mesh.tets)
     column = np.full(mesh.n_vertices, -1)
     column[corners] = np.arange(corners.size)
-    mids, first = np.unique(mesh.cells[:, 4:], return_index=True)
-    ends = mesh.cells[:, EDGES].reshape(-1, 2)[first]               # (midside nodes, 2)
+    mids, ends = mesh.midside_edges
     rows = np.concatenate([corners, mids, mids])
     cols = column[np.concatenate([corners, ends[:, 0], ends[:, 1]])]
     vals = np.concatenate([np.ones(corners.size), np.full(2 * mids.size, 0.5)])

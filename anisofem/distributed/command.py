@@ -21,21 +21,23 @@ def method_of(name, n_free):
     return name
 
 
-def check(args):
-    """ValueError for the serial engine's options that the petsc engine does not take."""
+def check(args, scene):
+    """The distributed method the options ask for scene; ValueError for the serial engine's
+    options that the petsc engine does not take."""
     if args.iterations is not None:
         raise ValueError("--iterations: the petsc engine solves to a tolerance (--rtol)")
     if args.continuation != "auto":
         raise ValueError("--continuation: the petsc engine does not ramp the load")
+    return method_of(args.method, scene.n_free)
 
 
-def run(args, scene):
-    """Solve or roll out scene as args say; returns the exit status (0: converged)."""
+def run(args, scene, method):
+    """Solve or roll out scene by method as args say; returns the exit status (0:
+    converged)."""
     from . import _petsc, simulate, solve
     PETSc = _petsc()
     comm = PETSc.COMM_WORLD
     try:
-        method = method_of(args.method, scene.n_free)
         if args.steps:
             xs, _, result = simulate(scene, args.steps, args.dt, method=method, rtol=args.rtol)
             x, said = xs[-1], f"{len(xs) - 1} steps, converged: {result.converged}"

@@ -127,20 +127,19 @@ class Solver:
         """(Newton direction as a parallel vector, or None where this Hessian gives none;
         Krylov iterations)."""
         PETSc = self.PETSc
-        self._release()
         H = self.system.hessian(x, project)
-        modes = self.system.rigid_body_modes(x)
-        if modes is not None:
-            H.setNearNullSpace(modes)
         reuse = self.method == "cg" and self._kept and not self._renew
+        if self.method == "cg" and not reuse:  # GAMG builds its hierarchy on them
+            modes = self.system.rigid_body_modes(x)
+            if modes is not None:
+                H.setNearNullSpace(modes)
         self.ksp.getPC().setReusePreconditioner(reuse)
         self.ksp.setOperators(H)
         if self.method == "cg":
             if not project:  # one forcing tolerance per Newton iteration, set at its first try
                 self._eta = forcing_tolerance(0.1, self._eta, self._miss, gnorm, tolerance)
             self.ksp.setTolerances(rtol=self._eta, atol=0.0, max_it=1000)
-        rhs = g.duplicate()
-        g.copy(rhs)
+        rhs = g.copy()
         rhs.scale(-1.0)
         p = g.duplicate()
         start = time.perf_counter()
@@ -148,7 +147,6 @@ class Solver:
             self.ksp.solve(rhs, p)
         except PETSc.Error as err:  # a factorization that breaks down: no direction here
             self.reason = f"error {err.ierr}"
-            H.destroy()
             return None, 0
         finally:
             self.seconds += time.perf_counter() - start
@@ -159,7 +157,7 @@ class Solver:
             # a kept hierarchy is renewed after a solve that needed too many iterations with it
             self._renew = reuse and its > RENEW_AFTER
             self._kept = True
-        if self.ksp.getConvergedReason() < 0 or not p.dot(g) < 0:
+        if self.reason < 0 or not p.dot(g) < 0:
             return None, its
         if self.method == "newton" and not project:
             negative, zero, _ = self.ksp.getPC().getFactorMatrix().getInertia()
@@ -180,13 +178,7 @@ class Solver:
         Hs.aypx(-1.0, g_new)
         self._miss = Hs.norm() / gnorm
 
-    def _release(self):
-        if self._H is not None:
-            self._H.destroy()
-            self._H = None
-
     def destroy(self):
-        self._release()
         self.ksp.destroy()
 
 

@@ -33,9 +33,8 @@ def write_xdmf(path, scene, part, comm, x):
     from petsc4py import PETSc
     mesh = scene.mesh
     h5 = os.path.splitext(path)[0] + ".h5"
-    order = np.lexsort((np.arange(mesh.n_vertices), part.owner))
     renumbered = np.empty(mesh.n_vertices, dtype=np.int64)
-    renumbered[order] = np.arange(mesh.n_vertices)
+    renumbered[part.order] = np.arange(mesh.n_vertices)
     mine = part.owned_nodes
     viewer = PETSc.Viewer().createHDF5(h5, mode=PETSc.Viewer.Mode.WRITE, comm=comm)
     for name, values in (("geometry", mesh.vertices[mine]),

@@ -26,6 +26,7 @@ class Partition:
     rank: int
     size: int
     owner: np.ndarray       # (n,) rank owning each node
+    order: np.ndarray       # (n,) the nodes rank by rank, by index within a rank
     dof: np.ndarray         # (n, 3) global index of each free DOF, -1 where fixed
     start: int              # first global DOF this rank owns
     stop: int               # one past its last
@@ -93,7 +94,8 @@ def partition(scene, comm):
     order = np.lexsort((np.arange(mesh.n_vertices), owner))  # nodes rank by rank
     numbered = free[order]
     dof = np.full((mesh.n_vertices, 3), -1, dtype=np.int64)
-    dof[order[np.nonzero(numbered)[0]], np.nonzero(numbered)[1]] = np.arange(numbered.sum())
+    nodes, components = np.nonzero(numbered)
+    dof[order[nodes], components] = np.arange(nodes.size)
     per_rank = np.bincount(np.repeat(owner, 3)[free.ravel()], minlength=size)
     if (per_rank == 0).any():
         raise ValueError(f"mesh: the partition leaves rank {int(np.argmin(per_rank))} without a "
@@ -103,5 +105,5 @@ def partition(scene, comm):
     touching = mine[mesh.cells].any(axis=1)
     elements = np.flatnonzero(touching)
     counted = mine[mesh.cells[elements, 0]]
-    return Partition(rank, size, owner, dof, start, start + int(per_rank[rank]),
+    return Partition(rank, size, owner, order, dof, start, start + int(per_rank[rank]),
                      int(per_rank.sum()), elements, counted, np.flatnonzero(mine))

@@ -33,13 +33,12 @@ class RankSystem:
             full, tets=full.tets[e], grads=full.grads[e], weights=full.weights[e],
             model=full.model[e], mu=full.mu[e], lam=full.lam[e], kappa=full.kappa[e],
             fiber=full.fiber[e], block_starts=starts, color_ptr=ptr)
-        owned = part.owned_nodes
-        self.owned = owned
-        self.f_ext = np.ascontiguousarray(scene.external_force[owned])
+        self.owned = part.owned_nodes
+        self.owned_free = part.dof[self.owned] >= 0                  # (k, 3)
+        self.f_ext = np.ascontiguousarray(scene.external_force[self.owned])
         #: wall time spent in this rank's assembly (energies, gradients, Hessians), s
         self.assembly_seconds = 0.0
         self.at_step(x_hat, dt)
-        self.owned_free = part.dof[owned] >= 0                       # (k, 3)
         self._layout()
         self._scatter_setup()
         bs_ok = (self.owned_free.all(axis=1) | ~self.owned_free.any(axis=1)).all()
@@ -52,6 +51,8 @@ class RankSystem:
         if self.dynamic:
             self.x_hat = np.ascontiguousarray(x_hat[self.owned])
             self.mass_over_dt2 = self.scene.masses[self.owned] / dt ** 2
+            #: M / dt^2 on the owned free DOFs, the Hessian's inertia (N/m)
+            self.inertia_diagonal = np.repeat(self.mass_over_dt2, 3)[self.owned_free.ravel()]
         else:
             self.x_hat, self.mass_over_dt2 = kernels.EMPTY_GRAD, np.empty(0)
 
@@ -72,8 +73,10 @@ class RankSystem:
         hess_map[valid] = position
         self.hess_map = hess_map.reshape(len(g), -1)
         local_rows = unique // n
-        self.indices = (unique % n).astype(np.int64)
-        self.indptr = np.searchsorted(local_rows, np.arange(part.n_owned + 1)).astype(np.int64)
+        IntType = self.PETSc.IntType
+        self.indices = (unique % n).astype(IntType)
+        self.indptr = np.searchsorted(local_rows, np.arange(part.n_owned + 1)).astype(IntType)
+        self._matrix = None
         owned = np.arange(part.start, part.stop, dtype=np.int64)
         self.diagonal = np.searchsorted(unique, (owned - part.start) * n + owned)
 
@@ -123,23 +126,27 @@ class RankSystem:
         return total, g
 
     def hessian(self, x, project):
-        """This rank's rows of d2G/dx2 at x (N/m) as a PETSc AIJ matrix (PSD-projected element
-        Hessians where project)."""
+        """This rank's rows of d2G/dx2 at x (N/m) (PSD-projected element Hessians where
+        project), as this system's one PETSc AIJ matrix: made with its sparsity at the first
+        call, its values overwritten at the later ones."""
         PETSc = self.PETSc
         start = time.perf_counter()
         data = np.zeros(self.indices.size)
         kernels.assemble(x, self.elements, want_hess=True, project=project,
                          hess_map=self.hess_map, hess_data=data)
         if self.dynamic:
-            data[self.diagonal] += np.repeat(self.mass_over_dt2, 3)[self.owned_free.ravel()]
-        n_owned, n = self.part.n_owned, self.part.n_free
-        H = PETSc.Mat().createAIJ(size=((n_owned, n), (n_owned, n)), bsize=self.block_size,
-                                  csr=(self.indptr.astype(PETSc.IntType),
-                                       self.indices.astype(PETSc.IntType), data),
-                                  comm=self.comm)
-        H.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+            data[self.diagonal] += self.inertia_diagonal
+        if self._matrix is None:
+            n_owned, n = self.part.n_owned, self.part.n_free
+            self._matrix = PETSc.Mat().createAIJ(
+                size=((n_owned, n), (n_owned, n)), bsize=self.block_size,
+                csr=(self.indptr, self.indices, data), comm=self.comm)
+            self._matrix.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        else:
+            self._matrix.setValuesCSR(self.indptr, self.indices, data)
+            self._matrix.assemble()
         self.assembly_seconds += time.perf_counter() - start
-        return H
+        return self._matrix
 
     def rigid_body_modes(self, x):
         """PETSc's rigid-body near-null space at positions x (n, 3), or None where the DOFs do
