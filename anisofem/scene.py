@@ -47,10 +47,12 @@ class Scene:
     fixed_positions : where the fixed components are held, m: (n, 3), or (k, 3) when fixed is
         given as k indices. Default: their rest positions.
     gravity : acceleration (3,) in m/s^2, adds density * gravity to the body force.
-    body_force : force density b in N/m^3, (3,) or (m, 3); b v / 4 goes to each tet vertex.
+    body_force : force density b in N/m^3, (3,) or (m, 3), integrated with the shape functions
+        (the consistent load, CONSISTENT: b v / 4 to each vertex of a linear tet).
     nodal_force : (n, 3) forces in N applied to vertices.
     traction : surface load t in N/m^2 on traction_faces, (3,) or (k, 3), per rest area; t
-        area / 3 goes to each face vertex (dead load: fixed in direction and magnitude).
+        area / 3 goes to each face vertex of linear tets, to each midside node of quadratic ones
+        (dead load: fixed in direction and magnitude).
     traction_faces : (k, 3) vertex triples, which must be boundary faces of the mesh (see
         TetMesh.faces_where).
 
