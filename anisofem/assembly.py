@@ -44,7 +44,8 @@ def _position_type(largest):
 
 
 class CsrLayout:
-    """CSR pattern of the Hessian restricted to the unknowns of dof_map.
+    """CSR pattern of the Hessian restricted to the unknowns of dof_map (n, 3), whose numbers
+    must rise with the vertex index (each row is searched in vertex order).
 
     Attributes: map (m, (3k)^2) position of element entry (r, c) in the CSR data, -1 where r
     or c is not unknown (int32 while the pattern has fewer than 2^31 entries, else int64); diag

@@ -3,8 +3,9 @@
 
 PETSc does what a distributed solver needs beyond the element kernels: PT-Scotch splits the
 mesh, the matrix is PETSc's parallel AIJ (block size 3 where whole nodes are held), and its
-KSP solves the Newton systems, MUMPS for exact Newton and CG with GAMG (rigid-body modes as
-near-null space) for the inexact one. anisofem contributes the element loop, the Newton
+KSP solves the Newton systems, MUMPS for exact Newton and CG with smoothed-aggregation
+multigrid (Trilinos' ML through PETSc, else PETSc's GAMG; rigid-body modes as near-null
+space) for the inexact one. anisofem contributes the element loop, the Newton
 iteration's test and line search (anisofem.distributed.newton) and the split of the work
 (anisofem.distributed.partition). Every rank holds the whole scene; each evaluates the elements
 touching its nodes and owns their rows. Every material and element order runs.
@@ -118,7 +119,7 @@ def _agree(comm, scene, *options):
 
 def solve(scene, method="newton", rtol=1e-8, atol=None, max_iter=100, comm=None):
     """Static equilibrium of scene over the ranks of comm (default PETSc.COMM_WORLD), from its
-    initial positions. method: "newton" (exact, MUMPS) or "cg" (inexact, CG + GAMG); rtol,
+    initial positions. method: "newton" (exact, MUMPS) or "cg" (inexact, CG + multigrid); rtol,
     atol, max_iter: Newton's test as in anisofem.solve. Returns a DistributedResult."""
     comm, part, split = _context(scene, comm, method, rtol, atol, max_iter)
     system = RankSystem(scene, part, comm)

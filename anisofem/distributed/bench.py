@@ -1,10 +1,11 @@
 """`python -m anisofem bench --distributed [--huge]`: the petsc engine's multigrid path (CG +
-GAMG) on 1 and 2 MPI ranks of this machine against the single-process multigrid path (`cg` with
-`preconditioner="amg"`, anisofem.bench_large) on the box cantilever of 10^5 tets (and 10^6 with
---huge), each run in its own processes: the static solve's wall time split into the partition,
-the assembly and the linear solves (the slowest rank's), Newton and Krylov iterations, the mean
-of 5 backward-Euler steps (dt 0.02 s, from rest), each rank's peak memory, and the answer's
-distance to the single-process one. Prints a table and writes JSON (atomically). Run alone."""
+smoothed aggregation, anisofem.distributed.newton.multigrid_type) on 1 and 2 MPI ranks of this
+machine against the single-process multigrid path (`cg` with `preconditioner="amg"`,
+anisofem.bench_large) on the box cantilever of 10^5 tets (and 10^6 with --huge), each run in its
+own processes: the static solve's wall time split into the partition, the assembly and the
+linear solves (the slowest rank's), Newton and Krylov iterations, the mean of 5 backward-Euler
+steps (dt 0.02 s, from rest), each rank's peak memory, and the answer's distance to the
+single-process one. Prints a table and writes JSON (atomically). Run alone."""
 import json
 import os
 import subprocess
@@ -37,9 +38,11 @@ def case(cells, target):
     _, _, last = simulate(scene, bench_large.STEPS, bench_large.STEP_DT, method="cg")
     step_s = (time.perf_counter() - start) / bench_large.STEPS
     from petsc4py import PETSc
+    from .newton import multigrid_type
     if PETSc.COMM_WORLD.getRank() == 0:
         n = result.newton
-        row = {"engine": "petsc", "ranks": result.ranks, "tets": scene.mesh.n_tets,
+        row = {"engine": "petsc " + multigrid_type(PETSc), "ranks": result.ranks,
+               "tets": scene.mesh.n_tets,
                "unknowns": scene.n_free, "solve_s": solve_s,
                **{f"{k}_s": v for k, v in result.seconds.items()},
                "newton_iterations": n.iterations, "krylov_iterations": n.linear_iterations,
@@ -56,7 +59,7 @@ def run(huge=False, out=result_path("bench_distributed.json")):
     for size, cells in sizes.items():
         print(f"  {size} tets, one process ...", file=sys.stderr, flush=True)
         serial, reference = bench_large._in_fresh_process(cells, "cg amg", 0.48)
-        rows.append({"engine": "serial", "ranks": 1, "tets": serial["tets"],
+        rows.append({"engine": "serial amg", "ranks": 1, "tets": serial["tets"],
                      "unknowns": serial["unknowns"], "solve_s": serial["solve_s"],
                      "newton_iterations": serial["newton_iterations"],
                      "krylov_iterations": serial["cg_iterations"],
@@ -86,17 +89,16 @@ def _on_ranks(cells, ranks):
 
 def _print(report):
     print("The box cantilever (nu = 0.48), static solve and backward-Euler steps by multigrid "
-          "CG: one process against PETSc (CG + GAMG) on MPI ranks; times in s, the slowest "
+          "CG: one process against PETSc (CG + ML or GAMG) on MPI ranks; times in s, the slowest "
           "rank's")
-    print(f"{'tets':>9} {'unknowns':>9} {'engine':>7} {'ranks':>5} | {'solve':>7} "
+    print(f"{'tets':>9} {'unknowns':>9} {'engine':>10} {'ranks':>5} | {'solve':>7} "
           f"{'split':>6} {'assemb':>6} {'linear':>7} | {'Newton':>6} {'Krylov':>6} | "
           f"{'step':>6} | {'GB per rank':>12} | {'vs one':>8}")
     for r in report["rows"]:
-        split = "-" if r["engine"] == "serial" else f"{r['partition_s']:.2f}"
-        assembly = "-" if r["engine"] == "serial" else f"{r['assembly_s']:.2f}"
-        linear = "-" if r["engine"] == "serial" else f"{r['linear_s']:.2f}"
+        split, assembly, linear = (f"{r[k]:.2f}" if k in r else "-"
+                                   for k in ("partition_s", "assembly_s", "linear_s"))
         memory = " ".join(f"{m:.2f}" for m in r["peak_memory_gb"])
-        print(f"{r['tets']:>9,} {r['unknowns']:>9,} {r['engine']:>7} {r['ranks']:>5} | "
+        print(f"{r['tets']:>9,} {r['unknowns']:>9,} {r['engine']:>10} {r['ranks']:>5} | "
               f"{r['solve_s']:>7.2f} {split:>6} {assembly:>6} {linear:>7} | "
               f"{r['newton_iterations']:>6} {r['krylov_iterations']:>6} | {r['step_s']:>6.2f} | "
               f"{memory:>12} | {r['difference']:>8.1e}" + ("" if r["converged"] else

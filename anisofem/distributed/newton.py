@@ -4,11 +4,12 @@ with energies and norms summed over ranks and the linear systems solved by PETSc
 method "newton": exact Newton. The true Hessian is factored by MUMPS (Cholesky, LDL^T); it is
 used when its inertia shows it positive definite and its step makes progress, else the
 PSD-projected Hessian is (the serial "adaptive" choice). method "cg": inexact Newton, conjugate
-gradients preconditioned by PETSc's smoothed-aggregation multigrid (GAMG) with the rigid-body
-modes as near-null space, stopped at the serial method's forcing tolerance; the hierarchy of an
-earlier Hessian is kept while CG converges with it in at most RENEW_AFTER iterations (GAMG's
-set-up, its Galerkin products above all, costs several CG solves); a direction of negative
-curvature of the true Hessian sends the iteration to the projected one.
+gradients preconditioned by smoothed-aggregation multigrid (multigrid_type: Trilinos' ML
+through PETSc where PETSc has it, else PETSc's GAMG) with the rigid-body modes as near-null
+space, stopped at the serial method's forcing tolerance; the hierarchy of an earlier Hessian is
+kept while CG converges with it in at most RENEW_AFTER iterations (a set-up, its Galerkin
+products above all, costs several CG solves); a direction of negative curvature of the true
+Hessian sends the iteration to the projected one.
 """
 import math
 import time
@@ -18,13 +19,25 @@ from ..methods import forcing_tolerance
 from ..newton import ARMIJO, ENERGY_NOISE, MIN_STEP, NOISE_PROGRESS
 
 METHODS = ("newton", "cg")
-#: MUMPS's controls for the inertia of its LDL^T factor (MatGetInertia): null pivots detected
-#: (ICNTL 24), and the root front factored on one rank rather than by ScaLAPACK (ICNTL 13),
-#: whose pivots MUMPS cannot count
 #: "cg" keeps the multigrid hierarchy of an earlier Hessian (as the serial "amg" method does)
 #: and renews it after a solve that needed more CG iterations than this with it
 RENEW_AFTER = 60
+#: MUMPS's controls for the inertia of its LDL^T factor (MatGetInertia): null pivots detected
+#: (ICNTL 24), and the root front factored on one rank rather than by ScaLAPACK (ICNTL 13),
+#: whose pivots MUMPS cannot count
 MUMPS_OPTIONS = {"mat_mumps_icntl_24": 1, "mat_mumps_icntl_13": 1}
+
+
+def multigrid_type(PETSc):
+    """The "cg" method's preconditioner: "ml" (Trilinos' smoothed aggregation) where PETSc was
+    built with ML, else "gamg" (PETSc's own). ML aggregates as anisofem's serial multigrid does
+    (greedy, about 14 nodes per aggregate on the box cantilever); GAMG's MIS aggregation makes
+    aggregates of about 4 nodes on the 5-tet split of a box, whose alternate nodes have only
+    their 6 axis neighbours, and coarse operators with 8.5 times the fine matrix's nonzeros
+    (2.2 with ML): at 10^5 tets on 2 ranks ML set up in 0.6-1 s against 3.6 s, and a static
+    solve took 20 s against 31 s (docs/experiments.md). Another preconditioner: the PETSc
+    option -anisofem_pc_type."""
+    return "ml" if PETSc.Sys.hasExternalPackage("ml") else "gamg"
 
 
 @dataclass
@@ -110,7 +123,7 @@ class Solver:
             pc.setFactorSolverType("mumps")
         else:
             self.ksp.setType("cg")
-            self.ksp.getPC().setType("gamg")
+            self.ksp.getPC().setType(multigrid_type(PETSc))
             self.ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
         self.ksp.setFromOptions()
         self._eta = self._miss = None
@@ -129,7 +142,7 @@ class Solver:
         PETSc = self.PETSc
         H = self.system.hessian(x, project)
         reuse = self.method == "cg" and self._kept and not self._renew
-        if self.method == "cg" and not reuse:  # GAMG builds its hierarchy on them
+        if self.method == "cg" and not reuse:  # the multigrid builds its hierarchy on them
             modes = self.system.rigid_body_modes(x)
             if modes is not None:
                 H.setNearNullSpace(modes)

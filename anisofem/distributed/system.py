@@ -12,6 +12,7 @@ from dataclasses import replace
 import numpy as np
 
 from .. import kernels
+from ..assembly import CsrLayout
 from ..mesh import block_coloring
 
 
@@ -59,26 +60,22 @@ class RankSystem:
     # ---- structure ------------------------------------------------------------------------
     def _layout(self):
         """This rank's CSR rows (indptr, global column indices), each element entry's position
-        in its data (hess_map, -1 for rows of other ranks and fixed DOFs), the diagonal."""
+        in its data (hess_map, -1 for rows of other ranks and fixed DOFs), the diagonal: the
+        serial CsrLayout of this rank's elements, cut to the rows this rank owns. The layout
+        is built on the nodes renumbered in the partition's order, in which the global DOF
+        numbering rises with the node number as CsrLayout's rows need."""
         part = self.part
-        k = self.elements.tets.shape[1]
-        g = part.dof[self.elements.tets].reshape(-1, 3 * k)           # (m_r, 3k)
-        rows = np.repeat(g[:, :, None], 3 * k, axis=2)
-        cols = np.repeat(g[:, None, :], 3 * k, axis=1)
-        valid = (rows >= part.start) & (rows < part.stop) & (cols >= 0)
-        n = np.int64(part.n_free)
-        keys = (rows[valid] - part.start) * n + cols[valid]
-        unique, position = np.unique(keys, return_inverse=True)
-        hess_map = np.full(valid.shape, -1, dtype=np.int64)
-        hess_map[valid] = position
-        self.hess_map = hess_map.reshape(len(g), -1)
-        local_rows = unique // n
+        renumber = np.empty_like(part.order)
+        renumber[part.order] = np.arange(part.order.size)
+        layout = CsrLayout(renumber[self.elements.tets], part.dof[part.order])
+        lo, hi = layout.indptr[part.start], layout.indptr[part.stop]
         IntType = self.PETSc.IntType
-        self.indices = (unique % n).astype(IntType)
-        self.indptr = np.searchsorted(local_rows, np.arange(part.n_owned + 1)).astype(IntType)
+        self.indptr = (layout.indptr[part.start:part.stop + 1] - lo).astype(IntType)
+        self.indices = layout.indices[lo:hi].astype(IntType)
+        mine = (layout.map >= lo) & (layout.map < hi)
+        self.hess_map = np.where(mine, layout.map - lo, -1).astype(layout.map.dtype)
+        self.diagonal = layout.diag[part.start:part.stop] - lo
         self._matrix = None
-        owned = np.arange(part.start, part.stop, dtype=np.int64)
-        self.diagonal = np.searchsorted(unique, (owned - part.start) * n + owned)
 
     def _scatter_setup(self):
         """The scatter of a parallel vector's entries to the DOFs this rank's elements read,
