@@ -8,13 +8,15 @@ gradients preconditioned by smoothed-aggregation multigrid (multigrid_type: Tril
 through PETSc where PETSc has it, else PETSc's GAMG) with the rigid-body modes as near-null
 space, stopped at the serial method's forcing tolerance; the hierarchy of an earlier Hessian is
 kept while CG converges with it in at most RENEW_AFTER iterations (a set-up, its Galerkin
-products above all, costs several CG solves); a direction of negative curvature of the true
-Hessian sends the iteration to the projected one.
+products above all, costs several CG solves) and applied in each vertex's frame turned since
+it was built, as the serial "amg" method does (anisofem.frames); a direction of negative
+curvature of the true Hessian sends the iteration to the projected one.
 """
 import math
 import time
 from dataclasses import dataclass
 
+from ..frames import VertexFrames
 from ..methods import forcing_tolerance
 from ..newton import ARMIJO, ENERGY_NOISE, MIN_STEP, NOISE_PROGRESS
 
@@ -123,12 +125,24 @@ class Solver:
             pc.setFactorSolverType("mumps")
         else:
             self.ksp.setType("cg")
-            self.ksp.getPC().setType(multigrid_type(PETSc))
             self.ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
+            # the multigrid takes the options -anisofem_pc_*; the KSP's own PC turns it
+            self.multigrid = PETSc.PC().create(comm=system.comm)
+            self.multigrid.setOptionsPrefix("anisofem_")
+            self.multigrid.setType(multigrid_type(PETSc))
+            self.multigrid.setFromOptions()  # ML takes its defaults here: needed
+            pc = self.ksp.getPC()
+            pc.setOptionsPrefix("anisofem_turned_")
+            pc.setType("python")
+            self._turned = _Turned()
+            pc.setPythonContext(self._turned)
+            self._frames = VertexFrames(system.scene.mesh, system.owned_flat)
+            self._built = self._kept = None
+            self._vectors = None
         self.ksp.setFromOptions()
         self._eta = self._miss = None
         self._H = self._p = None
-        self._kept = self._renew = False
+        self._renew = False
         self.seconds = 0.0
         self.reason = None
 
@@ -141,12 +155,11 @@ class Solver:
         Krylov iterations)."""
         PETSc = self.PETSc
         H = self.system.hessian(x, project)
-        reuse = self.method == "cg" and self._kept and not self._renew
-        if self.method == "cg" and not reuse:  # the multigrid builds its hierarchy on them
-            modes = self.system.rigid_body_modes(x)
-            if modes is not None:
-                H.setNearNullSpace(modes)
-        self.ksp.getPC().setReusePreconditioner(reuse)
+        reuse = self.method == "cg" and self._kept is not None and not self._renew
+        if self.method == "cg":
+            if not reuse:
+                self._build(x, H)
+            self._turned.apply_array = self._frames.carry(self._multigrid, self._built, x)
         self.ksp.setOperators(H)
         if self.method == "cg":
             if not project:  # one forcing tolerance per Newton iteration, set at its first try
@@ -169,7 +182,6 @@ class Solver:
         if self.method == "cg":
             # a kept hierarchy is renewed after a solve that needed too many iterations with it
             self._renew = reuse and its > RENEW_AFTER
-            self._kept = True
         if self.reason < 0 or not p.dot(g) < 0:
             return None, its
         if self.method == "newton" and not project:
@@ -178,6 +190,29 @@ class Solver:
                 return None, its
         self.system.spread(p)
         return p, its
+
+    def _build(self, x, H):
+        """Build the multigrid hierarchy on a copy of H (N/m, at positions x), with the
+        rigid-body modes at x, and note the vertex frames at x."""
+        start = time.perf_counter()
+        same = self.PETSc.Mat.Structure.SAME
+        self._kept = H.copy() if self._kept is None else H.copy(self._kept, same)
+        modes = self.system.rigid_body_modes(x)
+        if modes is not None:
+            self._kept.setNearNullSpace(modes)
+        self.multigrid.setOperators(self._kept)
+        self.multigrid.setUp()
+        self._built = self._frames.rotations(x)
+        self.seconds += time.perf_counter() - start
+
+    def _multigrid(self, r):
+        """The kept multigrid's V-cycle on r (this rank's free DOFs, numpy) as numpy."""
+        if self._vectors is None:
+            self._vectors = self._kept.createVecs()
+        rhs, out = self._vectors
+        rhs.setArray(r)
+        self.multigrid.apply(rhs, out)
+        return out.getArray(readonly=True)
 
     def accepted(self, g, g_new, gnorm, t):
         """After the step s = t p: how far the quadratic model missed the new gradient,
@@ -193,6 +228,20 @@ class Solver:
 
     def destroy(self):
         self.ksp.destroy()
+        if self.method == "cg":
+            self.multigrid.destroy()
+            for obj in [self._kept, *(self._vectors or ())]:
+                if obj is not None:
+                    obj.destroy()
+
+
+class _Turned:
+    """The "cg" method's preconditioner as a PETSc python PC: apply_array, a numpy function
+    of this rank's free DOFs (the kept multigrid turned by VertexFrames.carry)."""
+    apply_array = None
+
+    def apply(self, pc, r, z):
+        z.setArray(self.apply_array(r.getArray(readonly=True)))
 
 
 def _line_search(system, x, energy, g, gnorm, p):

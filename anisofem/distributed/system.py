@@ -36,6 +36,8 @@ class RankSystem:
             fiber=full.fiber[e], block_starts=starts, color_ptr=ptr)
         self.owned = part.owned_nodes
         self.owned_free = part.dof[self.owned] >= 0                  # (k, 3)
+        #: (N_r,) the flat index 3 i + c of each free DOF this rank owns, in its vector's order
+        self.owned_flat = (3 * self.owned[:, None] + np.arange(3))[self.owned_free]
         self.f_ext = np.ascontiguousarray(scene.external_force[self.owned])
         #: wall time spent in this rank's assembly (energies, gradients, Hessians), s
         self.assembly_seconds = 0.0
