@@ -138,7 +138,8 @@ class Solver:
             pc.setPythonContext(self._turned)
             self._frames = VertexFrames(system.scene.mesh, system.owned_flat)
             self._built = self._kept = None
-            self._vectors = None
+            #: the V-cycle's input and output (this rank's free DOFs)
+            self._vectors = (system.vector.duplicate(), system.vector.duplicate())
         self.ksp.setFromOptions()
         self._eta = self._miss = None
         self._H = self._p = None
@@ -200,7 +201,6 @@ class Solver:
         if self._kept is not None:
             self._kept.destroy()
         self._kept = H.copy()
-        self._vectors = None
         modes = self.system.rigid_body_modes(x)
         if modes is not None:
             self._kept.setNearNullSpace(modes)
@@ -211,8 +211,6 @@ class Solver:
 
     def _multigrid(self, r):
         """The kept multigrid's V-cycle on r (this rank's free DOFs, numpy) as numpy."""
-        if self._vectors is None:
-            self._vectors = self._kept.createVecs()
         rhs, out = self._vectors
         rhs.setArray(r)
         self.multigrid.apply(rhs, out)
@@ -233,10 +231,10 @@ class Solver:
     def destroy(self):
         self.ksp.destroy()
         if self.method == "cg":
-            self.multigrid.destroy()
-            for obj in [self._kept, *(self._vectors or ())]:
-                if obj is not None:
-                    obj.destroy()
+            for obj in (self.multigrid, *self._vectors):
+                obj.destroy()
+            if self._kept is not None:
+                self._kept.destroy()
 
 
 class _Turned:
