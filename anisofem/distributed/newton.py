@@ -32,13 +32,10 @@ MUMPS_OPTIONS = {"mat_mumps_icntl_24": 1, "mat_mumps_icntl_13": 1}
 
 def multigrid_type(PETSc):
     """The "cg" method's preconditioner: "ml" (Trilinos' smoothed aggregation) where PETSc was
-    built with ML, else "gamg" (PETSc's own). ML aggregates as anisofem's serial multigrid does
-    (greedy, about 14 nodes per aggregate on the box cantilever); GAMG's MIS aggregation makes
-    aggregates of about 4 nodes on the 5-tet split of a box, whose alternate nodes have only
-    their 6 axis neighbours, and coarse operators with 8.5 times the fine matrix's nonzeros
-    (2.2 with ML): at 10^5 tets on 2 ranks ML set up in 0.6-1 s against 3.6 s, and a static
-    solve took 20 s against 31 s (docs/experiments.md). Another preconditioner: the PETSc
-    option -anisofem_pc_type."""
+    built with ML, else "gamg" (PETSc's own). ML aggregates as anisofem's serial multigrid does;
+    GAMG's MIS aggregation makes aggregates of about 4 nodes on the 5-tet split of a box and
+    coarse operators with 8.5 times the fine matrix's nonzeros (docs/experiments.md). Another
+    preconditioner: the PETSc option -anisofem_pc_type."""
     return "ml" if PETSc.Sys.hasExternalPackage("ml") else "gamg"
 
 

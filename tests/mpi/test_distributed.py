@@ -182,7 +182,6 @@ def test_the_cg_multigrid_coarsens_the_box_split_as_the_serial_one(tmp_path):
     r = mpirun(2, str(script), cwd=tmp_path, timeout=120)
     assert r.returncode == 0, r.stderr[-3000:]
     kind, complexity, iterations, reason = (tmp_path / "levels.txt").read_text().split()
-    print(kind, complexity, iterations)
     assert kind == "ml", "this PETSc has no ML: the cg method falls back on GAMG"
     assert float(complexity) < 3.0
     assert int(reason) > 0 and int(iterations) < 100
