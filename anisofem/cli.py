@@ -9,13 +9,13 @@
   python -m anisofem bench --large --huge
 """
 import argparse
-import os
+import re
 import sys
 
 import numpy as np
 
-from . import bench, bench_large, convergence, ladder, meshgen, methods, robustness
-from .files import write_json
+from . import bench, bench_large, bench_load, convergence, ladder, meshgen, methods, robustness
+from .files import check_folder, write_json
 from .io import check_output_path, read_mesh, write_mesh
 from .inversion import inversion
 from .material import MODELS, Material
@@ -23,11 +23,18 @@ from .metrics import end_vertices, tip_displacement
 from .scene import Scene
 from .solve import CONTINUATION, simulate, solve
 
-_SHAPES = {"box": lambda a: meshgen.box_beam(a.size, a.cells, tets_per_cell=a.tets_per_cell),
-           "cylinder": lambda a: meshgen.cylinder_beam(a.size[0], a.size[1] / 2, a.cells[0],
-                                                       a.cells[1], a.rings),
-           "t": lambda a: meshgen.t_shape(),
-           "y": lambda a: meshgen.y_shape()}
+#: Each shape: (its mesh from the shape flags, the flags it takes with their defaults, the end
+#: it stands on: the --fixed default)
+_SHAPES = {
+    "box": (lambda a: meshgen.box_beam(a.size, a.cells, tets_per_cell=a.tets_per_cell),
+            {"size": (0.1, 0.02, 0.02), "cells": (10, 2, 2), "tets_per_cell": 5}, "x-min"),
+    "cylinder": (lambda a: meshgen.cylinder_beam(a.size[0], a.size[1] / 2, a.cells[0],
+                                                 a.cells[1], a.rings),
+                 {"size": (0.1, 0.02), "cells": (10, 2), "rings": 1}, "x-min"),
+    "t": (lambda a: meshgen.t_shape(), {}, "z-min"),
+    "y": (lambda a: meshgen.y_shape(), {}, "z-min")}
+#: The shapes' flags
+_SHAPE_FLAGS = ("size", "cells", "rings", "tets_per_cell")
 
 
 #: the finer meshes of the same body the trade can measure against (--bodies): name ->
@@ -64,27 +71,53 @@ def _fixed(mesh, spec):
 
 
 def _shape_arguments(p):
-    p.add_argument("--size", type=float, nargs=3, default=(0.1, 0.02, 0.02),
-                   help="box: length width height; cylinder: length diameter (m)")
-    p.add_argument("--cells", type=int, nargs="+", default=(10, 2, 2),
-                   help="box: nx ny nz; cylinder: along section")
-    p.add_argument("--rings", type=int, default=1, help="cylinder: O-grid rings")
-    p.add_argument("--tets-per-cell", type=int, choices=(5, 6), default=5,
-                   help="box: tets per hex cell (6: the more accurate split for quadratic "
-                        "tets, docs/fem.md)")
+    p.add_argument("--size", type=float, nargs="+",
+                   help="box: length width height (default 0.1 0.02 0.02); cylinder: length "
+                        "diameter (default 0.1 0.02), m; t and y have fixed dimensions")
+    p.add_argument("--cells", type=int, nargs="+",
+                   help="box: nx ny nz (default 10 2 2); cylinder: along section (default 10 "
+                        "2)")
+    p.add_argument("--rings", type=int, help="cylinder: O-grid rings (default 1)")
+    p.add_argument("--tets-per-cell", type=int, choices=(5, 6),
+                   help="box: tets per hex cell (default 5; 6: the more accurate split for "
+                        "quadratic tets, docs/fem.md)")
     _order_argument(p)
 
 
 def _shape(args, name):
-    """The mesh of the shape called name that the shape flags describe."""
-    if args.tets_per_cell != 5 and name != "box":
-        raise ValueError(f"--tets-per-cell {args.tets_per_cell}: only the box has a 6-tet split")
-    return _SHAPES[name](args)
+    """The mesh of the shape called name that the shape flags describe; a flag the shape does
+    not take, or with the wrong number of values, is a ValueError."""
+    build, takes, _ = _SHAPES[name]
+    for flag in _SHAPE_FLAGS:
+        given, option = getattr(args, flag), "--" + flag.replace("_", "-")
+        if given is None:
+            setattr(args, flag, takes.get(flag))
+        elif flag not in takes:
+            raise ValueError(
+                f"{option}: the {name} shape does not take it; it takes "
+                + (", ".join("--" + f.replace("_", "-") for f in takes) if takes else
+                   f"no shape flag (anisofem.{name}_shape in Python takes its dimensions)"))
+        elif isinstance(takes[flag], tuple) and len(given) != len(takes[flag]):
+            raise ValueError(f"{option}: expected {len(takes[flag])} values for the {name} "
+                             f"shape, got {len(given)}")
+    return build(args)
 
 
-def _scene_arguments(s):
-    """The flags that make a Scene of a mesh (solve and trade)."""
-    s.add_argument("--fixed", default="x-min", help="end held fixed: AXIS-SIDE")
+def _no_shape_flags(args):
+    """ValueError naming a shape flag given with a mesh file (whose mesh is as it is)."""
+    for flag in _SHAPE_FLAGS:
+        if getattr(args, flag) is not None:
+            raise ValueError(f"--{flag.replace('_', '-')}: a shape flag; the mesh of a file is "
+                             f"read as it is")
+
+
+def _scene_arguments(s, fixed="x-min"):
+    """The flags that make a Scene of a mesh (solve and trade); fixed: --fixed's default, None
+    for the shape's (scene_of)."""
+    s.add_argument("--fixed", default=fixed,
+                   help="end held fixed: AXIS-SIDE" + ("" if fixed else " (default: the end the "
+                        "shape stands on: x-min for box and cylinder, z-min for t and y; x-min "
+                        "for a mesh file)"))
     s.add_argument("--gravity", type=float, nargs=3, default=(0.0, 0.0, -9.81),
                    metavar=("GX", "GY", "GZ"), help="m/s^2")
     s.add_argument("--young", type=float, default=1e5, help="Pa")
@@ -115,13 +148,29 @@ def add_scene_arguments(p):
     p.add_argument("scene", help="a mesh file meshio reads, or a shape: "
                                  f"{', '.join(sorted(_SHAPES))}")
     _shape_arguments(p)
-    _scene_arguments(p)
+    _scene_arguments(p, fixed=None)
 
 
 def scene_of(args):
-    """The Scene that the flags of add_scene_arguments describe."""
-    mesh = _shape(args, args.scene) if args.scene in _SHAPES else read_mesh(args.scene)
+    """The Scene that the flags of add_scene_arguments describe (args.fixed set to the end
+    held where it was not given)."""
+    if args.scene in _SHAPES:
+        mesh = _shape(args, args.scene)
+        args.fixed = args.fixed or _SHAPES[args.scene][2]
+    else:
+        _no_shape_flags(args)
+        mesh = read_mesh(args.scene)
+        args.fixed = args.fixed or "x-min"
     return _scene(args, _of_order(mesh, args.order))
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser that reads negative numbers in exponent form (--young -1e5) as values,
+    as it reads -100000 and -0.5 (its own pattern misses the exponent)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
 
 class _ShowDefaults(argparse.ArgumentDefaultsHelpFormatter):
@@ -134,8 +183,8 @@ class _ShowDefaults(argparse.ArgumentDefaultsHelpFormatter):
 
 
 def _parser():
-    p = argparse.ArgumentParser(prog="python -m anisofem", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = Parser(prog="python -m anisofem", description=__doc__,
+               formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="command", required=True)
     defaults = {"formatter_class": _ShowDefaults}
     m = sub.add_parser("mesh", help="generate a mesh of one of the paper's shapes", **defaults)
@@ -212,12 +261,22 @@ def _parser():
     b.add_argument("--dynamics", action="store_true",
                    help="with --robustness: ten backward-Euler steps of 162 of them at dt = "
                         "0.02, 0.2 and 1 s too (longer)")
+    b.add_argument("--under-load", action="store_true",
+                   help="every rung of the trade on its 200- and 12,800-tet cantilevers, idle "
+                        "and beside --busy busy processes that the command starts and stops: "
+                        "each one's slowdown (about ten minutes)")
+    b.add_argument("--busy", type=int, default=None,
+                   help="with --under-load: busy processes (default: the cores this process "
+                        "may run on)")
+    b.add_argument("--rungs", nargs="+", metavar="NAME",
+                   help="with --under-load: only these rungs (names as in the trade's table)")
     b.add_argument("--json", default=None,
                    help="where to write the results (default: results/bench_anisofem.json, "
                         "with --large results/bench_large.json, with --crossover "
                         "results/bench_crossover.json, with --robustness "
                         "results/robustness.json, with --convergence results/convergence.json, "
-                        "with --distributed results/bench_distributed.json)")
+                        "with --distributed results/bench_distributed.json, with --under-load "
+                        "results/bench_under_load.json)")
     return p
 
 
@@ -274,9 +333,9 @@ def _solve(args):
 
 def _trade(args):
     """python -m anisofem trade: print the table, write the JSON and the plot."""
-    for path in (args.json, args.png):
-        if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
-            raise FileNotFoundError(f"the folder of {path!r} does not exist")
+    for path, name in ((args.json, "--json"), (args.png, "--png")):
+        if path:
+            check_folder(path, name)
     scene = scene_of(args)
     rungs, notes = ladder.fem_rungs(), []
     if not args.no_surrogates:
@@ -303,9 +362,11 @@ def _bench(args):
     if args.huge and not (args.large or args.distributed):
         raise ValueError("--huge: goes with --large or --distributed")
     if sum((args.large, args.crossover, args.robustness, args.convergence,
-            args.distributed)) > 1:
-        raise ValueError("--large, --crossover, --robustness, --convergence, --distributed: one "
-                         "at a time")
+            args.distributed, args.under_load)) > 1:
+        raise ValueError("--large, --crossover, --robustness, --convergence, --distributed, "
+                         "--under-load: one at a time")
+    if not args.under_load and (args.busy is not None or args.rungs):
+        raise ValueError("--busy, --rungs: go with --under-load")
     if args.dynamics and not args.robustness:
         raise ValueError("--dynamics: goes with --robustness")
     if not args.convergence and (args.refinements or args.max_unknowns is not None):
@@ -316,6 +377,8 @@ def _bench(args):
         if not available():
             raise ImportError(MISSING)
         distributed_bench.run(args.huge, **out)
+    elif args.under_load:
+        bench_load.run(args.busy, rungs=args.rungs, **out)
     elif args.convergence:
         convergence.run(refinements=args.refinements or convergence.REFINEMENTS,
                         max_unknowns=(convergence.MAX_UNKNOWNS if args.max_unknowns is None

@@ -35,6 +35,17 @@ def atomic_path(path, suffix=""):
             os.remove(tmp)
 
 
+def check_folder(path, name="path"):
+    """FileNotFoundError naming `name` unless the folder of path exists or can be made (its
+    nearest existing ancestor is a folder); writing through atomic_path makes it."""
+    folder = os.path.dirname(os.path.abspath(os.fspath(path)))
+    while not os.path.exists(folder):
+        folder = os.path.dirname(folder)
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(f"{name}: the folder of {os.fspath(path)!r} cannot be made "
+                                f"({folder!r} is a file)")
+
+
 def write_json(path, obj):
     """Write obj as indented JSON to path atomically (numpy scalars as floats)."""
     with atomic_path(path, ".json") as tmp, open(tmp, "w") as f:

@@ -10,7 +10,7 @@ import os
 import meshio
 import numpy as np
 
-from .files import atomic_path
+from .files import atomic_path, check_folder
 from ._validate import as_float_array
 from .mesh import TetMesh
 from .inversion import volume_change
@@ -69,11 +69,10 @@ def _meshio_read(path):
 
 def check_output_path(path):
     """path (a str) if a mesh can be written there: a format meshio knows from the extension,
-    in a folder that exists; else FileNotFoundError / ValueError naming it."""
+    in a folder that exists or can be made (writing makes it); else FileNotFoundError /
+    ValueError naming it."""
     path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise FileNotFoundError(f"path: the folder of {path!r} does not exist")
+    check_folder(path)
     if not any(path.lower().endswith(ext) for ext in meshio.extension_to_filetypes):
         raise ValueError(f"path: {path!r} has no mesh format meshio writes (use .vtu, .xdmf, "
                          f".msh, ...)")

@@ -24,6 +24,7 @@ from numba import njit, prange
 
 from .densities import fiber, point_hessian, point_stress
 from .mesh import ASSEMBLY_BLOCK
+from .threads import parallel_threads
 
 #: Below this many quadrature points (elements times points per element) the assembly runs on
 #: one thread (parallel launches cost more).
@@ -195,6 +196,7 @@ def assemble(x, elements, *, want_grad=False, want_hess=False, project=False, he
     if m * elements.weights.shape[1] < PARALLEL_MIN_POINTS:
         (_run_linear if linear else _run_general)(0, m, *args)
     else:
+        parallel_threads()
         _run_colors(elements.block_starts, elements.color_ptr, linear, *args)
     return e_iso, e_fib, (grad if want_grad else None)
 

@@ -31,6 +31,10 @@ in the same process; what is compared:
 - energy_drift: max over time of H(t) - H(0), H = kinetic + elastic - f_ext . x, over |the
   static potential|: backward Euler never gains energy (<= 0), a rung that does is unstable;
 - stable: every step was taken (none failed), every state finite, energy_drift <= 0.01;
+- busy_cores: the cores other processes kept busy while the rung was timed
+  (anisofem.threads.LoadMeter); from BUSY_CORES on, the rung is timed twice, the calmer run
+  kept (timed_twice), its row marked * and the table notes it. The result's "machine" holds
+  the core count and the load average at the start and the end;
 - min_volume_ratio: the smallest det(F) over tets and time (<= 0: an inverted element);
   inverted: the most tets turned inside out (det F <= 0) at any recorded state;
   max_volume_change: the largest |det(F) - 1|.
@@ -45,7 +49,7 @@ from typing import Callable
 
 import numpy as np
 
-from . import methods, metrics
+from . import methods, metrics, threads
 from .files import atomic_path
 from .inversion import volume_change
 from .potential import Potential
@@ -55,6 +59,9 @@ from .solve import Stepper, solve
 
 #: Energy gain (over |static potential|) above which a rung is called unstable.
 ENERGY_GAIN_MAX = 0.01
+#: Cores other processes keep busy during a rung's timing from which the trade times it again
+#: and marks its row: beside another process spinning on one core, a step can be 2-3x slower
+BUSY_CORES = 0.5
 #: The entry-point group of rung providers: functions (scene, dt, notes) -> [Rung] that say in
 #: notes (a list of str) what they cannot run.
 RUNG_GROUP = "anisofem.rungs"
@@ -197,6 +204,7 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, progress=True, 
     if steps % multiple:
         raise ValueError(f"steps: must be a multiple of {multiple} (the rungs' dt factors)")
     check = checked_steps(steps, multiple)
+    load_start = os.getloadavg()
     static = solve(scene)
     if not static.converged:
         raise RuntimeError(f"trade: the static solve failed ({static.message}); no error scale")
@@ -223,7 +231,8 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, progress=True, 
                         "vertices": scene.mesh.n_vertices, "unknowns": scene.n_free, "dt": dt,
                         "steps": steps, "deflection": deflection, "tip_vertices": tip.size},
               "times": [k * dt for k in check], "tolerance": tolerance, "rungs": rows,
-              "notes": notes}
+              "notes": notes, "machine": _machine(rows, load_start)}
+    _busy_note(result)
     if bodies:
         _against_the_body(result, scene, bodies, ref, check, tip, dt, steps, progress)
     mark_front(rows)
@@ -321,8 +330,25 @@ def registered_rungs(scene, dt, notes):
 
 
 def _roll(rung, scene, dt, steps, label):
+    """_rollout, timed again once if other processes kept BUSY_CORES or more cores busy while
+    it ran (the calmer of the two kept): the result of _rollout with "busy_cores", the cores
+    the others kept busy (anisofem.threads.LoadMeter; 0 where it cannot measure), and
+    "repeated"."""
+    run = _rollout(rung, scene, dt, steps, label)
+    if run["busy_cores"] >= BUSY_CORES:
+        again = _rollout(rung, scene, dt, steps, label and f"{label} (timed again: the machine "
+                                                             f"was busy)")
+        first = run["busy_cores"]
+        run = min(run, again, key=lambda r: r["busy_cores"])
+        run["busy_cores_first"] = first
+    run["repeated"] = "busy_cores_first" in run
+    return run
+
+
+def _rollout(rung, scene, dt, steps, label):
     """Roll rung out for steps of dt: positions and velocities at every scene step it lands on
-    (dict keyed by scene step), per-step seconds, infos, whether it completed."""
+    (dict keyed by scene step), per-step seconds, infos, whether it completed, the cores other
+    processes kept busy meanwhile."""
     h = dt * rung.dt_factor
     n_own = steps // rung.dt_factor
     live = sys.stderr.isatty()
@@ -332,6 +358,7 @@ def _roll(rung, scene, dt, steps, label):
     states = {0: (x, v)}
     seconds, infos, completed = [], [], True
     t_last = time.perf_counter()
+    meter = threads.LoadMeter()
     for k in range(n_own):
         try:
             x, v, info = advance(x, v)
@@ -351,7 +378,29 @@ def _roll(rung, scene, dt, steps, label):
         end = "" if completed else (f", stopped at step {len(seconds)}: "
                                     f"{infos[-1].get('message', 'failed')}")
         print(f"\r{label}: {sum(seconds):.1f} s{end}" + " " * 20, file=sys.stderr, flush=True)
-    return {"positions": states, "seconds": seconds, "infos": infos, "completed": completed}
+    return {"positions": states, "seconds": seconds, "infos": infos, "completed": completed,
+            "busy_cores": meter.others(wait=True) or 0.0}
+
+
+def _machine(rows, load_start):
+    """What the trade ran on: cores, the load average (1, 5, 15 minutes) at its start and end,
+    the thread count the user fixed (None: chosen by load, anisofem.threads), and the most
+    cores other processes kept busy during a rung's timing."""
+    return {"cores": len(threads.cores()), "load_average_start": list(load_start),
+            "load_average_end": list(os.getloadavg()), "threads": threads.fixed(),
+            "busy_cores": max(r["busy_cores"] for r in rows)}
+
+
+def _busy_note(result):
+    """Add a note naming the rungs timed while other processes kept BUSY_CORES or more busy."""
+    busy = [r for r in result["rungs"] if r["busy_cores"] >= BUSY_CORES]
+    if busy:
+        worst = max(r["busy_cores"] for r in busy)
+        result["notes"].insert(0, (
+            f"warning: the machine was busy: other processes kept up to {worst:.1f} of "
+            f"{result['machine']['cores']} cores busy while {len(busy)} rungs were timed (marked "
+            f"*, timed twice and the calmer run kept); their ms/step are slower than on an idle "
+            f"machine"))
 
 
 def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt, shared=None):
@@ -389,7 +438,8 @@ def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt
            "energy_drift": drift, "min_volume_ratio": ratio, "inverted": inverted,
            "max_volume_change": max(float(np.abs(c).max()) for c in change),
            "stable": bool(run["completed"] and drift <= ENERGY_GAIN_MAX),
-           "steps_taken": len(secs), "tip": tips}
+           "steps_taken": len(secs), "tip": tips, "busy_cores": run.get("busy_cores", 0.0),
+           "timed_twice": run.get("repeated", False)}
     setup = [info["setup_seconds"] for info in run["infos"] if "setup_seconds" in info]
     if setup:
         row["setup_seconds"] = setup[0]
@@ -413,7 +463,8 @@ def trade_table(result):
         errs = " / ".join(f"{e:.2g}" for e in r["errors"])
         its = r.get("iterations_per_step")
         vs_body = f" {r['max_continuum_error']:8.2g}" if body else ""
-        lines.append(f"{r['name']:<27} {r['ms_per_step']:8.3g} {exact / r['ms_per_step']:8.2f} "
+        mark = "*" if r.get("busy_cores", 0.0) >= BUSY_CORES else " "
+        lines.append(f"{r['name']:<27}{mark}{r['ms_per_step']:8.3g} {exact / r['ms_per_step']:8.2f} "
                      f"{errs:<36}{vs_body} {'' if its is None else f'{its:.1f}':>5} "
                      f"{r['energy_drift']:8.1e} {r['min_volume_ratio']:6.2f} {r['stable']}")
     s = result["scene"]

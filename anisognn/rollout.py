@@ -2,7 +2,7 @@
 import numpy as np
 import torch
 
-from anisofem import Scene
+from anisofem import Scene, threads
 from anisofem._validate import as_float_array, as_scalar
 
 from .graph import from_scene
@@ -50,6 +50,25 @@ def rollout(model, scene, steps, dt=None, x0=None, v0=None):
     return out
 
 
+_TORCH = {"set": None, "most": None}
+
+
+def torch_threads():
+    """Set torch's intra-op thread count for the inference about to run on the CPU: the
+    count torch had when a caller last chose one (torch's default: the cores), lowered to
+    anisofem.threads.available() while other processes keep cores busy. torch's OpenMP threads
+    wait at each operation's end for the slowest, and a descheduled one holds them all: a
+    200-tet step of the shipped network took 580 ms beside 2 busy processes on 2 threads, 7 ms
+    idle (docs/network.md)."""
+    now = torch.get_num_threads()
+    if now != _TORCH["set"]:  # chosen by the caller (or torch's default), not by this function
+        _TORCH["most"] = now
+    n = min(_TORCH["most"], threads.available())
+    if n != now:
+        torch.set_num_threads(n)
+    _TORCH["set"] = n
+
+
 def network_step(model, scene):
     """advance(x, v) -> (x_next, v_next, a): one step of the model's dt on scene, the network
     in its own dtype and device (given the positions in float64: GraphNet.forward), the state
@@ -61,6 +80,8 @@ def network_step(model, scene):
     held, dt = scene.fixed_mask, model.config.dt
 
     def advance(x, v):
+        if param.device.type == "cpu":
+            torch_threads()
         with torch.no_grad():
             a = model(torch.as_tensor(x, dtype=torch.float64, device=param.device),
                       torch.as_tensor(v, dtype=param.dtype, device=param.device), f_ext, graph)

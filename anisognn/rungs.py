@@ -14,7 +14,7 @@ from .galerkin import galerkin_acceleration
 from .graph import from_scene
 from .krylov import refine
 from .model import with_galerkin
-from .rollout import network_step
+from .rollout import network_step, torch_threads
 from .sampler import DENSITY, POISSON, YOUNG
 from .shipped import NAMES, pretrained
 
@@ -50,6 +50,7 @@ def previous_acceleration_rung(name, passes, iterations):
         previous = [torch.zeros(rest.shape, dtype=torch.float64)]
 
         def advance(x, v):
+            torch_threads()
             u, v_t = torch.tensor(x - rest), torch.tensor(v)
             with torch.no_grad():
                 a = galerkin_acceleration(previous[0], u, v_t, f_ext, graph, dt, passes)

@@ -6,17 +6,35 @@ SCENE -o PATH` (a scene's constant tensors for an engine), `python -m export red
 import argparse
 import sys
 
-from anisofem.files import result_path
+from anisofem.cli import Parser
+from anisofem.files import check_folder, result_path
 
 from . import bake, model_path
 
+#: The subcommands, each with what it does (python -m export --help lists them)
+COMMANDS = {"bench": "onnxruntime against torch per step (table + JSON)",
+            "bake": "a scene's constant model inputs for an engine (PATH.json + PATH.bin)",
+            "reduced": "a scene's reduced model for runtime.ReducedSimulator (no torch needed)",
+            "bake-reduced": "the browser page's reduced models of a baked scene",
+            "bench-reduced": "the reduced model's build, size and step times"}
+
+#: What a command's bad input raises: each ends it with one line and exit status 2
+BAD_INPUT = (ValueError, TypeError, FileNotFoundError, ImportError)
+
+
+def fail(parser, err):
+    """End the command with one line naming the problem and exit status 2 (as `python -m
+    anisofem` does)."""
+    parser.exit(2, f"{parser.prog}: error: {err}\n")
+
 
 def main(argv=None):
+    """Run a command; bad input ends it with a one-line error and exit status 2."""
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["bench"]:
         from . import bench
-        parser = argparse.ArgumentParser(prog="python -m export bench",
-                                         description="onnxruntime vs torch per step")
+        parser = Parser(prog="python -m export bench",
+                        description="onnxruntime vs torch per step")
         parser.add_argument("--json", default=result_path("bench_export.json"),
                             help="where to write the JSON (default %(default)s)")
         parser.add_argument("--sizes", nargs="+", default=list(bench.MESHES),
@@ -25,7 +43,7 @@ def main(argv=None):
         bench.run(sizes=args.sizes, out=args.json)
         return
     if argv[:1] == ["bake"]:
-        parser = argparse.ArgumentParser(
+        parser = Parser(
             prog="python -m export bake", description="write a scene's constant model inputs "
             "as PATH.json + PATH.bin (export/README.md, Baked scenes)")
         parser.add_argument("scene", choices=sorted(bake.SCENES))
@@ -36,9 +54,10 @@ def main(argv=None):
                             help="fiber angles in degrees from x towards z (default %(default)s)")
         args = parser.parse_args(argv[1:])
         try:
+            check_folder(args.output, "--output")
             header = bake.bake(args.scene, args.output, args.model, args.angles)
-        except (ValueError, FileNotFoundError) as err:
-            sys.exit(f"error: {err}")
+        except BAD_INPUT as err:
+            fail(parser, err)
         print(f"wrote {args.output}.json and .bin: {header['title']}, {header['n']} vertices, "
               f"{header['m']} tets, fiber angles {header['fiber_angles']}")
         return
@@ -52,18 +71,22 @@ def main(argv=None):
     from anisognn.cli import add_galerkin_arguments, stepping
 
     from . import to_onnx
-    parser = argparse.ArgumentParser(
-        prog="python -m export", description="export a trained anisognn model to ONNX "
-        "(`python -m export bench` times it)")
+    parser = Parser(
+        prog="python -m export", usage="python -m export {MODEL,%s} ..." % ",".join(COMMANDS),
+        description="export a trained anisognn model to ONNX: python -m export MODEL -o "
+        "model.onnx; the other commands (python -m export COMMAND --help for each):\n"
+        + "\n".join(f"  {name:<14} {what}" for name, what in COMMANDS.items()),
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("model", metavar="MODEL",
                         help=f"a model.pt / checkpoint.pt file or a shipped name {shipped.NAMES}")
     parser.add_argument("-o", "--output", default="model.onnx", help="the .onnx file to write")
     add_galerkin_arguments(parser)
     args = parser.parse_args(argv)
     try:
+        check_folder(args.output, "--output")
         net = stepping(shipped.model(args.model), args)
-    except (ValueError, FileNotFoundError) as err:
-        sys.exit(f"error: {err}")
+    except BAD_INPUT as err:
+        fail(parser, err)
     print(f"exporting {args.model} to {args.output} (tracing and checking take about a "
           f"minute)", file=sys.stderr, flush=True)
     to_onnx.export(net, args.output)
@@ -79,7 +102,7 @@ def _reduced(argv):
     from anisofem.reduced import MODES, ReducedModel
 
     from . import reduced
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="python -m export reduced", description="build a scene's reduced model "
         "(anisofem.reduced) and write it as PATH.json + PATH.bin for runtime.ReducedSimulator",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -92,12 +115,13 @@ def _reduced(argv):
     parser.add_argument("-o", "--output", required=True, help="PATH (without extension)")
     args = parser.parse_args(argv)
     try:
+        check_folder(args.output, "--output")
         display = None if args.display is None else read_mesh(args.display)
         model = ReducedModel(scene_of(args), modes=args.modes)
         header = reduced.write(model, args.output, title=args.scene, gravity=args.gravity,
                                display=display)
-    except (ValueError, FileNotFoundError) as err:
-        sys.exit(f"error: {err}")
+    except BAD_INPUT as err:
+        fail(parser, err)
     v = model.validation
     check = ("" if v is None else f"; static tip {100 * v.tip_error:.2g}% and field "
              f"{100 * v.field_error:.2g}% off the full FEM")
@@ -109,7 +133,7 @@ def _reduced(argv):
 def _bench_reduced(argv):
     """python -m export bench-reduced: the reduced model's build, size and step times."""
     from . import bench_reduced
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="python -m export bench-reduced", description=bench_reduced.__doc__.split("\n")[0],
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--sizes", nargs="+", default=list(bench_reduced.MESHES),
@@ -127,7 +151,7 @@ def _bake_reduced(argv):
     from anisofem.reduced import MODES
 
     from . import reduced
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="python -m export bake-reduced", description="write the reduced models of a "
         "baked scene at several fiber angles as PATH.json + PATH.bin (the browser page's)",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -138,9 +162,10 @@ def _bake_reduced(argv):
                         help="fiber angles in degrees from x towards z")
     args = parser.parse_args(argv)
     try:
+        check_folder(args.output, "--output")
         header = reduced.bake(args.scene, args.output, args.modes, args.angles)
-    except ValueError as err:
-        sys.exit(f"error: {err}")
+    except BAD_INPUT as err:
+        fail(parser, err)
     worst = max(v["tip_error"] for v in header["validation"])
     print(f"wrote {args.output}.json and .bin: {header['title']}, r = {header['r'][0]}, fiber "
           f"angles {header['fiber_angles']}; static tip within {100 * worst:.2g}% of the full "

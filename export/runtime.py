@@ -517,10 +517,17 @@ def _same_mesh(arrays, vertices, tets):
     if vertices is not None:
         vertices = _real(vertices, "vertices", (None, 3))
         rest = arrays["rest_positions"]
-        if vertices.shape != rest.shape or not np.allclose(vertices, rest, rtol=0,
-                                                           atol=1e-9 * np.abs(rest).max()):
-            raise ValueError(f"vertices: not the mesh this reduced model was built on ({rest.shape[0]} "
-                             f"vertices at its rest positions; got {vertices.shape[0]})")
+        if vertices.shape != rest.shape:
+            raise ValueError(f"vertices: not the mesh this reduced model was built on (it has "
+                             f"{rest.shape[0]} vertices; got {vertices.shape[0]})")
+        gap = np.linalg.norm(vertices - rest, axis=1)
+        moved = gap > 1e-9 * np.abs(rest).max()
+        if moved.any():
+            k = int(gap.argmax())
+            raise ValueError(f"vertices: not the mesh this reduced model was built on (the same "
+                             f"{rest.shape[0]} vertices, {int(moved.sum())} of them elsewhere; "
+                             f"the farthest, vertex {k}, is at {vertices[k].tolist()}, "
+                             f"{gap[k]:.3g} m from its rest position {rest[k].tolist()})")
     if tets is not None:
         tets = np.sort(np.asarray(tets), axis=1)   # a tet's vertex order is its orientation
         built = np.sort(arrays["tets"], axis=1)

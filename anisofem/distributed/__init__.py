@@ -100,11 +100,14 @@ def _result(system, x, info, comm, partition_seconds):
 def _share_cores(comm):
     """Give each rank its share of the machine's cores for numba's threads (the ranks on one
     machine otherwise run cores x ranks threads, and a rank waiting in a collective call
-    spins against the others' threads: a 2-rank solve ran 90x slower)."""
+    spins against the others' threads: a 2-rank solve ran 90x slower). The count is fixed
+    (anisofem.threads.set_threads): the other ranks' threads are no load to step aside from."""
     import numba
     from mpi4py import MPI
+
+    from .. import threads
     local = comm.tompi4py().Split_type(MPI.COMM_TYPE_SHARED)
-    numba.set_num_threads(max(1, numba.config.NUMBA_NUM_THREADS // local.Get_size()))
+    threads.set_threads(max(1, numba.config.NUMBA_NUM_THREADS // local.Get_size()))
     local.Free()
 
 

@@ -11,12 +11,14 @@ energy decrease is the exact quartic in the step length (no difference of two en
 the search ranks points below the energy's round-off).
 """
 import math
+import os
 import time
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse.linalg as spla
 
+from .._validate import as_float_array
 from ..densities import STVK
 from ..metrics import moving_tip
 from ..solve import solve
@@ -25,7 +27,7 @@ from ..scene import check_scene
 from . import basis as _basis
 from . import kernels
 from .display import interpolate
-from .polynomial import polynomial
+from .polynomial import build_bytes, polynomial
 
 #: Default number of vibration modes; the basis holds them and their m (m + 1) / 2 modal
 #: derivatives, less dependent directions (6 modes: r = 27).
@@ -91,6 +93,7 @@ class ReducedModel:
         if modes >= scene.n_free:
             raise ValueError(f"modes: {modes} modes need more than the scene's {scene.n_free} "
                              f"unknowns")
+        _check_memory(scene, modes, derivatives)
         t0 = time.perf_counter()
         self.scene = scene
         self.x0 = scene.initial_positions()
@@ -145,9 +148,11 @@ class ReducedModel:
         move to points + basis_at(points) @ q (anisofem.reduced.display)."""
         return interpolate(self.scene.mesh, self.basis, points)
 
-    def project(self, force):
-        """The reduced force U^T f (r,) of nodal forces f (n, 3) in N."""
-        return self.basis.T @ np.asarray(force, dtype=float).ravel()
+    def project(self, force, name="force"):
+        """The reduced force U^T f (r,) of nodal forces f (n, 3) in N (finite; name: what the
+        errors call it)."""
+        f = as_float_array(force, name, shape=(self.scene.mesh.n_vertices, 3))
+        return self.basis.T @ f.ravel()
 
     def energy(self, q):
         """The elastic energy V(q), J."""
@@ -161,7 +166,7 @@ class ReducedModel:
     def solve(self, force=None, q0=None, rtol=1e-8, max_iter=50):
         """The static equilibrium under the scene's loads plus nodal forces `force` (n, 3), N,
         from q0 (default 0): returns (q, NewtonReport)."""
-        q = np.zeros(self.r) if q0 is None else np.array(q0, dtype=float)
+        q = np.zeros(self.r) if q0 is None else as_float_array(q0, "q0", shape=(self.r,))
         load = self._load(force)
         return self._newton(load, q, None, 0.0, rtol * _norm(load), rtol, max_iter)
 
@@ -195,6 +200,48 @@ class ReducedModel:
 _MESSAGES = {kernels.CONVERGED: "converged", kernels.SPENT: "{} iterations spent",
              kernels.NO_DESCENT: "line search found no decrease",
              kernels.NOT_FINITE: "non-finite force"}
+
+
+def coordinates(modes, derivatives, unknowns):
+    """The most reduced coordinates of a basis of `modes` vibration modes (with their modal
+    derivatives, or not) on `unknowns` free components."""
+    return min(modes + (modes * (modes + 1) // 2 if derivatives else 0), unknowns)
+
+
+def _available_bytes():
+    """Memory the system can give without swapping (/proc/meminfo's MemAvailable; else the free
+    physical pages), or None where neither is known."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _check_memory(scene, modes, derivatives):
+    """ValueError, before any work, when the polynomial of `modes` modes would not fit in the
+    memory available now (polynomial.build_bytes), naming the estimate and the most modes that
+    would fit."""
+    available = _available_bytes()
+    points = scene.elements.weights.size
+
+    def need(m):
+        return build_bytes(coordinates(m, derivatives, scene.n_free), points)
+    if available is None or need(modes) <= available:
+        return
+    fits = max((m for m in range(1, modes) if need(m) <= available), default=0)
+    r = coordinates(modes, derivatives, scene.n_free)
+    raise ValueError(f"modes: {modes} modes make a basis of up to {r} coordinates, whose "
+                     f"polynomial needs about {need(modes) / 2 ** 30:.3g} GiB to build (its "
+                     f"quartic term grows as r^4) and this machine has "
+                     f"{available / 2 ** 30:.3g} GiB available; "
+                     + (f"at most {fits} modes fit" if fits else "not even 1 mode fits"))
 
 
 def _norm(v):
