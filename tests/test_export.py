@@ -114,10 +114,12 @@ def assert_within_float32_reach(net, sim, scene, count):
         np.testing.assert_allclose(v_next, (x_next - x) / 0.02, rtol=1e-12, atol=1e-12)
     assert scale > 1e-2
     # float32 from displacements formed in float64 (GraphNet.forward): torch's own float32 step
-    # is within 1e-5 of the largest acceleration (from float32 positions it was up to 1.6e-5 on
-    # one state and 3.9e-3 along a rollout's first step); onnxruntime sums in another order,
-    # which the second Galerkin pass amplifies on the most distorted states (6e-5)
-    assert rounding <= 1e-5 * scale, (rounding, scale)
+    # is within 1e-5 of the largest acceleration on AVX2 machines and 2.0e-5 on an AVX-512 one
+    # (meshgraphnets, 540 tets; torch's kernels sum in another order there); from float32
+    # positions it was up to 1.6e-5 on one state and 3.9e-3 along a rollout's first step;
+    # onnxruntime sums in another order, which the second Galerkin pass amplifies on the most
+    # distorted states (6e-5)
+    assert rounding <= 3e-5 * scale, (rounding, scale)
     assert ort <= 1e-4 * scale, (ort, scale)
 
 
@@ -289,8 +291,10 @@ def test_cli_exports_a_checkpoint_and_a_shipped_name(tmp_path, capsys):
     latent = anisognn.pretrained("directional").config.latent
     assert f"directional aggregation, {latent} wide" in capsys.readouterr().out
     assert (tmp_path / "a.onnx").read_bytes() == (tmp_path / "b.onnx").read_bytes()
-    with pytest.raises(SystemExit, match="error: checkpoint: no such file"):
+    with pytest.raises(SystemExit) as ended:
         cli.main([str(tmp_path / "missing.pt"), "-o", str(tmp_path / "c.onnx")])
+    assert ended.value.code == 2
+    assert "python -m export: error: checkpoint: no such file" in capsys.readouterr().err
 
 
 def test_cli_galerkin_flags_choose_how_the_exported_model_steps(tmp_path, capsys):
@@ -323,8 +327,9 @@ def test_cli_galerkin_flags_choose_how_the_exported_model_steps(tmp_path, capsys
     for flags, error in ((["--galerkin", "off", "--galerkin-passes", "2"], "--galerkin-passes"),
                          (["--galerkin-passes", "0"], "galerkin_passes: must be an integer >= 1"),
                          (["--cg-iterations", "-1"], "--cg-iterations: expected an integer")):
-        with pytest.raises(SystemExit, match=error):
+        with pytest.raises(SystemExit) as ended:
             cli.main(["directional", "-o", str(tmp_path / "bad.onnx")] + flags)
+        assert ended.value.code == 2 and error in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("name", anisognn.shipped.NAMES)

@@ -1,6 +1,8 @@
 """The reduced model (anisofem.reduced): its polynomial equals the full FEM projected on the
 basis, its Hessian matches finite differences, its solves converge or say so and approach the
 full FEM, and bad input is refused."""
+import os
+
 import numpy as np
 import pytest
 
@@ -221,3 +223,51 @@ def test_basis_at_points_of_the_same_body_interpolates_it(model):
     assert np.abs(moved - fine[match]).max() <= 1e-12
     with pytest.raises(ValueError, match="lies in no tet"):
         model.basis_at([[0.5, 0.0, 0.0]])
+
+
+def test_non_finite_forces_raise_like_the_runtime(model):
+    force = np.zeros((model.scene.mesh.n_vertices, 3))
+    force[4, 2] = np.nan
+    q = np.zeros(model.r)
+    for call in (lambda: model.step(q, q, 0.02, force=force), lambda: model.solve(force=force),
+                 lambda: model.project(force)):
+        with pytest.raises(ValueError, match=r"force: contains NaN or inf \(at index \[\[4, 2\]\]"):
+            call()
+    with pytest.raises(ValueError, match=r"force: expected shape \(\d+, 3\)"):
+        model.step(q, q, 0.02, force=np.zeros(3))
+
+
+def test_a_polynomial_past_the_memory_is_refused_before_it_is_built(monkeypatch):
+    from anisofem.reduced import model as module
+    from anisofem.reduced.polynomial import build_bytes
+    scene = cantilever()
+    monkeypatch.setattr(module, "_available_bytes", lambda: 2 ** 30)
+    points = scene.elements.weights.size
+    need = [build_bytes(module.coordinates(m, True, scene.n_free), points) for m in (12, 13, 14)]
+    assert need[0] <= 2 ** 30 < need[2]  # 12 modes fit in 1 GiB, 14 do not
+    fits = 12 if need[1] > 2 ** 30 else 13
+    with pytest.raises(ValueError, match=rf"modes: 14 modes make a basis of up to 119 coordinates"
+                                         rf", whose polynomial needs about .* GiB .* 1 GiB "
+                                         rf"available; at most {fits} modes fit"):
+        ReducedModel(scene, modes=14)
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="Linux's /proc")
+def test_the_memory_estimate_bounds_a_real_build():
+    import subprocess
+    import sys
+    # the peak of this process image (VmHWM; ru_maxrss would start at the forking parent's)
+    code = ("import anisofem as af\n"
+            "from anisofem.reduced import ReducedModel\n"
+            "from anisofem.reduced.polynomial import build_bytes\n"
+            "def peak():\n"
+            "    line = [l for l in open('/proc/self/status') if l.startswith('VmHWM')][0]\n"
+            "    return int(line.split()[1]) * 1024\n"
+            "scene = af.default_scene(af.box_beam(cells=(10, 2, 2)))\n"
+            "before = peak()\n"
+            "m = ReducedModel(scene, modes=10, validate=False)\n"
+            "print((peak() - before) / build_bytes(m.r, scene.elements.weights.size))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert 0.4 < float(done.stdout) < 1.3  # the estimate is the build's size, a little over

@@ -2,6 +2,8 @@
 only) moves like the library's stepper, refuses another mesh and another file, and the
 command writes it."""
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -91,8 +93,54 @@ def test_command_writes_a_scene_the_runtime_steps(tmp_path, capsys):
     for _ in range(5):
         q, w = sim.step(q, w, force, 0.02)
     assert sim.positions(q)[:, 2].min() < sim.rest_positions[:, 2].min() - 1e-4
-    with pytest.raises(SystemExit, match="Neo-Hookean"):
+    with pytest.raises(SystemExit) as ended:
         main(["reduced", "box", "--material", "neohookean", "-o", out])
+    assert ended.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("python -m export reduced: error: scene:")
+    assert "Neo-Hookean" in err[0]
+
+
+def test_runtime_says_how_another_mesh_differs(written):
+    scene, model, path = written
+    fewer = cantilever(cells=(5, 2, 2)).mesh.vertices
+    with pytest.raises(ValueError, match=f"it has {scene.mesh.n_vertices} vertices; got "
+                                         f"{fewer.shape[0]}"):
+        ReducedSimulator(path, fewer)
+    moved = scene.mesh.vertices.copy()
+    moved[7] += (0.0, 0.003, 0.0)
+    moved[9] += (0.001, 0.0, 0.0)
+    with pytest.raises(ValueError, match=r"the same \d+ vertices, 2 of them elsewhere; the "
+                                         r"farthest, vertex 7, .* 0.003 m from its rest"):
+        ReducedSimulator(path, moved)
+
+
+def test_export_commands_fail_in_one_line_with_status_2(tmp_path):
+    def export(*args):
+        return subprocess.run([sys.executable, "-m", "export", *args], cwd=tmp_path,
+                              capture_output=True, text=True, timeout=300)
+    for args, says in [
+            (("reduced", "nothere.msh", "-o", "r"), "path: no such mesh file 'nothere.msh'"),
+            (("reduced", "box", "--young", "-1e5", "-o", "r"), "young: Young's modulus must"),
+            (("reduced", "t", "--cells", "4", "2", "2", "-o", "r"), "--cells: the t shape"),
+            # refused before it allocates: the polynomial of 200 modes would need terabytes
+            (("reduced", "box", "--cells", "20", "4", "4", "--modes", "200", "-o", "r"),
+             "modes fit"),
+            (("bake", "box", "-o", "r"), "argument scene: invalid choice")]:
+        r = export(*args)
+        assert r.returncode == 2, (args, r.stdout, r.stderr)
+        lines = r.stderr.strip().splitlines()
+        assert says in lines[-1] and (len(lines) == 1 or lines[0].startswith("usage:")), args
+        assert r.stdout == ""
+    helped = export("--help").stdout
+    assert all(f"  {name} " in helped for name in ("bench", "bake", "reduced", "bake-reduced",
+                                                   "bench-reduced"))
+
+
+def test_commands_make_the_folders_they_write_to(tmp_path):
+    out = tmp_path / "made" / "here" / "box"
+    main(["reduced", "box", "--cells", "4", "1", "1", "--modes", "3", "-o", str(out)])
+    assert (tmp_path / "made" / "here" / "box.bin").exists()
 
 
 def test_bench_row_measures_what_it_names(tmp_path):

@@ -174,8 +174,11 @@ def test_library_boundaries_name_the_users_input(tmp_path):
         af.simulate(af.default_scene(mesh), steps=2.5)
     with pytest.raises(TypeError, match="bogus: not an option of method 'auto'"):
         af.solve(af.default_scene(mesh), bogus=3)
-    with pytest.raises(FileNotFoundError, match="the folder of .*nowhere.* does not exist"):
-        af.write_mesh(tmp_path / "nowhere" / "o.vtu", mesh)
+    af.write_mesh(tmp_path / "made" / "here" / "o.vtu", mesh)  # the folder is made
+    assert (tmp_path / "made" / "here" / "o.vtu").exists()
+    (tmp_path / "afile").write_text("")
+    with pytest.raises(FileNotFoundError, match="the folder of .*afile.* cannot be made"):
+        af.write_mesh(tmp_path / "afile" / "o.vtu", mesh)
     with pytest.raises(ValueError, match="has no mesh format"):
         af.write_mesh(tmp_path / "o.txt", mesh)
     (tmp_path / "empty.msh").write_text("")
