@@ -79,7 +79,9 @@ def test_bake_command_and_its_errors(tmp_path, capsys):
     cli.main(["bake", "t", "-o", str(tmp_path / "t"), "--model", MODEL, "--angles", "30"])
     assert "T, 0.1 m wide" in capsys.readouterr().out
     assert runtime.read_arrays(tmp_path / "t")[0]["fiber_angles"] == [30.0]
-    with pytest.raises(SystemExit, match="model: no such file"):
+    with pytest.raises(SystemExit) as ended:
         cli.main(["bake", "y", "-o", str(tmp_path / "y"), "--model", str(tmp_path / "no.onnx")])
+    assert ended.value.code == 2
+    assert "python -m export bake: error: model: no such file" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         cli.main(["bake", "sphere", "-o", str(tmp_path / "s")])
