@@ -29,6 +29,8 @@ SCENES = {"200": ((10, 2, 2), 20, 3), "12800": ((40, 8, 8), 5, 1)}
 #: the trade's cantilever: 0.1 x 0.02 x 0.02 m, fibers at 40 degrees in x-z, kappa = E
 FIBER = (math.cos(math.radians(40)), 0.0, math.sin(math.radians(40)))
 DT = 0.02
+#: A rollout goes on (up to 50 times its steps) until it has lasted this long, s
+MIN_SECONDS = 0.3
 
 
 def cantilever(cells):
@@ -61,13 +63,19 @@ class Busy:
 
 def time_rung(rung, scene, steps):
     """Median ms per step of dt of rung rolled out `steps` steps from rest (the first step
-    left out), and the cores other processes kept busy meanwhile (anisofem.threads.LoadMeter)."""
+    left out; a fast rung steps on until MIN_SECONDS have passed), and the cores other
+    processes kept busy meanwhile (anisofem.threads.LoadMeter)."""
     advance = rung.make(scene, DT * rung.dt_factor)
     x = scene.initial_positions()
     v = np.zeros_like(x)
     seconds = []
     meter = threads.LoadMeter()
-    for _ in range(max(2, steps // rung.dt_factor)):
+    own_steps = max(2, steps // rung.dt_factor)
+    start = time.perf_counter()
+    # a fast rung (the reduced models) steps on, to at most 50 times as many steps, until
+    # MIN_SECONDS have passed: a few steps of 0.1 ms are no measurement
+    while len(seconds) < own_steps or (time.perf_counter() - start < MIN_SECONDS
+                                       and len(seconds) < 50 * own_steps):
         t0 = time.perf_counter()
         x, v, info = advance(x, v)
         seconds.append(time.perf_counter() - t0)
@@ -99,7 +107,7 @@ def run(busy=None, scenes=tuple(SCENES), rungs=None, out=result_path("bench_unde
         if rungs:
             ladder_rungs = ladder.select_rungs(ladder_rungs, rungs)
         for i, rung in enumerate(ladder_rungs, 1):
-            if progress:
+            if progress and sys.stderr.isatty():
                 print(f"\r{name} tets [{i}/{len(ladder_rungs)}] {rung.name}" + " " * 20,
                       end="", file=sys.stderr, flush=True)
             idle, idle_busy = _timing(rung, scene, steps, repeats)
@@ -110,7 +118,7 @@ def run(busy=None, scenes=tuple(SCENES), rungs=None, out=result_path("bench_unde
                          "idle_busy_cores": idle_busy, "loaded_busy_cores": loaded_busy})
         for note in notes:
             print(f"note ({name} tets): {note}", file=sys.stderr)
-    if progress:
+    if progress and sys.stderr.isatty():
         print(file=sys.stderr)
     report = {"cores": cores, "busy_processes": busy, "load_average": os.getloadavg(),
               "user_threads": threads.fixed(), "rows": rows}

@@ -132,3 +132,19 @@ def test_trade_records_the_machine_and_warns_when_it_was_busy():
     assert "warning: the machine was busy" in table
     marked = [line[:27].strip() for line in table.splitlines()[2:] if line[27:28] == "*"]
     assert marked and set(marked) <= {"exact", "reduced m5"}
+
+
+def test_bench_under_load_times_each_rung_idle_and_beside_the_busy_processes(tmp_path, capsys):
+    from anisofem import bench_load
+    out = tmp_path / "load" / "bench.json"
+    report = bench_load.run(busy=1, scenes=("200",), rungs=["reduced m5"], out=str(out),
+                            progress=False)
+    assert [r["rung"] for r in report["rows"]] == ["exact", "reduced m5"]
+    for row in report["rows"]:
+        assert row["slowdown"] == pytest.approx(row["loaded_ms"] / row["idle_ms"])
+        assert row["loaded_busy_cores"] > 0.6 > row["idle_busy_cores"]
+    printed = capsys.readouterr().out
+    assert "beside 1 busy processes" in printed and "reduced m5" in printed
+    assert out.exists()
+    with pytest.raises(ValueError, match="busy: at least one busy process"):
+        bench_load.run(busy=0)
