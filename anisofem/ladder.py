@@ -232,7 +232,6 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, progress=True, 
                         "steps": steps, "deflection": deflection, "tip_vertices": tip.size},
               "times": [k * dt for k in check], "tolerance": tolerance, "rungs": rows,
               "notes": notes, "machine": _machine(rows, load_start)}
-    _busy_note(result)
     if bodies:
         _against_the_body(result, scene, bodies, ref, check, tip, dt, steps, progress)
     mark_front(rows)
@@ -391,18 +390,6 @@ def _machine(rows, load_start):
             "busy_cores": max(r["busy_cores"] for r in rows)}
 
 
-def _busy_note(result):
-    """Add a note naming the rungs timed while other processes kept BUSY_CORES or more busy."""
-    busy = [r for r in result["rungs"] if r["busy_cores"] >= BUSY_CORES]
-    if busy:
-        worst = max(r["busy_cores"] for r in busy)
-        result["notes"].insert(0, (
-            f"warning: the machine was busy: other processes kept up to {worst:.1f} of "
-            f"{result['machine']['cores']} cores busy while {len(busy)} rungs were timed (marked "
-            f"*, timed twice and the calmer run kept); their ms/step are slower than on an idle "
-            f"machine"))
-
-
 def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt, shared=None):
     """One rung's table row (see the module docstring for the quantities); shared: compare the
     first `shared` vertices only (a finer mesh of the same body), default all."""
@@ -481,6 +468,13 @@ def trade_table(result):
                      f"deflection {ref['deflection']:.4g} m; cheapest within "
                      f"{result['tolerance']:g} of it: {rec if rec else 'none'}")
     lines += [f"note: {n}" for n in result["notes"]]
+    busy = [r for r in result["rungs"] if r.get("busy_cores", 0.0) >= BUSY_CORES]
+    if busy:
+        lines.append(
+            f"warning: the machine was busy: other processes kept up to "
+            f"{max(r['busy_cores'] for r in busy):.1f} of {result['machine']['cores']} cores "
+            f"busy while {len(busy)} rungs were timed (marked *, timed twice and the calmer "
+            f"run kept); their ms/step are slower than on an idle machine")
     return "\n".join(lines)
 
 

@@ -18,7 +18,6 @@ left free, rounded, at least 1. An idle machine keeps every thread. Where the us
 it keeps numba's default.
 """
 import os
-import resource
 import threading
 import time
 
@@ -54,10 +53,10 @@ def cores():
 _TICK = 1.0 / os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 0.01
 
 
-def _busy_seconds(cores):
-    """CPU seconds the given cores spent busy since boot (every process: user, nice, system,
+def _busy_seconds(cpus):
+    """CPU seconds the CPUs (indices) spent busy since boot (every process: user, nice, system,
     irq, softirq, steal), or None where /proc/stat cannot be read."""
-    wanted = {f"cpu{c}" for c in cores}
+    wanted = {f"cpu{c}" for c in cpus}
     try:
         with open("/proc/stat", "rb") as f:
             text = f.read().decode()
@@ -74,12 +73,6 @@ def _busy_seconds(cores):
     return busy * _TICK
 
 
-def _own_seconds():
-    """CPU seconds this process has used (every thread, user and system)."""
-    usage = resource.getrusage(resource.RUSAGE_SELF)
-    return usage.ru_utime + usage.ru_stime
-
-
 class LoadMeter:
     """The other processes' use of this process's cores, measured between readings:
 
@@ -94,7 +87,7 @@ class LoadMeter:
 
     def _sample(self):
         busy = _busy_seconds(self.cores)
-        return None if busy is None else (time.monotonic(), busy, _own_seconds())
+        return None if busy is None else (time.monotonic(), busy, time.process_time())
 
     def others(self, wait=False):
         """Cores (a float) the other processes kept busy since the meter was made or last

@@ -1,4 +1,5 @@
 """The command line: generate a mesh, solve it, read the result back."""
+import json
 import subprocess
 import sys
 
@@ -166,3 +167,25 @@ def test_petsc_engine_without_petsc4py_says_what_to_install(folder):
     r = subprocess.run([sys.executable, "-c", code], cwd=folder, capture_output=True, text=True)
     assert r.returncode == 2
     assert "make install-mpi" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("shape, axis", [("box", 0), ("cylinder", 0), ("t", 2), ("y", 2)])
+def test_each_shape_holds_the_end_it_stands_on(shape, axis):
+    from anisofem.cli import _parser, scene_of
+    args = _parser().parse_args(["trade", shape])
+    scene = scene_of(args)
+    X = scene.mesh.vertices
+    held = scene.fixed_mask.all(axis=1)
+    assert held.any()
+    np.testing.assert_allclose(X[held, axis], X[:, axis].min(), atol=1e-12)
+    assert args.fixed == ("x-min" if axis == 0 else "z-min")
+
+
+def test_the_trade_makes_the_folders_of_its_files(tmp_path):
+    r = run("trade", "box", "--cells", "4", "1", "1", "--steps", "10", "--no-surrogates",
+            "--rungs", "reduced m5", "--json", "results/trade/box.json", "--png",
+            "results/trade/box.png", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (tmp_path / "results" / "trade" / "box.json").exists()
+    assert (tmp_path / "results" / "trade" / "box.png").exists()
+    assert "machine" in json.loads((tmp_path / "results" / "trade" / "box.json").read_text())

@@ -32,14 +32,18 @@ def test_free_threads_are_the_cores_the_others_leave_rounded():
 
 def test_meter_counts_other_processes_and_not_this_one():
     meter = threads.LoadMeter()
+    time.sleep(0.3)
+    before = meter.others()  # what else runs on this machine now
+    if before > CORES - 1.2:
+        pytest.skip(f"the machine is busy ({before:.1f} of {CORES} cores): no core to measure")
     end = time.monotonic() + 0.4
     while time.monotonic() < end:  # this process busy: not "others"
         pass
-    assert meter.others() < 0.5
+    assert meter.others() < before + 0.5
     with Busy(1):
         meter.others()
         time.sleep(0.5)
-        assert meter.others() > 0.6
+        assert meter.others() > before + 0.6
 
 
 @pytest.mark.skipif(threads.fixed() is not None, reason="the environment fixes the threads")
@@ -127,6 +131,7 @@ def test_trade_records_the_machine_and_warns_when_it_was_busy():
     with Busy(CORES):
         busy = ladder.trade(scene, steps=10, rungs=rungs, progress=False)
     assert busy["machine"]["busy_cores"] >= ladder.BUSY_CORES
+    assert not any("busy" in n for n in busy["notes"])  # said in the table, not a note
     assert any(r["timed_twice"] for r in busy["rungs"])
     table = ladder.trade_table(busy)
     assert "warning: the machine was busy" in table
@@ -142,7 +147,9 @@ def test_bench_under_load_times_each_rung_idle_and_beside_the_busy_processes(tmp
     assert [r["rung"] for r in report["rows"]] == ["exact", "reduced m5"]
     for row in report["rows"]:
         assert row["slowdown"] == pytest.approx(row["loaded_ms"] / row["idle_ms"])
-        assert row["loaded_busy_cores"] > 0.6 > row["idle_busy_cores"]
+        assert row["loaded_busy_cores"] > row["idle_busy_cores"]
+        if row["idle_busy_cores"] < 0.3:  # an idle machine: the busy process is all the others
+            assert row["loaded_busy_cores"] > 0.6
     printed = capsys.readouterr().out
     assert "beside 1 busy processes" in printed and "reduced m5" in printed
     assert out.exists()
