@@ -280,6 +280,10 @@ def _parser():
     return p
 
 
+#: What a command's bad input raises: each ends it with one line and exit status 2
+BAD_INPUT = (ValueError, TypeError, FileNotFoundError, ImportError)
+
+
 def main(argv=None):
     """Run a command; bad input ends it with a one-line error and exit status 2, before any
     long work starts."""
@@ -287,7 +291,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         return _COMMANDS[args.command](args)
-    except (ValueError, TypeError, FileNotFoundError, ImportError) as err:
+    except BAD_INPUT as err:
         parser.exit(2, f"{parser.prog} {args.command}: error: {err}\n")
 
 

@@ -332,15 +332,14 @@ def _roll(rung, scene, dt, steps, label):
     """_rollout, timed again once if other processes kept BUSY_CORES or more cores busy while
     it ran (the calmer of the two kept): the result of _rollout with "busy_cores", the cores
     the others kept busy (anisofem.threads.LoadMeter; 0 where it cannot measure), and
-    "repeated"."""
+    "timed_twice"."""
     run = _rollout(rung, scene, dt, steps, label)
-    if run["busy_cores"] >= BUSY_CORES:
+    timed_twice = run["busy_cores"] >= BUSY_CORES
+    if timed_twice:
         again = _rollout(rung, scene, dt, steps, label and f"{label} (timed again: the machine "
                                                              f"was busy)")
-        first = run["busy_cores"]
         run = min(run, again, key=lambda r: r["busy_cores"])
-        run["busy_cores_first"] = first
-    run["repeated"] = "busy_cores_first" in run
+    run["timed_twice"] = timed_twice
     return run
 
 
@@ -426,7 +425,7 @@ def _row(rung, run, ref, check, tip, deflection, u_max, static_energy, scene, dt
            "max_volume_change": max(float(np.abs(c).max()) for c in change),
            "stable": bool(run["completed"] and drift <= ENERGY_GAIN_MAX),
            "steps_taken": len(secs), "tip": tips, "busy_cores": run.get("busy_cores", 0.0),
-           "timed_twice": run.get("repeated", False)}
+           "timed_twice": run.get("timed_twice", False)}
     setup = [info["setup_seconds"] for info in run["infos"] if "setup_seconds" in info]
     if setup:
         row["setup_seconds"] = setup[0]

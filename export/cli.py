@@ -6,7 +6,7 @@ SCENE -o PATH` (a scene's constant tensors for an engine), `python -m export red
 import argparse
 import sys
 
-from anisofem.cli import Parser
+from anisofem.cli import BAD_INPUT, Parser
 from anisofem.files import check_folder, result_path
 
 from . import bake, model_path
@@ -17,10 +17,6 @@ COMMANDS = {"bench": "onnxruntime against torch per step (table + JSON)",
             "reduced": "a scene's reduced model for runtime.ReducedSimulator (no torch needed)",
             "bake-reduced": "the browser page's reduced models of a baked scene",
             "bench-reduced": "the reduced model's build, size and step times"}
-
-#: What a command's bad input raises: each ends it with one line and exit status 2
-BAD_INPUT = (ValueError, TypeError, FileNotFoundError, ImportError)
-
 
 def fail(parser, err):
     """End the command with one line naming the problem and exit status 2 (as `python -m

@@ -148,10 +148,9 @@ class ReducedModel:
         move to points + basis_at(points) @ q (anisofem.reduced.display)."""
         return interpolate(self.scene.mesh, self.basis, points)
 
-    def project(self, force, name="force"):
-        """The reduced force U^T f (r,) of nodal forces f (n, 3) in N (finite; name: what the
-        errors call it)."""
-        f = as_float_array(force, name, shape=(self.scene.mesh.n_vertices, 3))
+    def project(self, force):
+        """The reduced force U^T f (r,) of nodal forces f (n, 3) in N (finite)."""
+        f = as_float_array(force, "force", shape=(self.scene.mesh.n_vertices, 3))
         return self.basis.T @ f.ravel()
 
     def energy(self, q):
