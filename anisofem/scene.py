@@ -77,10 +77,9 @@ class Scene:
         self.fixed_positions = self._fixed_positions(fixed, fixed_positions)
         vol = mesh.rest_volumes
         self.masses = _to_nodes(mesh, self._params["density"] * vol, LUMPED[mesh.order])
-        b = np.zeros((m, 3))
-        if gravity is not None:
-            g = as_float_array(gravity, "gravity", shape=(3,))
-            b += self._params["density"][:, None] * g
+        self.gravity = np.zeros(3) if gravity is None else as_float_array(gravity, "gravity",
+                                                                           shape=(3,))
+        b = self._params["density"][:, None] * self.gravity
         if body_force is not None:
             b += per_element(body_force, "body_force", m, width=3)
         f = np.zeros((n, 3))
@@ -91,8 +90,17 @@ class Scene:
         if traction is not None or traction_faces is not None:
             f += _traction_force(mesh, traction, traction_faces)
         self.external_force = f
-        for arr in (self.fixed_mask, self.fixed_positions, self.masses, self.external_force):
+        for arr in (self.fixed_mask, self.fixed_positions, self.masses, self.external_force,
+                    self.gravity):
             arr.setflags(write=False)
+
+    def gravity_force(self, g):
+        """The nodal force (n, 3), N, of gravity g (3,), m/s^2, on this scene's mesh and
+        densities (the consistent load, as the scene's own gravity)."""
+        g = as_float_array(g, "gravity", shape=(3,))
+        per_tet = self._params["density"] * self.mesh.rest_volumes
+        share = _to_nodes(self.mesh, per_tet, CONSISTENT[self.mesh.order])
+        return share[:, None] * g
 
     def _fixed_mask(self, fixed):
         n = self.mesh.n_vertices
@@ -248,6 +256,16 @@ class Scene:
         force = share * self.external_force
         force.setflags(write=False)
         moved.external_force = force
+        return moved
+
+    def plus_force(self, force):
+        """The same scene with nodal forces `force` (n, 3), N, added to its external force.
+        Shares what held_at shares."""
+        f = as_float_array(force, "force", shape=(self.mesh.n_vertices, 3))
+        moved = self.held_at(self.fixed_positions)
+        total = self.external_force + f
+        total.setflags(write=False)
+        moved.external_force = total
         return moved
 
     @cached_property

@@ -20,18 +20,31 @@ import scipy.sparse.linalg as spla
 
 from .._validate import as_float_array
 from ..densities import STVK
+from ..inversion import volume_change
 from ..metrics import moving_tip
-from ..solve import solve
+from ..solve import Stepper, solve
 from ..potential import Potential
 from ..scene import check_scene
 from . import basis as _basis
 from . import kernels
 from .display import interpolate
+from .loads import Loads, default_loads, unseen_cases
+from .snapshots import static_states, principal_directions
 from .polynomial import build_bytes, polynomial
 
 #: Default number of vibration modes; the basis holds them and their m (m + 1) / 2 modal
 #: derivatives, less dependent directions (6 modes: r = 27).
 MODES = 6
+
+#: The validation of a model with declared loads: unseen load cases, each held for HOLD_STEPS
+#: backward-Euler steps of VALIDATION_DT s from rest and released for as many.
+VALIDATION_CASES = 3
+HOLD_STEPS = 25
+VALIDATION_DT = 0.02
+
+#: Cases drawn per validation case wanted: a drawn case whose full rollout turns elements
+#: inside out is left out and the next one taken.
+REDRAWS = 3
 
 #: The smallest gradient norm float64 resolves, over eps times the size of the terms summed
 #: into it (|H| |q| and the loads).
@@ -40,15 +53,22 @@ ROUNDOFF_FACTOR = 1.0
 
 @dataclass
 class Validation:
-    """The reduced model against the full FEM in the scene's static equilibrium under its own
-    loads: tip_error, |mean displacement difference over the tip| / |the full tip
-    displacement| (the tip: anisofem.metrics.moving_tip of the full answer); field_error, the
-    largest vertex displacement difference over the largest full displacement; full_seconds,
-    the full solve's time; converged, whether both solves converged."""
+    """The reduced model against the full FEM on cases it was not built from. Static (no
+    declared loads): the equilibrium under the scene's loads. Rollouts (declared loads): from
+    rest, each of `cases` unseen loads drawn from the declaration held for HOLD_STEPS steps of
+    VALIDATION_DT and released for as many. tip_error: the largest |mean displacement
+    difference over the tip| over the largest |full tip displacement| of its case (the tip: the
+    drag's vertices, else anisofem.metrics.moving_tip of the full answer); field_error: the
+    largest vertex displacement difference over the largest full one; full_seconds, the full
+    FEM's time; converged, whether every solve of both converged; cases, how many load cases
+    (0: the static check); inverted, how many drawn cases were left out (and drawn again)
+    because the full FEM turned elements inside out, where StVK is unphysical."""
     tip_error: float
     field_error: float
     full_seconds: float
     converged: bool
+    cases: int = 0
+    inverted: int = 0
 
 
 @dataclass
@@ -68,34 +88,51 @@ class ReducedModel:
     ----------
     scene : the Scene (mesh, material, fixed vertices, loads). The basis moves its initial
         positions x0, and its external force is projected on the basis.
-    modes : vibration modes m of the rest Hessian with the lumped mass (default MODES); the
-        basis adds their modal derivatives, so r <= m + m (m + 1) / 2.
-    derivatives : False keeps the linear modes only (r = m; they do not follow large
-        rotations).
-    validate : compare the static equilibrium under the scene's loads with the full FEM's
-        (validation; a full static solve: seconds on 10^5 tets).
+    modes : vibration modes m of the rest Hessian with the lumped mass (default MODES).
+    derivatives : add the modes' m (m + 1) / 2 modal derivatives (default: when snapshots is
+        0). Linear modes alone do not follow large rotations.
+    snapshots : add this many principal directions of the full FEM's static equilibria under
+        the declared loads (anisofem.reduced.snapshots): a basis fitted to what the scene does,
+        which follows bending through large rotations within the declaration.
+    loads : a Loads, what the model must handle beyond the scene's own loads (default, where
+        snapshots > 0: anisofem.reduced.loads.default_loads, a drag of the body's weight at
+        each free end). Declared loads also make the validation a set of unseen rollouts.
+    validate : check the model against the full FEM on cases it was not built from
+        (validation: the static equilibrium under the scene's loads, or with declared loads
+        VALIDATION_CASES short rollouts under unseen loads drawn from them).
 
     Attributes: basis (3n, r) over all vertex components (0 on fixed ones) in m per unit of q,
     with basis^T M basis = I; frequencies (m,) of the vibration modes, Hz; polynomial (the
-    reduced energy); external (r,) the scene's projected load, N; build_seconds (basis and
-    polynomial); validation (a Validation, or None).
+    reduced energy); external (r,) the scene's projected load, N; loads (the Loads, or None);
+    snapshots (a SnapshotReport, or None); build_seconds (basis and polynomial, with the
+    snapshots' solves even where another model of the scene solved them); validation (a
+    Validation, or None).
     """
 
-    def __init__(self, scene, modes=MODES, derivatives=True, validate=True):
+    def __init__(self, scene, modes=MODES, derivatives=None, snapshots=0, loads=None,
+                 validate=True):
         check_scene(scene)
         if (scene.elements.model != STVK).any():
             raise ValueError("scene: the reduced model needs the StVK base material (its energy "
                              "is a polynomial in the reduced coordinates); this scene has "
                              "Neo-Hookean elements")
         scene.check_static()
-        if not isinstance(modes, (int, np.integer)) or isinstance(modes, bool) or modes < 1:
-            raise ValueError(f"modes: expected a positive integer, got {modes!r}")
+        modes = _count(modes, "modes", 1)
+        snapshots = _count(snapshots, "snapshots", 0)
+        derivatives = snapshots == 0 if derivatives is None else bool(derivatives)
         if modes >= scene.n_free:
             raise ValueError(f"modes: {modes} modes need more than the scene's {scene.n_free} "
                              f"unknowns")
-        _check_memory(scene, modes, derivatives)
+        if loads is None and snapshots:
+            loads = default_loads(scene)
+        if loads is not None:
+            if not isinstance(loads, Loads):
+                raise TypeError(f"loads: expected an anisofem.reduced.Loads, got "
+                                f"{type(loads).__name__}")
+            loads.check(scene)
+        _check_memory(scene, modes, derivatives, snapshots)
         t0 = time.perf_counter()
-        self.scene = scene
+        self.scene, self.loads, self.snapshots = scene, loads, None
         self.x0 = scene.initial_positions()
         free = scene.free_dofs
         mass = np.repeat(scene.masses, 3)[free]
@@ -110,16 +147,30 @@ class ReducedModel:
             columns.append(_basis.modal_derivatives(potential, self.x0, layout, factor, phi,
                                                     free))
         U = _basis.mass_orthonormal(np.hstack(columns), mass)
+        solving = 0.0
+        if snapshots:
+            t1 = time.perf_counter()
+            states, self.snapshots = static_states(scene, loads)
+            solving = time.perf_counter() - t1 - self.snapshots.seconds
+            fitted = principal_directions((states - self.x0).reshape(len(states), -1)[:, free].T,
+                                          mass, snapshots, against=U)
+            U = _basis.mass_orthonormal(np.hstack([U, fitted]), mass)
         self.basis = np.zeros((3 * scene.mesh.n_vertices, U.shape[1]))
         self.basis[free] = U
         self.polynomial = polynomial(scene.elements, self.x0, self.basis)
         self.external = self.project(scene.external_force)
-        self.build_seconds = time.perf_counter() - t0
+        self.build_seconds = time.perf_counter() - t0 - solving
         self.validation = self.validate() if validate else None
 
-    def validate(self):
-        """The static equilibrium under the scene's loads, reduced against full (Validation;
-        None where the full answer does not move)."""
+    def validate(self, cases=None, seed=0):
+        """The model against the full FEM on cases it was not built from (a Validation): with
+        declared loads, `cases` (default VALIDATION_CASES) short rollouts under unseen loads
+        drawn from them with `seed`; else the static equilibrium under the scene's loads (None
+        where the full answer does not move)."""
+        if self.loads is not None:
+            cases = VALIDATION_CASES if cases is None else _count(cases, "cases", 1)
+            return self._validate_rollouts(unseen_cases(self.scene, self.loads, REDRAWS * cases,
+                                                        seed), cases)
         t0 = time.perf_counter()
         full = solve(self.scene, warn=False)
         seconds = time.perf_counter() - t0
@@ -133,6 +184,49 @@ class ReducedModel:
             float(np.linalg.norm(d[tip].mean(0)) / np.linalg.norm(u[tip].mean(0))),
             float(np.linalg.norm(d, axis=1).max() / np.linalg.norm(u, axis=1).max()), seconds,
             bool(full.converged and report.converged))
+
+    def _validate_rollouts(self, drawn, cases):
+        """Validation over rollouts of the first `cases` of `drawn` [(drag index or None, extra
+        force (n, 3))] whose full rollout turns no element inside out."""
+        tip_error = field_error = seconds = 0.0
+        converged, used, inverted = True, 0, 0
+        zero = np.zeros_like(self.x0)
+        for which, force in drawn:
+            if used == cases:
+                break
+            phases = ((force, HOLD_STEPS), (zero, HOLD_STEPS))
+            t0 = time.perf_counter()
+            full, full_ok = _full_rollout(self.scene, phases, VALIDATION_DT)
+            seconds += time.perf_counter() - t0
+            if any((volume_change(self.scene.mesh, x) <= -1.0).any() for x in full):
+                inverted += 1
+                continue
+            used += 1
+            reduced, reduced_ok = self._rollout(phases, VALIDATION_DT)
+            converged &= full_ok and reduced_ok
+            u, d = full - self.x0, reduced[:len(full)] - full
+            size = np.linalg.norm(u, axis=2)
+            tip = (np.asarray(self.loads.drags[which].vertices) if which is not None
+                   else moving_tip(u[int(np.argmax(size.max(axis=1)))]))
+            tip_u = np.linalg.norm(u[:, tip].mean(axis=1), axis=1).max()
+            tip_error = max(tip_error, float(np.linalg.norm(d[:, tip].mean(axis=1),
+                                                            axis=1).max() / tip_u))
+            field_error = max(field_error, float(np.linalg.norm(d, axis=2).max() / size.max()))
+        return Validation(tip_error if used else math.nan, field_error if used else math.nan,
+                          seconds, bool(converged), used, inverted)
+
+    def _rollout(self, phases, dt):
+        """Positions (k + 1, n, 3) from rest through phases ((extra force (n, 3), steps), ...),
+        and whether every step converged."""
+        q, w = np.zeros(self.r), np.zeros(self.r)
+        xs, ok = [self.positions(q)], True
+        for force, steps in phases:
+            for _ in range(steps):
+                q, w, report = self.step(q, w, dt, force=force)
+                ok &= report.converged
+                xs.append(self.positions(q))
+        return np.array(xs), ok
+
     @property
     def r(self):
         """Number of reduced coordinates."""
@@ -201,10 +295,35 @@ _MESSAGES = {kernels.CONVERGED: "converged", kernels.SPENT: "{} iterations spent
              kernels.NOT_FINITE: "non-finite force"}
 
 
-def coordinates(modes, derivatives, unknowns):
+def _full_rollout(scene, phases, dt):
+    """The full FEM's positions (k + 1, n, 3) from rest through phases ((extra force (n, 3),
+    steps), ...), exact backward Euler, and whether every step converged (a failed step ends
+    the rollout there)."""
+    x = scene.initial_positions()
+    v = np.zeros_like(x)
+    xs = [x]
+    for force, steps in phases:
+        stepper = Stepper(scene.plus_force(force), dt, warn=False)
+        for _ in range(steps):
+            result = stepper(x, v)
+            if result.newton.failed:
+                return np.array(xs), False
+            x, v = result.x, result.v
+            xs.append(x)
+    return np.array(xs), True
+
+
+def _count(value, name, smallest):
+    """value as an int >= smallest, or ValueError naming `name`."""
+    if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < smallest:
+        raise ValueError(f"{name}: expected an integer >= {smallest}, got {value!r}")
+    return int(value)
+
+
+def coordinates(modes, derivatives, unknowns, snapshots=0):
     """The most reduced coordinates of a basis of `modes` vibration modes (with their modal
-    derivatives, or not) on `unknowns` free components."""
-    return min(modes + (modes * (modes + 1) // 2 if derivatives else 0), unknowns)
+    derivatives, or not) and `snapshots` principal directions on `unknowns` free components."""
+    return min(modes + (modes * (modes + 1) // 2 if derivatives else 0) + snapshots, unknowns)
 
 
 def _available_bytes():
@@ -223,7 +342,7 @@ def _available_bytes():
         return None
 
 
-def _check_memory(scene, modes, derivatives):
+def _check_memory(scene, modes, derivatives, snapshots):
     """ValueError, before any work, when the polynomial of `modes` modes would not fit in the
     memory available now (polynomial.build_bytes), naming the estimate and the most modes that
     would fit."""
@@ -231,11 +350,11 @@ def _check_memory(scene, modes, derivatives):
     points = scene.elements.weights.size
 
     def need(m):
-        return build_bytes(coordinates(m, derivatives, scene.n_free), points)
+        return build_bytes(coordinates(m, derivatives, scene.n_free, snapshots), points)
     if available is None or need(modes) <= available:
         return
     fits = max((m for m in range(1, modes) if need(m) <= available), default=0)
-    r = coordinates(modes, derivatives, scene.n_free)
+    r = coordinates(modes, derivatives, scene.n_free, snapshots)
     raise ValueError(f"modes: {modes} modes make a basis of up to {r} coordinates, whose "
                      f"polynomial needs about {need(modes) / 2 ** 30:.3g} GiB to build (its "
                      f"quartic term grows as r^4) and this machine has "

@@ -1,0 +1,220 @@
+"""The loads a reduced model must handle, declared with its scene, and the load cases drawn
+from a declaration: the static equilibria its basis is fitted to, and unseen cases that
+validate it.
+
+    loads = Loads(drags=(Drag(tip, magnitude=0.8),), cone=20.0)
+
+A Drag is a force of up to `magnitude` N on a set of vertices, spread over them in proportion
+to their mass (a hand or a hook grabbing a region, a controller's actuator), in any direction
+or in given ones. `cone` lets the scene's gravity turn by up to that many degrees (a body
+carried around). Without a declaration (default_loads) a model handles the scene's own loads
+and a drag of half the body's weight at each free end.
+"""
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+#: Directions a drag declared in any direction is built from: the 6 axes and the 8 diagonals.
+ANY_DIRECTION = tuple(tuple(np.array(d, float) / np.linalg.norm(d)) for d in
+                      [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
+                      + [(a, b, c) for a in (1, -1) for b in (1, -1) for c in (1, -1)])
+
+#: Shares of a drag's magnitude the build solves for, in order, each from the last equilibrium.
+SHARES = (0.25, 0.5, 1.0)
+
+#: Gravity directions the build takes on a cone: this many around its rim, at the full angle
+#: and at half of it.
+CONE_DIRECTIONS = 4
+
+#: A free end: the vertices at least this share of the farthest distance from the held ones,
+#: split into connected pieces (the tip of a cantilever, each arm's end of a T).
+END_SHARE = 0.9
+
+#: The unseen cases draw a drag's magnitude between this share of the declared one and all of it.
+SMALLEST_UNSEEN = 0.3
+
+#: Standard gravity, m/s^2: the default drag's weight in a scene without gravity.
+STANDARD_GRAVITY = 9.81
+
+#: The default drag's magnitude, over the body's weight: a sudden drag of the whole weight at
+#: the free end of the 0.2 m trade cantilever folds it back on itself, and the full FEM turns
+#: dozens of its elements inside out.
+DRAG_SHARE = 0.5
+
+
+@dataclass(frozen=True)
+class Drag:
+    """A force of up to `magnitude` N on `vertices` (indices), spread in proportion to their
+    masses, along any direction (directions None) or along one of `directions` (unit 3-vectors,
+    normalized here)."""
+    vertices: tuple
+    magnitude: float
+    directions: tuple = None
+
+    def __post_init__(self):
+        vertices = np.asarray(self.vertices)
+        if vertices.ndim != 1 or vertices.size == 0 or not np.issubdtype(vertices.dtype,
+                                                                            np.integer):
+            raise ValueError(f"vertices: expected a non-empty list of vertex indices, got "
+                             f"{self.vertices!r}")
+        object.__setattr__(self, "vertices", tuple(int(i) for i in vertices))
+        if (not isinstance(self.magnitude, (int, float, np.floating, np.integer))
+                or not math.isfinite(self.magnitude) or self.magnitude <= 0):
+            raise ValueError(f"magnitude: expected a finite force > 0 N, got "
+                             f"{self.magnitude!r}")
+        object.__setattr__(self, "magnitude", float(self.magnitude))
+        if self.directions is not None:
+            object.__setattr__(self, "directions", _unit_rows(self.directions))
+
+    def force(self, scene, direction):
+        """The nodal force (n, 3), N, of this drag at its full magnitude along `direction`."""
+        idx = np.asarray(self.vertices)
+        m = scene.masses[idx]
+        f = np.zeros((scene.mesh.n_vertices, 3))
+        f[idx] = np.outer(m / m.sum(), self.magnitude * np.asarray(direction, float))
+        return f
+
+    @property
+    def candidate_directions(self):
+        """The directions the build solves along: the declared ones, or ANY_DIRECTION."""
+        return ANY_DIRECTION if self.directions is None else self.directions
+
+
+@dataclass(frozen=True)
+class Loads:
+    """What a reduced model must handle beyond the scene's own dead loads: drags (Drag, any
+    number) and a gravity cone (degrees, 0 to 180: the scene's gravity may turn by up to this
+    angle)."""
+    drags: tuple = field(default_factory=tuple)
+    cone: float = 0.0
+
+    def __post_init__(self):
+        drags = tuple(self.drags)
+        for i, d in enumerate(drags):
+            if not isinstance(d, Drag):
+                raise TypeError(f"drags: item {i} is a {type(d).__name__}, expected a Drag")
+        object.__setattr__(self, "drags", drags)
+        if (not isinstance(self.cone, (int, float, np.floating, np.integer))
+                or not 0.0 <= self.cone <= 180.0):
+            raise ValueError(f"cone: expected an angle from 0 to 180 degrees, got {self.cone!r}")
+        object.__setattr__(self, "cone", float(self.cone))
+
+    def check(self, scene):
+        """ValueError unless every drag names vertices of the scene's mesh of which at least one
+        is free, and a cone has gravity to turn."""
+        n = scene.mesh.n_vertices
+        held = scene.fixed_mask.all(axis=1)
+        for i, d in enumerate(self.drags):
+            idx = np.asarray(d.vertices)
+            outside = idx[(idx < 0) | (idx >= n)]
+            if outside.size:
+                raise ValueError(f"drags[{i}].vertices: {outside.size} indices outside the "
+                                 f"mesh's {n} vertices (first {int(outside[0])})")
+            if held[idx].all():
+                raise ValueError(f"drags[{i}].vertices: every one of its {idx.size} vertices is "
+                                 f"held fixed; a drag needs a free vertex to act on")
+        if self.cone > 0 and not np.any(scene.gravity):
+            raise ValueError(f"cone: {self.cone} degrees of gravity direction, but the scene "
+                             f"has no gravity")
+
+
+def _unit_rows(directions):
+    """Directions (3,) or (k, 3) as a tuple of unit 3-tuples; ValueError unless each is a
+    finite non-zero 3-vector."""
+    try:
+        d = np.atleast_2d(np.asarray(directions, dtype=float))
+    except (TypeError, ValueError):
+        d = None
+    ok = d is not None and d.ndim == 2 and d.shape[1] == 3 and d.shape[0] > 0
+    norms = np.linalg.norm(d, axis=1) if ok else None
+    if not ok or not np.isfinite(d).all() or not (norms > 0).all():
+        raise ValueError(f"directions: expected non-zero finite 3-vectors, got {directions!r}")
+    return tuple(tuple(float(c) for c in row) for row in d / norms[:, None])
+
+
+def free_ends(scene):
+    """The free ends of a scene's body: lists of vertex indices, the vertices at least
+    END_SHARE of the farthest distance from the held vertices, split into connected pieces."""
+    x = scene.mesh.vertices
+    held = np.flatnonzero(scene.fixed_mask.any(axis=1))
+    distance = cKDTree(x[held]).query(x)[0]
+    far = np.flatnonzero(distance >= END_SHARE * distance.max())
+    cells = scene.mesh.cells[:, :4]
+    pairs = np.vstack([cells[:, [i, j]] for i in range(4) for j in range(i + 1, 4)])
+    n = x.shape[0]
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    count, label = connected_components(graph.tocsr()[far][:, far], directed=False)
+    return [far[label == c] for c in range(count)]
+
+
+def default_loads(scene):
+    """The scene's own loads plus, at each free end (free_ends), a drag in any direction of up
+    to DRAG_SHARE of the body's weight (its mass times |gravity|, or standard gravity in a
+    scene without)."""
+    g = float(np.linalg.norm(scene.gravity)) or STANDARD_GRAVITY
+    weight = DRAG_SHARE * float(scene.masses.sum()) * g
+    return Loads(drags=tuple(Drag(tuple(end), weight) for end in free_ends(scene)))
+
+
+def gravity_change(scene, direction):
+    """The nodal force (n, 3), N, that turns the scene's gravity to `direction` (a unit
+    3-vector) at the same magnitude."""
+    g = scene.gravity
+    return scene.gravity_force(np.linalg.norm(g) * np.asarray(direction, float) - g)
+
+
+def _cone_direction(g, angle, azimuth):
+    """The unit vector at `angle` radians from g (3,), at `azimuth` around it."""
+    axis = g / np.linalg.norm(g)
+    e1 = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    return (math.cos(angle) * axis
+            + math.sin(angle) * (math.cos(azimuth) * e1 + math.sin(azimuth) * e2))
+
+
+def build_cases(scene, loads):
+    """The static load cases a basis is fitted to, as chains of extra nodal forces (n, 3), N,
+    over the scene's own: each drag along each candidate direction at SHARES of its magnitude
+    (a chain, solved in order), and gravity turned to CONE_DIRECTIONS points on the cone's rim
+    and on the cone at half its angle (one-case chains)."""
+    chains = [[s * d.force(scene, direction) for s in SHARES]
+              for d in loads.drags for direction in d.candidate_directions]
+    if loads.cone > 0:
+        for angle in (loads.cone, loads.cone / 2):
+            for k in range(CONE_DIRECTIONS):
+                direction = _cone_direction(scene.gravity, math.radians(angle),
+                                            2 * math.pi * k / CONE_DIRECTIONS)
+                chains.append([gravity_change(scene, direction)])
+    return chains
+
+
+def unseen_cases(scene, loads, count, seed=0):
+    """`count` load cases drawn from the declaration (reproducibly, from `seed`), almost surely
+    none of the build's: a random drag along a random direction (uniform on the sphere, or one
+    of its declared directions) at SMALLEST_UNSEEN to 1 of its magnitude, with gravity turned
+    to a random direction within the cone. Returns [(drag index or None, force (n, 3), N)]."""
+    rng = np.random.default_rng(seed)
+    cases = []
+    for _ in range(count):
+        f = np.zeros((scene.mesh.n_vertices, 3))
+        which = None
+        if loads.drags:
+            which = int(rng.integers(len(loads.drags)))
+            d = loads.drags[which]
+            if d.directions is None:
+                direction = rng.normal(size=3)
+                direction /= np.linalg.norm(direction)
+            else:
+                direction = d.directions[int(rng.integers(len(d.directions)))]
+            f += rng.uniform(SMALLEST_UNSEEN, 1.0) * d.force(scene, direction)
+        if loads.cone > 0:
+            angle = math.radians(loads.cone) * math.sqrt(rng.uniform())
+            f += gravity_change(scene, _cone_direction(scene.gravity, angle,
+                                                       rng.uniform(0, 2 * math.pi)))
+        cases.append((which, f))
+    return cases
