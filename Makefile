@@ -79,7 +79,7 @@ web/scenes/%.json: export/models/directional.onnx export/bake.py export/runtime.
 
 web/scenes/%-reduced.json: export/reduced.py export/runtime.py anisofem/reduced/*.py $(VENV)/.installed
 	mkdir -p web/scenes
-	$(PY) -m export bake-reduced $* -o web/scenes/$*-reduced --modes 6
+	$(PY) -m export bake-reduced $* -o web/scenes/$*-reduced --modes 4 --snapshots 16
 
 web-assets: web/node_modules/.package-lock.json web/models/directional.onnx \
             web/models/meshgraphnets.onnx $(WEB_SCENES:%=web/scenes/%.json) \

@@ -104,7 +104,12 @@ def _reduced(argv):
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     add_scene_arguments(parser)
     parser.add_argument("--modes", type=int, default=MODES,
-                        help="vibration modes; the basis adds their modal derivatives")
+                        help="vibration modes; without --snapshots the basis adds their modal "
+                             "derivatives")
+    parser.add_argument("--snapshots", type=int, default=0,
+                        help="add this many directions fitted to the full FEM's static "
+                             "equilibria under a drag of up to half the body's weight at each "
+                             "free end (follows large bending; 0: modes and modal derivatives)")
     parser.add_argument("--display", metavar="MESH",
                         help="a coarser mesh file of the same body: the file moves its vertices "
                              "(the basis interpolated there) instead of the model's")
@@ -113,17 +118,24 @@ def _reduced(argv):
     try:
         check_folder(args.output, "--output")
         display = None if args.display is None else read_mesh(args.display)
-        model = ReducedModel(scene_of(args), modes=args.modes)
+        model = ReducedModel(scene_of(args), modes=args.modes, snapshots=args.snapshots)
         header = reduced.write(model, args.output, title=args.scene, gravity=args.gravity,
                                display=display)
     except BAD_INPUT as err:
         fail(parser, err)
-    v = model.validation
-    check = ("" if v is None else f"; static tip {100 * v.tip_error:.2g}% and field "
-             f"{100 * v.field_error:.2g}% off the full FEM")
+    fitted = f" + {model.fitted} fitted" if model.fitted else ""
     print(f"wrote {args.output}.json and .bin: {header['n']} vertices, {header['m']} tets, "
-          f"r = {header['r']} ({header['modes']} modes), built in {model.build_seconds:.2g} s"
-          f"{check}")
+          f"r = {header['r']} ({header['modes']} modes{fitted}), built in "
+          f"{model.build_seconds:.2g} s{_checked(model.validation)}")
+
+
+def _checked(v):
+    """How far a model's Validation (or None) found it from the full FEM, as a clause."""
+    if v is None:
+        return ""
+    where = f"on {v.cases} unseen loads" if v.cases else "in the static answer"
+    return (f"; tip {100 * v.tip_error:.2g}% and field {100 * v.field_error:.2g}% off the "
+            f"full FEM {where}")
 
 
 def _bench_reduced(argv):
@@ -154,15 +166,20 @@ def _bake_reduced(argv):
     parser.add_argument("scene", choices=sorted(bake.SCENES))
     parser.add_argument("-o", "--output", required=True, help="PATH (without extension)")
     parser.add_argument("--modes", type=int, default=MODES, help="vibration modes")
+    parser.add_argument("--snapshots", type=int, default=0,
+                        help="directions fitted to the scene's default declared loads (0: "
+                             "modes and modal derivatives)")
     parser.add_argument("--angles", type=float, nargs="+", default=list(bake.ANGLES),
                         help="fiber angles in degrees from x towards z")
     args = parser.parse_args(argv)
     try:
         check_folder(args.output, "--output")
-        header = reduced.bake(args.scene, args.output, args.modes, args.angles)
+        header = reduced.bake(args.scene, args.output, args.modes, args.angles, args.snapshots)
     except BAD_INPUT as err:
         fail(parser, err)
     worst = max(v["tip_error"] for v in header["validation"])
+    where = (f"on {header['validation'][0]['cases']} unseen loads" if args.snapshots
+             else "in the static answer")
     print(f"wrote {args.output}.json and .bin: {header['title']}, r = {header['r'][0]}, fiber "
-          f"angles {header['fiber_angles']}; static tip within {100 * worst:.2g}% of the full "
-          f"FEM at every angle")
+          f"angles {header['fiber_angles']}; tip within {100 * worst:.2g}% of the full FEM "
+          f"{where} at every angle")

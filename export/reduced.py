@@ -8,8 +8,10 @@ W4 (T, r), T = r (r + 1) (r + 2) / 6, the coefficients of the energy (runtime.Re
 masses (n,) kg; held (n, 3) uint8; tets (m, 4) int32, the mesh it was built on; surface (k, 3)
 int32, the boundary triangles; with a display mesh, the basis interpolated at its vertices
 (physics on the model's mesh, drawing on the display's). The header: model_format REDUCED_FORMAT, title, n, m, r, modes,
-frequencies (Hz), c0 (J), build_seconds, validation (the static tip and field errors against
-the full FEM), gravity (m/s^2) and material.
+snapshots (the principal directions fitted to declared loads, 0 for a modal basis),
+frequencies (Hz), c0 (J), build_seconds, validation (anisofem.reduced.model.Validation: the
+tip and field errors against the full FEM, statically or on `cases` unseen loads), gravity
+(m/s^2) and material.
 
 `python -m export bake-reduced SCENE -o PATH` writes the models of a baked scene (export.bake)
 at several fiber angles in one pair of files, for the browser page: the arrays that depend on
@@ -55,7 +57,7 @@ def write(model, path, title="", gravity=None, display=None):
     material = scene.material
     header = {"model_format": runtime.REDUCED_FORMAT, "title": title, "n": mesh.n_vertices,
               "m": mesh.n_tets, "physics_tets": scene.mesh.n_tets, "r": r,
-              "modes": len(model.frequencies),
+              "modes": len(model.frequencies), "snapshots": model.fitted,
               "frequencies": [float(f) for f in model.frequencies], "c0": float(P.c0),
               "build_seconds": model.build_seconds,
               "validation": (None if model.validation is None
@@ -77,12 +79,14 @@ def _display_masses(scene, display):
     return np.bincount(display.tets.ravel(), np.repeat(volumes, 4), display.n_vertices)
 
 
-def bake(name, out, modes, angles):
+def bake(name, out, modes, angles, snapshots=0):
     """Write the reduced models of the baked scene `name` (export.bake.SCENES; the trained
     material: Material.paper with fiber stiffness E, gravity) at each fiber angle (degrees from
     x towards z) as out.json and out.bin: the mesh arrays once, the model arrays (basis, c1,
     C2, S3, W4) once per angle as NAME@A; the header lists fiber_angles and r per angle.
-    Returns the header."""
+    snapshots: principal directions fitted to the scene's default declared loads (a drag of
+    half the body's weight at each free end) added to the modes (0: modes and their modal
+    derivatives). Returns the header."""
     if name not in SCENES:
         raise ValueError(f"scene: expected one of {sorted(SCENES)}, got {name!r}")
     angles = [float(a) for a in angles]
@@ -93,7 +97,8 @@ def bake(name, out, modes, angles):
     arrays, ranks, checks = {}, [], []
     for angle in angles:
         material = Material.paper(fiber_direction(angle), Material.paper().young)
-        model = ReducedModel(Scene(mesh, material, fixed=held, gravity=GRAVITY), modes=modes)
+        model = ReducedModel(Scene(mesh, material, fixed=held, gravity=GRAVITY), modes=modes,
+                             snapshots=snapshots)
         P, tag = model.polynomial, f"@{angle:g}"
         arrays.update({"basis" + tag: model.basis.reshape(-1, 3, model.r), "c1" + tag: P.c1,
                        "C2" + tag: P.C2, "S3" + tag: P.S3, "W4" + tag: P.W4})
@@ -104,6 +109,7 @@ def bake(name, out, modes, angles):
                    "surface": runtime.surface_triangles(vertices, tets).astype(np.int32)})
     header = {"model_format": runtime.REDUCED_FORMAT, "scene": name, "title": SCENES[name][0],
               "n": int(vertices.shape[0]), "m": int(tets.shape[0]), "modes": modes,
+              "snapshots": snapshots,
               "fiber_angles": angles, "r": ranks, "validation": checks, "dt": DT,
               "gravity": list(GRAVITY)}
     write_arrays(out, arrays, header)

@@ -175,8 +175,9 @@ async function frame(now) {
     const speed = (1000 * state.sim.dt) / ms;
     const pace = speed >= 1 ? "real time" : `${speed.toFixed(2)}x real time`;
     const v = state.sim.validation;
-    const model = v ? `reduced model, r = ${state.sim.r}; its static tip within ` +
-      `${(100 * v.tip_error).toPrecision(2)}% of the FEM's. ` : "";
+    const checked = v && v.cases ? `on ${v.cases} unseen drags` : "in the static answer";
+    const model = v ? `reduced model, r = ${state.sim.r}; its tip within ` +
+      `${(100 * v.tip_error).toPrecision(2)}% of the FEM's ${checked}. ` : "";
     ui.stats.textContent = `${model}${state.sim.steps} steps of ${state.sim.dt} s, ` +
       `${ms.toFixed(2)} ms per step (${pace})`;
   }

@@ -104,7 +104,8 @@ class ReducedModel:
     Attributes: basis (3n, r) over all vertex components (0 on fixed ones) in m per unit of q,
     with basis^T M basis = I; frequencies (m,) of the vibration modes, Hz; polynomial (the
     reduced energy); external (r,) the scene's projected load, N; loads (the Loads, or None);
-    snapshots (a SnapshotReport, or None); build_seconds (basis and polynomial, with the
+    snapshots (a SnapshotReport, or None); fitted (how many of the r directions are fitted to
+    the loads); build_seconds (basis and polynomial, with the
     snapshots' solves even where another model of the scene solved them); validation (a
     Validation, or None).
     """
@@ -132,7 +133,7 @@ class ReducedModel:
             loads.check(scene)
         _check_memory(scene, modes, derivatives, snapshots)
         t0 = time.perf_counter()
-        self.scene, self.loads, self.snapshots = scene, loads, None
+        self.scene, self.loads, self.snapshots, self.fitted = scene, loads, None, 0
         self.x0 = scene.initial_positions()
         free = scene.free_dofs
         mass = np.repeat(scene.masses, 3)[free]
@@ -154,7 +155,9 @@ class ReducedModel:
             solving = time.perf_counter() - t1 - self.snapshots.seconds
             fitted = principal_directions((states - self.x0).reshape(len(states), -1)[:, free].T,
                                           mass, snapshots, against=U)
+            modal = U.shape[1]
             U = _basis.mass_orthonormal(np.hstack([U, fitted]), mass)
+            self.fitted = U.shape[1] - modal
         self.basis = np.zeros((3 * scene.mesh.n_vertices, U.shape[1]))
         self.basis[free] = U
         self.polynomial = polynomial(scene.elements, self.x0, self.basis)

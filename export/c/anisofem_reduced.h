@@ -1,0 +1,72 @@
+/* A reduced model written by `python -m export reduced` (PATH.json + PATH.bin), stepped by
+ * backward Euler in C99 with no dependency: the same step as export/runtime.py's
+ * ReducedSimulator, in double precision.
+ *
+ *   char err[256];
+ *   af_reduced *m = af_reduced_load("cantilever", NULL, err, sizeof err);
+ *   double *q = calloc(af_reduced_coordinates(m), sizeof(double));   // rest state: zeros
+ *   double *w = calloc(af_reduced_coordinates(m), sizeof(double));
+ *   af_reduced_step(m, q, w, force, 0.02, 1e-8, 50);   // force: n x 3 N per vertex
+ *   af_reduced_positions(m, q, x);                      // x: n x 3 m
+ *   af_reduced_free(m);
+ *
+ * Units SI: positions m, forces N, time s. Arrays are row-major, vertex by vertex (x0 y0 z0 x1
+ * ...). Every function that can fail returns a negative AF_* code (or NULL) and, where given a
+ * buffer, a message in it.
+ */
+#ifndef ANISOFEM_REDUCED_H
+#define ANISOFEM_REDUCED_H
+
+#include <stddef.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#if defined(_WIN32)
+#define AF_API __declspec(dllexport)
+#else
+#define AF_API __attribute__((visibility("default")))
+#endif
+
+enum {
+    AF_OK = 0,
+    AF_BAD_FILE = -1,      /* the file is missing, not a reduced model, or of another version */
+    AF_BAD_INPUT = -2,     /* a non-finite force or state, or dt <= 0 */
+    AF_NOT_CONVERGED = -3, /* Newton stopped short of its tolerance (the state is unchanged) */
+    AF_NO_MEMORY = -4
+};
+
+typedef struct af_reduced af_reduced;
+
+/* Load PATH.json + PATH.bin (path without extension). angle: NULL for a file of one model, or
+ * the fiber angle to step in a file of several (`python -m export bake-reduced`), e.g. "30".
+ * Returns NULL on failure with the reason in error (error_size bytes, may be 0). */
+AF_API af_reduced *af_reduced_load(const char *path, const char *angle, char *error,
+                                   size_t error_size);
+AF_API void af_reduced_free(af_reduced *model);
+
+/* n, the vertices the model moves; r, its reduced coordinates. */
+AF_API int af_reduced_vertices(const af_reduced *model);
+AF_API int af_reduced_coordinates(const af_reduced *model);
+/* The vertices' lumped masses (n,), kg, and rest positions (n x 3), m. */
+AF_API const double *af_reduced_masses(const af_reduced *model);
+AF_API const double *af_reduced_rest_positions(const af_reduced *model);
+
+/* One backward-Euler step of dt s from reduced coordinates q (r,) and velocities w (r,), in
+ * place, under nodal forces force (n x 3, N; gravity included: masses times g). rtol: the
+ * reduced gradient's tolerance over the step's force size (1e-8); max_iter: Newton's budget
+ * (50). Returns AF_OK, or a negative code with q and w unchanged. */
+AF_API int af_reduced_step(af_reduced *model, double *q, double *w, const double *force,
+                           double dt, double rtol, int max_iter);
+/* The Newton iterations of the last step. */
+AF_API int af_reduced_iterations(const af_reduced *model);
+
+/* Positions x (n x 3), m, of reduced coordinates q (r,). */
+AF_API void af_reduced_positions(const af_reduced *model, const double *q, double *x);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

@@ -1,0 +1,113 @@
+"""The C runtime of the reduced model (export/c/anisofem_reduced.c), built with the system C
+compiler and called through ctypes: how the tests check it against runtime.ReducedSimulator
+and how `python -m export bench-reduced` times it. An engine links the C file pair itself
+(export/README.md).
+
+    lib = build("build/c")                  # compiles once; returns the shared library's path
+    sim = CReducedSimulator("cantilever", lib)
+    q, w = sim.rest_state()
+    sim.step(q, w, force, 0.02)             # in place; force (n, 3) N
+    x = sim.positions(q)
+"""
+import ctypes
+import os
+import shutil
+import subprocess
+
+import numpy as np
+
+SOURCE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "c", "anisofem_reduced.c")
+
+#: The C runtime's return codes (anisofem_reduced.h).
+CODES = {-1: "bad file", -2: "bad input", -3: "not converged", -4: "no memory"}
+
+
+def compiler():
+    """The system C compiler's command (cc, gcc or clang), or None."""
+    for name in ("cc", "gcc", "clang"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
+def build(folder):
+    """Compile the C runtime into folder/libanisofem_reduced.so (C99, -O2) unless it is newer
+    than its source; returns its path. RuntimeError without a C compiler or where it fails."""
+    cc = compiler()
+    if cc is None:
+        raise RuntimeError("no C compiler (cc, gcc or clang) on the PATH")
+    os.makedirs(folder, exist_ok=True)
+    lib = os.path.join(folder, "libanisofem_reduced.so")
+    if os.path.exists(lib) and os.path.getmtime(lib) >= os.path.getmtime(SOURCE):
+        return lib
+    tmp = lib + f".{os.getpid()}.tmp"
+    done = subprocess.run([cc, "-std=c99", "-O2", "-shared", "-fPIC", "-o", tmp, SOURCE, "-lm"],
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"compiling {SOURCE} failed:\n{done.stderr}")
+    os.replace(tmp, lib)
+    return lib
+
+
+class CReducedSimulator:
+    """A reduced model's arrays files (path without extension) stepped by the C runtime at
+    `lib` (build's path); angle: the fiber angle of a file of several, as its header writes it."""
+
+    def __init__(self, path, lib, angle=None):
+        c = ctypes.CDLL(lib)
+        double_p = ctypes.POINTER(ctypes.c_double)
+        c.af_reduced_load.restype = ctypes.c_void_p
+        c.af_reduced_load.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p,
+                                      ctypes.c_size_t]
+        c.af_reduced_free.argtypes = [ctypes.c_void_p]
+        for name in ("af_reduced_vertices", "af_reduced_coordinates", "af_reduced_iterations"):
+            getattr(c, name).argtypes = [ctypes.c_void_p]
+        c.af_reduced_step.argtypes = [ctypes.c_void_p, double_p, double_p, double_p,
+                                      ctypes.c_double, ctypes.c_double, ctypes.c_int]
+        c.af_reduced_positions.argtypes = [ctypes.c_void_p, double_p, double_p]
+        error = ctypes.create_string_buffer(512)
+        handle = c.af_reduced_load(str(path).encode(), None if angle is None
+                                   else str(angle).encode(), error, len(error))
+        if not handle:
+            raise ValueError(error.value.decode())
+        self._c, self._handle = c, handle
+        self.n = c.af_reduced_vertices(handle)
+        self.r = c.af_reduced_coordinates(handle)
+
+    def __del__(self):
+        if getattr(self, "_handle", None):
+            self._c.af_reduced_free(self._handle)
+            self._handle = None
+
+    def rest_state(self):
+        """(q, w): zeros (r,), float64."""
+        return np.zeros(self.r), np.zeros(self.r)
+
+    def step(self, q, w, force, dt, rtol=1e-8, max_iter=50):
+        """One backward-Euler step of q, w (float64 (r,), contiguous) in place under nodal
+        forces (n, 3), N; RuntimeError naming the C runtime's code where it fails."""
+        f = np.ascontiguousarray(force, dtype=np.float64)
+        if f.shape != (self.n, 3):
+            raise ValueError(f"force: expected shape ({self.n}, 3), got {f.shape}")
+        code = self._c.af_reduced_step(self._handle, _pointer(q), _pointer(w), _pointer(f),
+                                       dt, rtol, max_iter)
+        if code != 0:
+            raise RuntimeError(f"af_reduced_step: {CODES.get(code, code)}")
+
+    @property
+    def iterations(self):
+        """Newton iterations of the last step."""
+        return self._c.af_reduced_iterations(self._handle)
+
+    def positions(self, q):
+        """Positions (n, 3), m."""
+        x = np.empty((self.n, 3))
+        self._c.af_reduced_positions(self._handle, _pointer(q), _pointer(x))
+        return x
+
+
+def _pointer(a):
+    if a.dtype != np.float64 or not a.flags.c_contiguous:
+        raise TypeError("expected a contiguous float64 array")
+    return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))

@@ -1,0 +1,111 @@
+"""The C runtime (export/c): built with the system C compiler, it steps a reduced model like
+runtime.ReducedSimulator to round-off in double precision, from Python through ctypes and
+from a C program, and refuses files it cannot step."""
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+from anisofem.reduced import ReducedModel
+from export import native
+from export import reduced as writer
+from export.runtime import ReducedSimulator
+from test_reduced import cantilever
+
+pytestmark = pytest.mark.skipif(native.compiler() is None, reason="no C compiler")
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("c")
+    scene = cantilever(length=0.2)
+    model = ReducedModel(scene, modes=4, snapshots=16, validate=False)
+    path = str(folder / "long")
+    writer.write(model, path, "long")
+    return scene, path, native.build(str(folder / "lib"))
+
+
+def test_c_steps_like_the_numpy_runtime_over_200_steps(built):
+    """A drag that swings the 0.2 m beam sideways for 100 steps, then released: positions
+    within 1e-9 of the deflection."""
+    scene, path, lib = built
+    py, c = ReducedSimulator(path), native.CReducedSimulator(path, lib)
+    assert (c.n, c.r) == (scene.mesh.n_vertices, 20)
+    drag = scene.external_force.copy()
+    drag[np.argmax(scene.mesh.vertices[:, 0]), 1] += 0.2
+    qp, wp = py.rest_state()
+    qc, wc = c.rest_state()
+    worst = size = 0.0
+    for k in range(200):
+        f = drag if k < 100 else scene.external_force
+        qp, wp = py.step(qp, wp, f, 0.02)
+        c.step(qc, wc, f, 0.02)
+        assert c.iterations == py.iterations
+        x = py.positions(qp)
+        worst = max(worst, np.abs(c.positions(qc) - x).max())
+        size = max(size, np.abs(x - scene.mesh.vertices).max())
+    assert size > 0.05  # the tip swung by a quarter of the beam's length or more
+    assert worst < 1e-9 * size
+
+
+def test_c_program_prints_the_runtime_rollout(built, tmp_path):
+    scene, path, _ = built
+    exe = tmp_path / "example"
+    c_dir = native.SOURCE.rsplit("/", 1)[0]
+    done = subprocess.run([native.compiler(), "-std=c99", "-O2", "-o", str(exe),
+                           f"{c_dir}/example.c", native.SOURCE, "-lm"], capture_output=True,
+                          text=True)
+    assert done.returncode == 0, done.stderr
+    out = subprocess.run([str(exe), path, "30", "0.02"], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    lowest = np.array(out.stdout.split(), dtype=float)
+    py = ReducedSimulator(path)
+    q, w = py.rest_state()
+    force = py.masses[:, None] * np.array([0.0, 0.0, -9.81])
+    expected = []
+    for _ in range(30):
+        q, w = py.step(q, w, force, 0.02)
+        expected.append(py.positions(q)[:, 2].min())
+    assert lowest.shape == (30,) and np.abs(lowest - expected).max() < 1e-12
+
+
+def test_c_runtime_reads_a_file_of_several_fiber_angles(tmp_path, built):
+    _, _, lib = built
+    path = str(tmp_path / "baked")
+    writer.bake("cantilever", path, modes=2, angles=[0, 45])
+    for angle in (0, 45):
+        py = ReducedSimulator(path, angle=angle)
+        c = native.CReducedSimulator(path, lib, angle=f"{angle:g}")
+        force = py.masses[:, None] * np.array([0.0, 0.0, -9.81])
+        qp, wp = py.rest_state()
+        qc, wc = c.rest_state()
+        for _ in range(10):
+            qp, wp = py.step(qp, wp, force, 0.02)
+            c.step(qc, wc, force, 0.02)
+        assert np.abs(c.positions(qc) - py.positions(qp)).max() < 1e-12
+
+
+def test_c_runtime_refuses_other_files_and_bad_input(built, tmp_path):
+    scene, path, lib = built
+    with open(path + ".json") as f:
+        header = json.load(f)
+    header["model_format"] = "anisofem-reduced-0"
+    old = tmp_path / "old"
+    (tmp_path / "old.json").write_text(json.dumps({**header, "bin": "long.bin"}))
+    (tmp_path / "long.bin").write_bytes(open(path + ".bin", "rb").read())
+    with pytest.raises(ValueError, match="anisofem-reduced-0.*rebuild"):
+        native.CReducedSimulator(str(old), lib)
+    with pytest.raises(ValueError, match="cannot read"):
+        native.CReducedSimulator(str(tmp_path / "missing"), lib)
+    with pytest.raises(ValueError, match="no float64 array basis@30"):
+        native.CReducedSimulator(path, lib, angle="30")
+    c = native.CReducedSimulator(path, lib)
+    q, w = c.rest_state()
+    bad = scene.external_force.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(RuntimeError, match="bad input"):
+        c.step(q, w, bad, 0.02)
+    with pytest.raises(RuntimeError, match="bad input"):
+        c.step(q, w, scene.external_force, 0.0)
+    assert not q.any() and not w.any()
