@@ -3,8 +3,11 @@
 12,800 and 102,400 tets, for 5, 8 and 10 vibration modes (r = 20, 44, 65): its build time
 (basis and polynomial; the validation's full static solve apart), the size of its arrays
 files, the mean time of a backward-Euler step (dt = 0.02 s, 100 steps from rest, the first left
-out) in the library (numba) and in runtime.ReducedSimulator (numpy), and its static tip error
-against the full FEM. Prints a table and writes JSON (atomically). Run alone."""
+out) in the library (numba), in runtime.ReducedSimulator (numpy) and in the C runtime (export/c,
+built with the system C compiler; left out without one), and its validation's tip error against
+the full FEM (static for a modal basis; with --snapshots S, bases of the modes and S directions
+fitted to the default declared loads, the largest over 3 unseen drags' rollouts). Prints a
+table and writes JSON (atomically). Run alone."""
 import os
 import tempfile
 import time
@@ -15,7 +18,7 @@ from anisofem.convergence import cantilever
 from anisofem.files import publish
 from anisofem.reduced import ReducedModel
 
-from . import reduced
+from . import native, reduced
 from .runtime import ReducedSimulator
 
 #: mesh label -> box_beam cells of the 0.1 m cantilever (5 tets per cell)
@@ -34,10 +37,11 @@ def _step_times(step, state):
     return (time.perf_counter() - t0) / (STEPS - 1)
 
 
-def measure(cells, modes, folder):
-    """One row: the model of cantilever(cells) with `modes` modes."""
+def measure(cells, modes, folder, snapshots=0, lib=None):
+    """One row: the model of cantilever(cells) with `modes` modes (and `snapshots` fitted
+    directions); lib, the C runtime's shared library (None: no C column)."""
     scene = cantilever(cells, 1)
-    model = ReducedModel(scene, modes=modes)
+    model = ReducedModel(scene, modes=modes, snapshots=snapshots)
     path = os.path.join(folder, "model")
     reduced.write(model, path)
     size = sum(os.path.getsize(path + ext) for ext in (".json", ".bin"))
@@ -52,32 +56,46 @@ def measure(cells, modes, folder):
 
     def runtime(state):
         return sim.step(*state, force, DT)
+
+    def c_runtime(state):
+        c_sim.step(*state, force, DT)
+        return state
     zero = (np.zeros(model.r), np.zeros(model.r))
+    c_ms = None
+    if lib is not None:
+        c_sim = native.CReducedSimulator(path, lib)
+        c_ms = 1e3 * _step_times(c_runtime, (np.zeros(model.r), np.zeros(model.r)))
     v = model.validation
-    return {"tets": scene.mesh.n_tets, "unknowns": scene.n_free, "modes": modes, "r": model.r,
-            "build_s": model.build_seconds, "validation_s": v.full_seconds,
-            "file_mb": size / 1e6, "library_ms": 1e3 * _step_times(library, zero),
-            "runtime_ms": 1e3 * _step_times(runtime, zero),
-            "static_tip_error": v.tip_error}
+    return {"tets": scene.mesh.n_tets, "unknowns": scene.n_free, "modes": modes,
+            "snapshots": snapshots, "r": model.r, "build_s": model.build_seconds,
+            "snapshot_s": model.snapshots.seconds if model.snapshots else 0.0,
+            "validation_s": v.full_seconds, "file_mb": size / 1e6,
+            "library_ms": 1e3 * _step_times(library, zero),
+            "runtime_ms": 1e3 * _step_times(runtime, zero), "c_ms": c_ms,
+            "tip_error": v.tip_error, "validation_cases": v.cases}
 
 
-def run(sizes=tuple(MESHES), modes=MODES, out=None):
+def run(sizes=tuple(MESHES), modes=MODES, out=None, snapshots=0):
     """Measure every (size, modes) pair; print the table, write JSON to out."""
     rows = []
     with tempfile.TemporaryDirectory() as folder:
+        lib = native.build(folder) if native.compiler() else None
         for size in sizes:
             for m in modes:
-                rows.append(measure(MESHES[size], m, folder))
+                rows.append(measure(MESHES[size], m, folder, snapshots, lib))
                 print(f"  {size} tets, {m} modes done", flush=True)
     return publish({"steps": STEPS, "dt": DT, "rows": rows}, _print, out)
 
 
 def _print(report):
-    print(f"{'tets':>7} {'r':>3} {'build s':>8} {'file MB':>8} {'library ms':>11} "
-          f"{'runtime ms':>11} {'static tip err':>15}")
+    print(f"{'tets':>7} {'r':>3} {'fitted':>6} {'build s':>8} {'file MB':>8} {'library ms':>11} "
+          f"{'runtime ms':>11} {'C ms':>8} {'tip err':>8}")
     for r in report["rows"]:
-        print(f"{r['tets']:>7} {r['r']:>3} {r['build_s']:>8.3g} {r['file_mb']:>8.3g} "
-              f"{r['library_ms']:>11.3g} {r['runtime_ms']:>11.3g} "
-              f"{r['static_tip_error']:>15.2g}")
+        c_ms = "-" if r["c_ms"] is None else f"{r['c_ms']:.3g}"
+        print(f"{r['tets']:>7} {r['r']:>3} {r['snapshots']:>6} {r['build_s']:>8.3g} "
+              f"{r['file_mb']:>8.3g} {r['library_ms']:>11.3g} {r['runtime_ms']:>11.3g} "
+              f"{c_ms:>8} {r['tip_error']:>8.2g}")
     print(f"(ms per backward-Euler step of {report['dt']} s, mean of {report['steps'] - 1} after "
-          f"the first; the build leaves out the validation's full static solve)")
+          f"the first; the build, snapshots included, leaves out the validation's full FEM; "
+          f"tip err: static for modal bases, the largest over 3 unseen drags' rollouts for "
+          f"fitted ones)")

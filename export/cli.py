@@ -148,10 +148,13 @@ def _bench_reduced(argv):
                         choices=list(bench_reduced.MESHES), help="meshes, by tets")
     parser.add_argument("--modes", type=int, nargs="+", default=list(bench_reduced.MODES),
                         help="vibration modes of each model")
+    parser.add_argument("--snapshots", type=int, default=0,
+                        help="directions fitted to the default declared loads, added to each "
+                             "model's modes (0: modes and modal derivatives)")
     parser.add_argument("--json", default=result_path("bench_reduced.json"),
                         help="where to write the JSON")
     args = parser.parse_args(argv)
-    bench_reduced.run(args.sizes, args.modes, args.json)
+    bench_reduced.run(args.sizes, args.modes, args.json, args.snapshots)
 
 
 def _bake_reduced(argv):

@@ -164,11 +164,16 @@ def test_commands_make_the_folders_they_write_to(tmp_path):
 
 
 def test_bench_row_measures_what_it_names(tmp_path):
-    from export import bench_reduced
+    from export import bench_reduced, native
     row = bench_reduced.measure((4, 1, 1), 3, str(tmp_path))
     assert row["tets"] == 20 and row["r"] == 9 and row["modes"] == 3
     assert row["file_mb"] > 0 and row["library_ms"] > 0 and row["runtime_ms"] > 0
-    assert 0 <= row["static_tip_error"] < 0.5
+    assert 0 <= row["tip_error"] < 0.5 and row["validation_cases"] == 0
+    assert row["c_ms"] is None
+    lib = native.build(str(tmp_path / "c")) if native.compiler() else None
+    row = bench_reduced.measure((4, 1, 1), 2, str(tmp_path), snapshots=4, lib=lib)
+    assert row["r"] == 6 and row["snapshots"] == 4 and row["validation_cases"] == 3
+    assert row["snapshot_s"] > 0 and (lib is None or row["c_ms"] > 0)
 
 
 def test_display_mesh_file_moves_the_coarse_vertices_by_the_fine_model(tmp_path):
