@@ -39,7 +39,7 @@ _SHAPE_FLAGS = ("size", "cells", "rings", "tets_per_cell")
 
 #: the finer meshes of the same body the trade can measure against (--bodies): name ->
 #: (row label, the finer mesh of a linear mesh)
-_BODIES = {"quadratic": ("exact, quadratic tets", lambda m: m.raised()),
+BODIES = {"quadratic": ("exact, quadratic tets", lambda m: m.raised()),
            "refined": ("exact, refined mesh", lambda m: m.refined()),
            "refined-quadratic": ("exact, refined quadratic", lambda m: m.refined().raised())}
 
@@ -142,6 +142,14 @@ def _scene(args, mesh):
     return Scene(mesh, material, fixed=_fixed(mesh, args.fixed), gravity=args.gravity)
 
 
+def body_of(args, scene, body, flag):
+    """The Scene of scene's body on the finer mesh `body` (a key of BODIES), with the same
+    flags; ValueError naming `flag` where the scene's tets are quadratic already."""
+    if scene.mesh.order != 1:
+        raise ValueError(f"{flag}: the scene has quadratic tets already; give its linear mesh")
+    return _scene(args, BODIES[body][1](scene.mesh))
+
+
 def add_scene_arguments(p):
     """The positional scene (a mesh file or a shape) and the flags that make a Scene of it
     (trade here, `python -m export reduced`)."""
@@ -222,7 +230,7 @@ def _parser():
                         "the static deflection")
     t.add_argument("--no-surrogates", action="store_true",
                    help="only the FEM rungs (skip the shipped networks)")
-    t.add_argument("--bodies", nargs="+", choices=list(_BODIES), default=[],
+    t.add_argument("--bodies", nargs="+", choices=list(BODIES), default=[],
                    help="the same body on finer meshes (quadratic tets, the mesh refined once, "
                         "both), each rolled out exactly as a row; every rung's error against "
                         "the finest (the body) is added, and the plot shows it (minutes)")
@@ -346,9 +354,7 @@ def _trade(args):
         rungs += ladder.registered_rungs(scene, args.dt, notes)
     if args.rungs:
         rungs = ladder.select_rungs(rungs, args.rungs)
-    if args.bodies and scene.mesh.order != 1:
-        raise ValueError("--bodies: the scene has quadratic tets already; give its linear mesh")
-    bodies = [(_BODIES[b][0], _scene(args, _BODIES[b][1](scene.mesh))) for b in args.bodies]
+    bodies = [(BODIES[b][0], body_of(args, scene, b, "--bodies")) for b in args.bodies]
     result = ladder.trade(scene, args.steps, args.dt, tolerance=args.tolerance, rungs=rungs,
                           name=args.scene, bodies=bodies)
     result["notes"][:0] = notes

@@ -189,7 +189,12 @@ def test_bodies_measure_every_rung_against_the_finest_mesh_of_the_body():
     assert rows["exact"]["max_continuum_error"] > 0.3 > 0.05 > rows["order 2"][
         "max_continuum_error"]
     assert rows["exact"]["max_error"] == 0.0 and rows["order 2"]["max_error"] > 0.3
-    assert result["recommended_continuum"] == "order 2"
+    # a reduced model of the finest body, drawn on the scene's mesh, follows the body
+    reduced = rows["reduced m4 s16 of the body"]
+    assert reduced["kind"] == "reduced" and reduced["body"] == "refined, order 2"
+    assert reduced["stable"] and reduced["max_error"] > 0.3
+    assert reduced["max_continuum_error"] < 0.02
+    assert result["recommended_continuum"] == "reduced m4 s16 of the body"
     assert "vs body" in ladder.trade_table(result)
     with pytest.raises(ValueError, match="bodies"):
         af.trade(scene, steps=10, rungs=[ladder.fem_rung("exact")], progress=False,
