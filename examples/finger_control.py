@@ -11,10 +11,12 @@ model. Prints the tip error when each target is settled and the real-time factor
 over wall time), and draws the tip against the target in out/finger_control.png.
 
     python examples/finger_control.py [MODEL.onnx]   (default export/models/directional.onnx)
-    python examples/finger_control.py reduced        (the finger's reduced model, 6 modes)
+    python examples/finger_control.py reduced        (the finger's reduced model)
 
-The reduced model is built once with anisofem into out/finger_reduced.json and .bin (as
-`python -m export reduced` does for a mesh file); the loop steps it with numpy alone.
+The reduced model is built once with anisofem into out/finger_reduced.json and .bin, for the
+load the finger declares: its actuator, a force on the tip face along +z or -z up to twice the
+finger's weight (4 modes and 8 directions fitted to the full FEM's equilibria under it, r =
+12); the loop steps it with numpy alone.
 """
 import os
 import sys
@@ -80,10 +82,10 @@ class Network:
 class Reduced:
     """The finger stepped by its reduced model (built on first use): the same interface."""
 
-    def __init__(self, vertices, tets, modes=6):
+    def __init__(self, vertices, tets):
         path = os.path.join("out", "finger_reduced")
         if not os.path.exists(path + ".json"):
-            build_reduced(path, vertices, tets, modes)
+            build_reduced(path, vertices, tets)
         self.sim = ReducedSimulator(path, vertices, tets)
         self.masses, self.dt, self.label = self.sim.masses, DT, "reduced model"
         self.q, self.w = self.sim.rest_state()
@@ -96,16 +98,19 @@ class Reduced:
         return x, v
 
 
-def build_reduced(path, vertices, tets, modes):
+def build_reduced(path, vertices, tets):
     """The finger's reduced model written to path (.json, .bin): the one step that needs the
     library (anisofem) rather than the runtime."""
     import anisofem as af
+    from anisofem.reduced import Drag, Loads, ReducedModel
     from export.reduced import write
     material = af.Material(1e5, 0.48, DENSITY, np.array(FIBER) / np.linalg.norm(FIBER), KAPPA)
     scene = af.Scene(af.TetMesh(vertices, tets), material,
                      fixed=np.flatnonzero(vertices[:, 0] < 1e-9), gravity=(0.0, 0.0, -9.81))
+    tip = np.flatnonzero(vertices[:, 0] > 0.1 - 1e-9)
+    actuator = Drag(tip, 2 * scene.masses.sum() * 9.81, directions=[(0, 0, 1), (0, 0, -1)])
     os.makedirs(os.path.dirname(path), exist_ok=True)
-    write(af.reduced.ReducedModel(scene, modes=modes), path)
+    write(ReducedModel(scene, modes=4, snapshots=8, loads=Loads((actuator,))), path)
 
 
 def main(which):

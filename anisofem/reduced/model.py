@@ -105,9 +105,8 @@ class ReducedModel:
     with basis^T M basis = I; frequencies (m,) of the vibration modes, Hz; polynomial (the
     reduced energy); external (r,) the scene's projected load, N; loads (the Loads, or None);
     snapshots (a SnapshotReport, or None); fitted (how many of the r directions are fitted to
-    the loads); build_seconds (basis and polynomial, with the
-    snapshots' solves even where another model of the scene solved them); validation (a
-    Validation, or None).
+    the loads); build_seconds (basis and polynomial, with the snapshots' solves even where
+    another model of the scene solved them); validation (a Validation, or None).
     """
 
     def __init__(self, scene, modes=MODES, derivatives=None, snapshots=0, loads=None,
@@ -148,22 +147,28 @@ class ReducedModel:
             columns.append(_basis.modal_derivatives(potential, self.x0, layout, factor, phi,
                                                     free))
         U = _basis.mass_orthonormal(np.hstack(columns), mass)
-        solving = 0.0
+        credit = 0.0  # the static solves' time where another model of this scene ran them
         if snapshots:
             t1 = time.perf_counter()
-            states, self.snapshots = static_states(scene, loads)
-            solving = time.perf_counter() - t1 - self.snapshots.seconds
-            fitted = principal_directions((states - self.x0).reshape(len(states), -1)[:, free].T,
-                                          mass, snapshots, against=U)
-            modal = U.shape[1]
-            U = _basis.mass_orthonormal(np.hstack([U, fitted]), mass)
-            self.fitted = U.shape[1] - modal
+            U = self._fit(U, snapshots, mass)
+            credit = max(self.snapshots.seconds - (time.perf_counter() - t1), 0.0)
         self.basis = np.zeros((3 * scene.mesh.n_vertices, U.shape[1]))
         self.basis[free] = U
         self.polynomial = polynomial(scene.elements, self.x0, self.basis)
         self.external = self.project(scene.external_force)
-        self.build_seconds = time.perf_counter() - t0 - solving
+        self.build_seconds = time.perf_counter() - t0 + credit
         self.validation = self.validate() if validate else None
+
+    def _fit(self, U, count, mass):
+        """U (free unknowns, k; mass-orthonormal) with up to `count` principal directions of the
+        full FEM's static equilibria under the declared loads added (snapshots, fitted)."""
+        free = self.scene.free_dofs
+        states, self.snapshots = static_states(self.scene, self.loads)
+        displacements = (states - self.x0).reshape(len(states), -1)[:, free].T
+        fitted = principal_directions(displacements, mass, count, against=U)
+        both = _basis.mass_orthonormal(np.hstack([U, fitted]), mass)
+        self.fitted = both.shape[1] - U.shape[1]
+        return both
 
     def validate(self, cases=None, seed=0):
         """The model against the full FEM on cases it was not built from (a Validation): with
