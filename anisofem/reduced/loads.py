@@ -61,8 +61,7 @@ class Drag:
             raise ValueError(f"vertices: expected a non-empty list of vertex indices, got "
                              f"{self.vertices!r}")
         object.__setattr__(self, "vertices", tuple(int(i) for i in vertices))
-        if (not isinstance(self.magnitude, (int, float, np.floating, np.integer))
-                or not math.isfinite(self.magnitude) or self.magnitude <= 0):
+        if not _real(self.magnitude) or not self.magnitude > 0:
             raise ValueError(f"magnitude: expected a finite force > 0 N, got "
                              f"{self.magnitude!r}")
         object.__setattr__(self, "magnitude", float(self.magnitude))
@@ -97,8 +96,7 @@ class Loads:
             if not isinstance(d, Drag):
                 raise TypeError(f"drags: item {i} is a {type(d).__name__}, expected a Drag")
         object.__setattr__(self, "drags", drags)
-        if (not isinstance(self.cone, (int, float, np.floating, np.integer))
-                or not 0.0 <= self.cone <= 180.0):
+        if not _real(self.cone) or not 0.0 <= self.cone <= 180.0:
             raise ValueError(f"cone: expected an angle from 0 to 180 degrees, got {self.cone!r}")
         object.__setattr__(self, "cone", float(self.cone))
 
@@ -113,12 +111,19 @@ class Loads:
             if outside.size:
                 raise ValueError(f"drags[{i}].vertices: {outside.size} indices outside the "
                                  f"mesh's {n} vertices (first {int(outside[0])})")
-            if held[idx].all():
+            if held[idx].all() or not scene.masses[idx].sum() > 0:
                 raise ValueError(f"drags[{i}].vertices: every one of its {idx.size} vertices is "
-                                 f"held fixed; a drag needs a free vertex to act on")
+                                 f"held fixed or in no tet; a drag needs a free vertex to act "
+                                 f"on")
         if self.cone > 0 and not np.any(scene.gravity):
             raise ValueError(f"cone: {self.cone} degrees of gravity direction, but the scene "
                              f"has no gravity")
+
+
+def _real(value):
+    """Whether value is a finite real number (not a bool)."""
+    return (isinstance(value, (int, float, np.integer, np.floating))
+            and not isinstance(value, bool) and math.isfinite(value))
 
 
 def _unit_rows(directions):
