@@ -66,6 +66,7 @@ class CReducedSimulator:
         c.af_reduced_step.argtypes = [ctypes.c_void_p, double_p, double_p, double_p,
                                       ctypes.c_double, ctypes.c_double, ctypes.c_int]
         c.af_reduced_positions.argtypes = [ctypes.c_void_p, double_p, double_p]
+        c.af_reduced_set_constant_force.argtypes = [ctypes.c_void_p, double_p]
         error = ctypes.create_string_buffer(512)
         handle = c.af_reduced_load(str(path).encode(), None if angle is None
                                    else str(angle).encode(), error, len(error))
@@ -84,16 +85,30 @@ class CReducedSimulator:
         """(q, w): zeros (r,), float64."""
         return np.zeros(self.r), np.zeros(self.r)
 
+    def set_constant_force(self, force):
+        """A force (n, 3), N, added to every later step, projected once (None clears it)."""
+        code = self._c.af_reduced_set_constant_force(self._handle, self._forces(force))
+        if code != 0:
+            raise RuntimeError(f"af_reduced_set_constant_force: {CODES.get(code, code)}")
+
     def step(self, q, w, force, dt, rtol=1e-8, max_iter=50):
-        """One backward-Euler step of q, w (float64 (r,), contiguous) in place under nodal
-        forces (n, 3), N; RuntimeError naming the C runtime's code where it fails."""
-        f = np.ascontiguousarray(force, dtype=np.float64)
-        if f.shape != (self.n, 3):
-            raise ValueError(f"force: expected shape ({self.n}, 3), got {f.shape}")
-        code = self._c.af_reduced_step(self._handle, _pointer(q), _pointer(w), _pointer(f),
-                                       dt, rtol, max_iter)
+        """One backward-Euler step of q, w (float64 (r,), contiguous) in place under the
+        constant force plus nodal forces (n, 3), N (None: none); RuntimeError naming the C
+        runtime's code where it fails."""
+        code = self._c.af_reduced_step(self._handle, _pointer(q), _pointer(w),
+                                       self._forces(force), dt, rtol, max_iter)
         if code != 0:
             raise RuntimeError(f"af_reduced_step: {CODES.get(code, code)}")
+
+    def _forces(self, force):
+        """A pointer to force as a contiguous float64 (n, 3) array (kept alive on self), or
+        None."""
+        if force is None:
+            return None
+        self._held = np.ascontiguousarray(force, dtype=np.float64)
+        if self._held.shape != (self.n, 3):
+            raise ValueError(f"force: expected shape ({self.n}, 3), got {self._held.shape}")
+        return _pointer(self._held)
 
     @property
     def iterations(self):

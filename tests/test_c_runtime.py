@@ -49,6 +49,23 @@ def test_c_steps_like_the_numpy_runtime_over_200_steps(built):
     assert worst < 1e-9 * size
 
 
+def test_a_constant_force_set_once_steps_like_passing_it_every_step(built):
+    scene, path, lib = built
+    every, once = (native.CReducedSimulator(path, lib) for _ in range(2))
+    once.set_constant_force(scene.external_force)
+    drag = np.zeros_like(scene.external_force)
+    drag[np.argmax(scene.mesh.vertices[:, 0]), 2] = 0.3
+    (qe, we), (qo, wo) = every.rest_state(), once.rest_state()
+    for k in range(40):
+        every.step(qe, we, scene.external_force + (drag if k < 20 else 0.0), 0.02)
+        once.step(qo, wo, drag if k < 20 else None, 0.02)
+    assert np.abs(qo).max() > 0 and np.abs(qo - qe).max() < 1e-9 * np.abs(qe).max()
+    bad = scene.external_force.copy()
+    bad[0, 0] = np.inf
+    with pytest.raises(RuntimeError, match="bad input"):
+        once.set_constant_force(bad)
+
+
 def test_c_program_prints_the_runtime_rollout(built, tmp_path):
     scene, path, _ = built
     exe = tmp_path / "example"

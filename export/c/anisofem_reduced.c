@@ -27,6 +27,7 @@ struct af_reduced {
     int n, r;
     long triples;                /* T = r (r + 1) (r + 2) / 6 */
     double *rest, *basis, *masses, *c1, *C2, *S3, *W4;
+    double *constant;            /* (r,) the projected constant force */
     double *work;                /* scratch for a step */
     int iterations;
 };
@@ -140,7 +141,7 @@ static double *load_array(const char *table, const char *bin, long bin_size, con
 void af_reduced_free(af_reduced *m) {
     if (!m) return;
     free(m->rest); free(m->basis); free(m->masses); free(m->c1); free(m->C2); free(m->S3);
-    free(m->W4); free(m->work);
+    free(m->W4); free(m->work); free(m->constant);
     free(m);
 }
 
@@ -220,7 +221,8 @@ af_reduced *af_reduced_load(const char *path, const char *angle, char *error,
     /* work: A, Ap (T each); X, Y, H, L, V, J (r^2 each); g, p, x, load, terms, t1, lam (r
        each) */
     m->work = malloc((size_t)(2 * m->triples + 6 * r * r + 7 * r) * sizeof(double));
-    if (!m->work) {
+    m->constant = calloc((size_t)r, sizeof(double));
+    if (!m->work || !m->constant) {
         say(error, error_size, "no memory for a model of r = %s%s", "", "");
         goto fail;
     }
@@ -422,6 +424,30 @@ static void newton_direction(const double *H, const double *g, double *p, double
     for (i = 0; i < r; i++) p[i] = -p[i];
 }
 
+/* load (r,) += basis^T force (n x 3) */
+static void project(const af_reduced *m, const double *force, double *load) {
+    long i, k, r = m->r;
+    for (i = 0; i < 3L * m->n; i++) {
+        const double *row = m->basis + i * r;
+        double f = force[i];
+        if (f != 0.0) for (k = 0; k < r; k++) load[k] += f * row[k];
+    }
+}
+
+static int finite_forces(const af_reduced *m, const double *force) {
+    long i;
+    for (i = 0; i < 3L * m->n; i++) if (!isfinite(force[i])) return 0;
+    return 1;
+}
+
+int af_reduced_set_constant_force(af_reduced *m, const double *force) {
+    long k;
+    if (force && !finite_forces(m, force)) return AF_BAD_INPUT;
+    for (k = 0; k < m->r; k++) m->constant[k] = 0.0;
+    if (force) project(m, force, m->constant);
+    return AF_OK;
+}
+
 int af_reduced_step(af_reduced *m, double *q, double *w, const double *force, double dt,
                     double rtol, int max_iter) {
     long r = m->r, rr = r * r, i, k, it;
@@ -430,14 +456,10 @@ int af_reduced_step(af_reduced *m, double *q, double *w, const double *force, do
            *x = p + r, *load = x + r, *terms = load + r, *t1 = terms + r, *lam = t1 + r;
     double inertia, tolerance, residual = 0.0, eps = 2.220446049250313e-16;
     if (!(dt > 0.0) || !(rtol >= 0.0)) return AF_BAD_INPUT;
-    for (i = 0; i < 3L * m->n; i++) if (!isfinite(force[i])) return AF_BAD_INPUT;
+    if (force && !finite_forces(m, force)) return AF_BAD_INPUT;
     for (k = 0; k < r; k++) if (!isfinite(q[k]) || !isfinite(w[k])) return AF_BAD_INPUT;
-    for (k = 0; k < r; k++) load[k] = 0.0;
-    for (i = 0; i < 3L * m->n; i++) {
-        const double *row = m->basis + i * r;
-        double f = force[i];
-        if (f != 0.0) for (k = 0; k < r; k++) load[k] += f * row[k];
-    }
+    for (k = 0; k < r; k++) load[k] = m->constant[k];
+    if (force) project(m, force, load);
     inertia = 1.0 / (dt * dt);
     tolerance = rtol * (sqrt(dot(load, load, r)) + sqrt(dot(w, w, r)) / dt);
     for (k = 0; k < r; k++) x[k] = q[k] + dt * w[k];

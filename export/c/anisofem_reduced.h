@@ -53,8 +53,13 @@ AF_API int af_reduced_coordinates(const af_reduced *model);
 AF_API const double *af_reduced_masses(const af_reduced *model);
 AF_API const double *af_reduced_rest_positions(const af_reduced *model);
 
+/* A force (n x 3, N) added to every later step (gravity: masses times g), projected once
+ * here so that a step need not project it again (that projection, n x 3 x r, is most of a
+ * step's time on large meshes). NULL clears it. Returns AF_OK or AF_BAD_INPUT (non-finite). */
+AF_API int af_reduced_set_constant_force(af_reduced *model, const double *force);
+
 /* One backward-Euler step of dt s from reduced coordinates q (r,) and velocities w (r,), in
- * place, under nodal forces force (n x 3, N; gravity included: masses times g). rtol: the
+ * place, under the constant force plus nodal forces force (n x 3, N; NULL: none). rtol: the
  * reduced gradient's tolerance over the step's force size (1e-8); max_iter: Newton's budget
  * (50). Returns AF_OK, or a negative code with q and w unchanged. */
 AF_API int af_reduced_step(af_reduced *model, double *q, double *w, const double *force,

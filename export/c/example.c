@@ -31,9 +31,10 @@ int main(int argc, char **argv) {
     force = calloc((size_t)n * 3, sizeof *force);
     x = malloc((size_t)n * 3 * sizeof *x);
     for (i = 0; i < n; i++) force[3 * i + 2] = -9.81 * af_reduced_masses(model)[i];
+    af_reduced_set_constant_force(model, force);   /* gravity, projected once */
     for (k = 0; k < steps; k++) {
         double lowest = 1e300;
-        int code = af_reduced_step(model, q, w, force, dt, 1e-8, 50);
+        int code = af_reduced_step(model, q, w, NULL, dt, 1e-8, 50);   /* no other force */
         if (code != AF_OK) {
             fprintf(stderr, "step %d: code %d\n", k, code);
             return 1;
