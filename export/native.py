@@ -105,10 +105,10 @@ class CReducedSimulator:
         None."""
         if force is None:
             return None
-        self._held = np.ascontiguousarray(force, dtype=np.float64)
-        if self._held.shape != (self.n, 3):
-            raise ValueError(f"force: expected shape ({self.n}, 3), got {self._held.shape}")
-        return _pointer(self._held)
+        self._force_buffer = np.ascontiguousarray(force, dtype=np.float64)
+        if self._force_buffer.shape != (self.n, 3):
+            raise ValueError(f"force: expected shape ({self.n}, 3), got {self._force_buffer.shape}")
+        return _pointer(self._force_buffer)
 
     @property
     def iterations(self):

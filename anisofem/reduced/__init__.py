@@ -9,7 +9,7 @@ statics and backward Euler by Newton in r dimensions.
     x = model.positions(q)                         # (n, 3) full positions
 
 A basis fitted to the loads a scene declares (anisofem.reduced.loads; by default a drag of
-the body's weight at each free end) follows bending through large rotations:
+up to half the body's weight at each free end) follows bending through large rotations:
 
     model = ReducedModel(scene, modes=4, snapshots=16)   # r = 20
     model.validation.tip_error                           # on unseen loads, against the FEM

@@ -95,8 +95,9 @@ class ReducedModel:
         the declared loads (anisofem.reduced.snapshots): a basis fitted to what the scene does,
         which follows bending through large rotations within the declaration.
     loads : a Loads, what the model must handle beyond the scene's own loads (default, where
-        snapshots > 0: anisofem.reduced.loads.default_loads, a drag of the body's weight at
-        each free end). Declared loads also make the validation a set of unseen rollouts.
+        snapshots > 0: anisofem.reduced.loads.default_loads, a drag of up to half the
+        body's weight at each free end). Declared loads also make the validation a set of
+        unseen rollouts.
     validate : check the model against the full FEM on cases it was not built from
         (validation: the static equilibrium under the scene's loads, or with declared loads
         VALIDATION_CASES short rollouts under unseen loads drawn from them).
@@ -204,13 +205,13 @@ class ReducedModel:
                 break
             phases = ((force, HOLD_STEPS), (zero, HOLD_STEPS))
             t0 = time.perf_counter()
-            full, full_ok = _full_rollout(self.scene, phases, VALIDATION_DT)
+            full, full_ok = full_rollout(self.scene, phases, VALIDATION_DT)
             seconds += time.perf_counter() - t0
             if any((volume_change(self.scene.mesh, x) <= -1.0).any() for x in full):
                 inverted += 1
                 continue
             used += 1
-            reduced, reduced_ok = self._rollout(phases, VALIDATION_DT)
+            reduced, reduced_ok = self.rollout(phases, VALIDATION_DT)
             converged &= full_ok and reduced_ok
             u, d = full - self.x0, reduced[:len(full)] - full
             size = np.linalg.norm(u, axis=2)
@@ -223,9 +224,9 @@ class ReducedModel:
         return Validation(tip_error if used else math.nan, field_error if used else math.nan,
                           seconds, bool(converged), used, inverted)
 
-    def _rollout(self, phases, dt):
-        """Positions (k + 1, n, 3) from rest through phases ((extra force (n, 3), steps), ...),
-        and whether every step converged."""
+    def rollout(self, phases, dt):
+        """Positions (k + 1, n, 3) from rest through phases ((extra nodal force (n, 3) N or
+        None, steps), ...) of dt s, and whether every step converged."""
         q, w = np.zeros(self.r), np.zeros(self.r)
         xs, ok = [self.positions(q)], True
         for force, steps in phases:
@@ -303,10 +304,10 @@ _MESSAGES = {kernels.CONVERGED: "converged", kernels.SPENT: "{} iterations spent
              kernels.NOT_FINITE: "non-finite force"}
 
 
-def _full_rollout(scene, phases, dt):
-    """The full FEM's positions (k + 1, n, 3) from rest through phases ((extra force (n, 3),
-    steps), ...), exact backward Euler, and whether every step converged (a failed step ends
-    the rollout there)."""
+def full_rollout(scene, phases, dt):
+    """The full FEM's positions (k + 1, n, 3) from rest through phases ((extra nodal force (n,
+    3) N, steps), ...) of dt s, exact backward Euler, and whether every step converged (a
+    failed step ends the rollout there): what ReducedModel.rollout is compared with."""
     x = scene.initial_positions()
     v = np.zeros_like(x)
     xs = [x]
