@@ -361,12 +361,19 @@ def _physical_reference_only(rungs, inverted, notes):
 
 
 def _representable(rungs, scene, notes):
-    """rungs without the reduced ones where the scene has Neo-Hookean elements (the reduced
-    model's energy is exact only for the StVK base), saying so in notes."""
-    if not scene.neohookean.any() or all(r.kind != "reduced" for r in rungs):
-        return rungs
-    notes.append("reduced rungs not run: the reduced model needs the StVK base material")
-    return [r for r in rungs if r.kind != "reduced"]
+    """rungs without those that cannot model the scene, saying so in notes: the reduced ones
+    where it has Neo-Hookean elements (the reduced model's energy is exact only for the StVK
+    base) or pressure; the surrogates where it has pressure (they take nodal forces only)."""
+    left = {"reduced": "the reduced model needs the StVK base material"
+            if scene.neohookean.any() else None}
+    if scene.pressures:
+        left = {"reduced": "the reduced model takes no pressure loads",
+                "surrogate": "the surrogates take nodal forces only, not pressure"}
+    for kind, why in left.items():
+        if why and any(r.kind == kind for r in rungs):
+            notes.append(f"{kind} rungs not run: {why}")
+            rungs = [r for r in rungs if r.kind != kind]
+    return rungs
 
 
 def registered_rungs(scene, dt, notes):

@@ -221,3 +221,30 @@ def y_shape(width=0.1, height=0.08, flange=0.02, stem=0.02, depth=0.02, cell=0.0
     X = mesh.vertices.copy()
     X[:, 2] += np.maximum(np.abs(X[:, 0]) - stem / 2, 0.0) * np.tan(np.radians(angle))
     return of_order(TetMesh(X, mesh.tets), order)
+
+
+def tube(inner=0.01, outer=0.02, length=0.02, cells=(4, 8, 2), sweep=90.0, order=1):
+    """A thick-walled tube along z from 0 to length: radii inner < outer in m, over `sweep`
+    degrees of the circle from the +x axis (360: the whole tube, cells around even), cells
+    (radial, around, along). Quadratic tets (order 2) are straight-sided: their midside nodes on
+    the chords. Its cavity wall: the boundary faces with centroid radius below the wall's
+    middle (faces_where)."""
+    nr, nt, nz = _check_cells(cells, "cells", 3)
+    if not 0 < inner < outer or length <= 0:
+        raise ValueError(f"inner, outer, length: need 0 < inner < outer and length > 0 m, got "
+                         f"{inner}, {outer}, {length}")
+    if not 0 < sweep <= 360:
+        raise ValueError(f"sweep: degrees in (0, 360], got {sweep}")
+    whole = sweep == 360
+    if whole and nt % 2:
+        raise ValueError(f"cells: a whole tube needs an even number of cells around, got {nt}")
+    theta = np.radians(np.linspace(0.0, sweep, nt + 1))[:nt if whole else nt + 1]
+    r = np.linspace(inner, outer, nr + 1)
+    R, T = np.meshgrid(r, theta, indexing="ij")
+    section = np.stack([(R * np.cos(T)).ravel(), (R * np.sin(T)).ravel()], axis=1)
+    quads = _grid_quads(nr, nt)
+    if whole:  # the last column of cells closes on the first row of angles
+        quads = np.where(quads % (nt + 1) == nt, quads - nt, quads)
+        quads = quads - quads // (nt + 1)
+    pts, hexes = _extrude(section, quads, np.linspace(0.0, length, nz + 1), axis=2)
+    return of_order(hexes_to_tets(pts, hexes), order)

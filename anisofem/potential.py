@@ -82,7 +82,9 @@ class Potential:
         e_iso, e_fib, elastic = kernels.assemble(self.x_start, self.scene.elements,
                                                  want_grad=True)
         external, kinetic = self._loads(self.x_start, kernels.EMPTY_GRAD)
-        return float(e_iso.sum()) + float(e_fib.sum()) + external + kinetic, elastic
+        pressure = self._pressure(self.x_start, elastic)
+        return (float(e_iso.sum()) + float(e_fib.sum()) + external + kinetic + pressure,
+                elastic)
 
     def _elastic(self, x, want_grad=False, layout=None, project=False):
         """Elastic part: (e_iso (m,), e_fib (m,), gradient (n, 3) or None, Hessian data or
@@ -96,13 +98,15 @@ class Potential:
         return e_iso, e_fib, grad, data
 
     def terms(self, x):
-        """Energy terms in J: isotropic, fiber, external, kinetic, total; and per-element
+        """Energy terms in J: isotropic, fiber, external, kinetic, pressure (-p times each
+        cavity's volume change, summed), total; and per-element
         elastic energies (m,) under "elements"."""
         e_iso, e_fib, _, _ = self._elastic(x)
         external, kinetic = self._loads(x, kernels.EMPTY_GRAD)
         out = {"isotropic": float(e_iso.sum()), "fiber": float(e_fib.sum()),
-               "external": external, "kinetic": kinetic}
-        out["total"] = out["isotropic"] + out["fiber"] + out["external"] + out["kinetic"]
+               "external": external, "kinetic": kinetic, "pressure": self._pressure(x)}
+        out["total"] = (out["isotropic"] + out["fiber"] + out["external"] + out["kinetic"]
+                        + out["pressure"])
         out["elements"] = e_iso + e_fib
         return out
 
@@ -125,10 +129,24 @@ class Potential:
     def _evaluate(self, x, want_grad, layout=None, project=False):
         e_iso, e_fib, grad, data = self._elastic(x, want_grad, layout, project)
         external, kinetic = self._loads(x, grad if want_grad else kernels.EMPTY_GRAD)
-        value = float(e_iso.sum()) + float(e_fib.sum()) + external + kinetic
+        pressure = self._pressure(x, grad if want_grad else None)
+        value = float(e_iso.sum()) + float(e_fib.sum()) + external + kinetic + pressure
+        if layout is not None and not project:
+            for cavity in self.scene.pressures:
+                cavity.add_hessian(x, layout, data)
         if self.dynamic and layout is not None:
             data[layout.diag] += self.mass_per_dof[layout.dofs]
         return value, grad, data
+
+    def _pressure(self, x, grad=None):
+        """The pressures' energy, J; adds their gradient to grad (n, 3) when given. (Their
+        Hessian is left out of the PSD-projected one: the elastic part is PSD by itself.)"""
+        total = 0.0
+        for cavity in self.scene.pressures:
+            total += cavity.energy(x)
+            if grad is not None:
+                cavity.add_gradient(x, grad)
+        return total
 
     def _loads(self, x, grad):
         """(external, kinetic) energies in J; adds their gradient to grad unless it is empty."""

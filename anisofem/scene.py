@@ -13,6 +13,7 @@ from .kernels import MAX_NODES
 from .densities import STVK
 from .material import Material
 from .mesh import TetMesh
+from .pressure import CavityLoad, Pressure
 
 
 #: Scene.gradient_roundoff's margin over the smallest gradient norm Newton reaches.
@@ -55,13 +56,17 @@ class Scene:
         (dead load: fixed in direction and magnitude).
     traction_faces : (k, 3) vertex triples, which must be boundary faces of the mesh (see
         TetMesh.faces_where).
+    pressure : an anisofem.Pressure or a sequence of them: uniform pressures on the walls of
+        cavities, follower loads whose potential is -p times the change of the enclosed volume
+        (anisofem.pressure); `pressures` holds them bound to the mesh.
 
-    Vertices that no tet uses are held in place. All loads are dead loads: the external force
-    vector is constant, f_ext (n, 3), and enters the potential as -f_ext . x.
+    Vertices that no tet uses are held in place. The other loads are dead loads: the external
+    force vector is constant, f_ext (n, 3), and enters the potential as -f_ext . x.
     """
 
     def __init__(self, mesh, material=None, *, fixed=None, fixed_positions=None, gravity=None,
-                 body_force=None, nodal_force=None, traction=None, traction_faces=None):
+                 body_force=None, nodal_force=None, traction=None, traction_faces=None,
+                 pressure=None):
         if not isinstance(mesh, TetMesh):
             raise TypeError(f"mesh: expected an anisofem.TetMesh, got {type(mesh).__name__}")
         material = Material.paper() if material is None else material
@@ -90,6 +95,7 @@ class Scene:
         if traction is not None or traction_faces is not None:
             f += _traction_force(mesh, traction, traction_faces)
         self.external_force = f
+        self.pressures = _cavity_loads(mesh, pressure, self.fixed_mask)
         for arr in (self.fixed_mask, self.fixed_positions, self.masses, self.external_force,
                     self.gravity):
             arr.setflags(write=False)
@@ -256,6 +262,7 @@ class Scene:
         force = share * self.external_force
         force.setflags(write=False)
         moved.external_force = force
+        moved.pressures = tuple(p.scaled(share) for p in self.pressures)
         return moved
 
     def plus_force(self, force):
@@ -314,6 +321,18 @@ def _to_nodes(mesh, per_tet, shares):
     out = np.zeros(mesh.n_vertices)
     np.add.at(out, mesh.cells.ravel(), np.outer(per_tet, shares).ravel())
     return out
+
+
+def _cavity_loads(mesh, pressure, fixed_mask):
+    """The CavityLoads (a tuple) of `pressure`: None, a Pressure or a sequence of them."""
+    if pressure is None:
+        return ()
+    given = (pressure,) if isinstance(pressure, Pressure) else tuple(pressure)
+    for p in given:
+        if not isinstance(p, Pressure):
+            raise TypeError(f"pressure: expected anisofem.Pressure objects, got "
+                            f"{type(p).__name__}")
+    return tuple(CavityLoad(mesh, p, fixed_mask) for p in given)
 
 
 def _traction_force(mesh, traction, faces):

@@ -90,6 +90,8 @@ def from_scene(scene, dtype=torch.float32):
     if scene.mesh.order != 1:
         raise ValueError(f"scene: the network steps linear tets (the paper's setting); this "
                          f"mesh has quadratic tets (order {scene.mesh.order})")
+    if scene.pressures:
+        raise ValueError("scene: the network takes nodal forces; this scene has pressure loads")
     mesh, el = scene.mesh, scene.elements
     t = runtime.mesh_tensors(mesh.vertices, mesh.tets, scene.masses, scene.fixed_mask,
                              scene.fixed_positions, el.fiber, el.kappa, el.mu, el.lam)

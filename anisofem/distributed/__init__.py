@@ -77,6 +77,9 @@ def _context(scene, comm, *options):
     all ranks hold the same scene size and options."""
     PETSc = _petsc()
     check_scene(scene)
+    if scene.pressures:
+        raise ValueError("scene: the petsc engine takes nodal forces, gravity and tractions; "
+                         "this scene has pressure loads (solve it with anisofem.solve)")
     comm = PETSc.COMM_WORLD if comm is None else comm
     _share_cores(comm)
     _agree(comm, scene, *options)

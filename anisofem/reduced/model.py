@@ -117,6 +117,9 @@ class ReducedModel:
             raise ValueError("scene: the reduced model needs the StVK base material (its energy "
                              "is a polynomial in the reduced coordinates); this scene has "
                              "Neo-Hookean elements")
+        if scene.pressures:
+            raise ValueError("scene: the reduced model takes nodal forces, gravity and "
+                             "tractions; this scene has pressure loads")
         scene.check_static()
         modes = _count(modes, "modes", 1)
         snapshots = _count(snapshots, "snapshots", 0)
