@@ -21,6 +21,7 @@ from .inversion import inversion
 from .material import MODELS, Material
 from .metrics import end_vertices, tip_displacement
 from .scene import Scene
+from .scenefile import load_scene
 from .solve import CONTINUATION, simulate, solve
 
 #: Each shape: (its mesh from the shape flags, the flags it takes with their defaults, the end
@@ -106,29 +107,58 @@ def _shape(args, name):
 def _no_shape_flags(args):
     """ValueError naming a shape flag given with a mesh file (whose mesh is as it is)."""
     for flag in _SHAPE_FLAGS:
-        if getattr(args, flag) is not None:
+        if getattr(args, flag, None) is not None:
             raise ValueError(f"--{flag.replace('_', '-')}: a shape flag; the mesh of a file is "
                              f"read as it is")
+
+
+#: The scene flags besides --fixed and their defaults (a scene file sets them all itself)
+SCENE_FLAGS = {"gravity": (0.0, 0.0, -9.81), "young": 1e5, "poisson": 0.48, "density": 1000.0,
+               "fiber": (1.0, 0.0, 0.0), "kappa": 0.0, "material": "stvk"}
 
 
 def _scene_arguments(s, fixed="x-min"):
     """The flags that make a Scene of a mesh (solve and trade); fixed: --fixed's default, None
     for the shape's (scene_of)."""
+    d = SCENE_FLAGS
     s.add_argument("--fixed", default=fixed,
                    help="end held fixed: AXIS-SIDE" + ("" if fixed else " (default: the end the "
                         "shape stands on: x-min for box and cylinder, z-min for t and y; x-min "
                         "for a mesh file)"))
-    s.add_argument("--gravity", type=float, nargs=3, default=(0.0, 0.0, -9.81),
+    s.add_argument("--gravity", type=float, nargs=3, default=d["gravity"],
                    metavar=("GX", "GY", "GZ"), help="m/s^2")
-    s.add_argument("--young", type=float, default=1e5, help="Pa")
-    s.add_argument("--poisson", type=float, default=0.48, help="Poisson's ratio")
-    s.add_argument("--density", type=float, default=1000.0, help="kg/m^3")
-    s.add_argument("--fiber", type=float, nargs=3, default=(1.0, 0.0, 0.0),
+    s.add_argument("--young", type=float, default=d["young"], help="Pa")
+    s.add_argument("--poisson", type=float, default=d["poisson"], help="Poisson's ratio")
+    s.add_argument("--density", type=float, default=d["density"], help="kg/m^3")
+    s.add_argument("--fiber", type=float, nargs=3, default=d["fiber"],
                    help="unit fiber direction")
-    s.add_argument("--kappa", type=float, default=0.0, help="fiber stiffness, Pa")
-    s.add_argument("--material", default="stvk", choices=MODELS,
+    s.add_argument("--kappa", type=float, default=d["kappa"], help="fiber stiffness, Pa")
+    s.add_argument("--material", default=d["material"], choices=MODELS,
                    help="base material: stvk (the paper's) or neohookean (never turns inside "
                         "out; pick it when the scene compresses hard)")
+
+
+def is_scene_file(name):
+    """Whether a command's positional names a TOML scene file (anisofem.scenefile)."""
+    return str(name).lower().endswith(".toml")
+
+
+def _scene_file(args, name, fixed_default):
+    """The Scene of the scene file `name`; ValueError naming a flag given with it that the
+    file sets itself (shape, order, --fixed and the scene flags away from their defaults)."""
+    _no_shape_flags(args)
+    given = [f for f, d in SCENE_FLAGS.items()
+             if tuple(np.atleast_1d(getattr(args, f))) != tuple(np.atleast_1d(d))]
+    if args.order is not None:
+        given.insert(0, "order")
+    if args.fixed != fixed_default:
+        given.insert(0, "fixed")
+    if given:
+        raise ValueError(f"--{given[0]}: the scene file {name} sets the scene (its mesh, "
+                         f"materials, boundary and loads); change it there")
+    scene = load_scene(name)
+    args.gravity = tuple(float(g) for g in scene.gravity)
+    return scene
 
 
 def _scene(args, mesh):
@@ -144,7 +174,11 @@ def _scene(args, mesh):
 
 def body_of(args, scene, body, flag):
     """The Scene of scene's body on the finer mesh `body` (a key of BODIES), with the same
-    flags; ValueError naming `flag` where the scene's tets are quadratic already."""
+    flags; ValueError naming `flag` where the scene's tets are quadratic already or it comes
+    from a scene file."""
+    if is_scene_file(args.scene):
+        raise ValueError(f"{flag}: takes a mesh file or a shape; a scene file's regions and "
+                         f"surfaces are named on its own mesh")
     if scene.mesh.order != 1:
         raise ValueError(f"{flag}: the scene has quadratic tets already; give its linear mesh")
     return _scene(args, BODIES[body][1](scene.mesh))
@@ -153,8 +187,8 @@ def body_of(args, scene, body, flag):
 def add_scene_arguments(p):
     """The positional scene (a mesh file or a shape) and the flags that make a Scene of it
     (trade here, `python -m export reduced`)."""
-    p.add_argument("scene", help="a mesh file meshio reads, or a shape: "
-                                 f"{', '.join(sorted(_SHAPES))}")
+    p.add_argument("scene", help="a scene file (.toml, docs/scenes.md), a mesh file meshio "
+                                 f"reads, or a shape: {', '.join(sorted(_SHAPES))}")
     _shape_arguments(p)
     _scene_arguments(p, fixed=None)
 
@@ -162,6 +196,8 @@ def add_scene_arguments(p):
 def scene_of(args):
     """The Scene that the flags of add_scene_arguments describe (args.fixed set to the end
     held where it was not given)."""
+    if is_scene_file(args.scene):
+        return _scene_file(args, args.scene, None)
     if args.scene in _SHAPES:
         mesh = _shape(args, args.scene)
         args.fixed = args.fixed or _SHAPES[args.scene][2]
@@ -200,7 +236,8 @@ def _parser():
     _shape_arguments(m)
     m.add_argument("-o", "--output", required=True)
     s = sub.add_parser("solve", help="static equilibrium or a backward-Euler rollout", **defaults)
-    s.add_argument("mesh", help="a mesh file meshio reads (.msh, .vtu, .xdmf, ...)")
+    s.add_argument("mesh", help="a scene file (.toml, docs/scenes.md) or a mesh file meshio "
+                                "reads (.msh, .vtu, .xdmf, ...)")
     s.add_argument("-o", "--output", required=True, help="result file (.vtu, .xdmf, .msh)")
     _scene_arguments(s)
     _order_argument(s)
@@ -313,8 +350,11 @@ def _mesh(args):
 
 def _solve(args):
     check_output_path(args.output)
-    mesh = _of_order(read_mesh(args.mesh), args.order)
-    scene = _scene(args, mesh)
+    if is_scene_file(args.mesh):
+        scene = _scene_file(args, args.mesh, "x-min")
+    else:
+        scene = _scene(args, _of_order(read_mesh(args.mesh), args.order))
+    mesh = scene.mesh
     if args.engine == "petsc":
         from .distributed import command
         return command.run(args, scene, command.check(args, scene))

@@ -6,6 +6,7 @@ element is turned inside out)."""
 import contextlib
 import io
 import os
+from dataclasses import dataclass
 
 import meshio
 import numpy as np
@@ -25,6 +26,27 @@ def read_mesh(path, **mesh_options):
     (surface triangles, lines) are common in .msh files, and the vertices only they use are
     dropped unless unreferenced is given.
     """
+    return read_tagged_mesh(path, **mesh_options)[0]
+
+
+@dataclass
+class MeshTags:
+    """What a mesh file says about its tets and surfaces besides their geometry.
+
+    volumes: (m,) int physical group of each tet (Gmsh's "gmsh:physical"), or None; surfaces:
+    {physical group: (k, 3) corner vertex triples of its triangles}; names: {name: (group,
+    dimension)} (Gmsh's physical names: 3 for volumes, 2 for surfaces); cell_data: {name: (m,
+    ...) array} the tets' other cell fields (a fiber field, say).
+    """
+    volumes: object
+    surfaces: dict
+    names: dict
+    cell_data: dict
+
+
+def read_tagged_mesh(path, **mesh_options):
+    """(TetMesh, MeshTags) of a mesh file: read_mesh's mesh with the file's physical groups,
+    names and cell fields (numbered for the mesh's vertices and tets)."""
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise FileNotFoundError(f"path: no such mesh file {path!r}")
@@ -40,9 +62,34 @@ def read_mesh(path, **mesh_options):
     if len(found) > 1:
         raise ValueError(f"path: {path} mixes linear (tetra) and quadratic (tetra10) tets; a "
                          f"mesh has one order")
-    tets = [c.data for c in m.cells if c.type == found[0]]
+    blocks = [k for k, c in enumerate(m.cells) if c.type == found[0]]
+    tets = np.concatenate([m.cells[k].data for k in blocks]).astype(np.int64)
     mesh_options.setdefault("unreferenced", "drop")
-    return TetMesh(m.points[:, :3], np.concatenate(tets).astype(np.int64), **mesh_options)
+    mesh = TetMesh(m.points[:, :3], tets, **mesh_options)
+    new = np.arange(len(m.points))
+    if mesh.kept_vertices is not None:
+        new = np.full(len(m.points), -1)
+        new[mesh.kept_vertices] = np.arange(mesh.kept_vertices.size)
+    fields = {name: np.concatenate([np.asarray(data[k]) for k in blocks])
+              for name, data in m.cell_data.items()}
+    volumes = fields.pop("gmsh:physical", None)
+    fields.pop("gmsh:geometrical", None)
+    surfaces = {}
+    physical = m.cell_data.get("gmsh:physical")
+    for k, block in enumerate(m.cells):
+        if block.type not in ("triangle", "triangle6") or physical is None:
+            continue
+        corners = new[np.asarray(block.data[:, :3], dtype=np.int64)]
+        if (corners < 0).any():
+            raise ValueError(f"path: {path} has surface triangles on vertices no tet uses")
+        for tag in np.unique(physical[k]):
+            part = corners[np.asarray(physical[k]) == tag]
+            surfaces[int(tag)] = np.concatenate([surfaces.get(int(tag), np.empty((0, 3), int)),
+                                                 part])
+    names = {str(name): (int(v[0]), int(v[1])) for name, v in (m.field_data or {}).items()
+             if np.size(v) >= 2}
+    return mesh, MeshTags(None if volumes is None else np.asarray(volumes, np.int64), surfaces,
+                          names, fields)
 
 
 #: meshio's cell types of the tets anisofem reads, by order

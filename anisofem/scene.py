@@ -13,6 +13,7 @@ from .kernels import MAX_NODES
 from .densities import STVK
 from .material import Material
 from .mesh import TetMesh
+from .curves import Timed
 from .pressure import CavityLoad, Pressure
 
 
@@ -93,9 +94,10 @@ class Scene:
         if nodal_force is not None:
             f += as_float_array(nodal_force, "nodal_force", shape=(n, 3))
         if traction is not None or traction_faces is not None:
-            f += _traction_force(mesh, traction, traction_faces)
+            f += traction_force(mesh, traction, traction_faces)
         self.external_force = f
         self.pressures = _cavity_loads(mesh, pressure, self.fixed_mask)
+        self.timed = ()
         for arr in (self.fixed_mask, self.fixed_positions, self.masses, self.external_force,
                     self.gravity):
             arr.setflags(write=False)
@@ -275,6 +277,47 @@ class Scene:
         moved.external_force = total
         return moved
 
+    def following(self, timed):
+        """The same scene with loads that follow load curves: timed, a sequence of
+        anisofem.curves.Timed, each a part of this scene's loads as written (its force in
+        external_force, its pressure in pressures, its motion in fixed_positions).
+        Scene.at(t) scales each part by its curve. Shares what held_at shares."""
+        timed = tuple(timed)
+        n = self.mesh.n_vertices
+        for k, part in enumerate(timed):
+            if not isinstance(part, Timed):
+                raise TypeError(f"timed[{k}]: expected anisofem.curves.Timed, got "
+                                f"{type(part).__name__}")
+            if part.pressure is not None and not 0 <= part.pressure < len(self.pressures):
+                raise ValueError(f"timed[{k}]: pressure {part.pressure} is not one of the "
+                                 f"scene's {len(self.pressures)}")
+            if part.force is not None:
+                as_float_array(part.force, f"timed[{k}].force", shape=(n, 3))
+        moved = self.held_at(self.fixed_positions)
+        moved.timed = timed
+        return moved
+
+    def at(self, t):
+        """The scene at time t, s: each timed part (following) at its curve's value at t;
+        the scene itself when none is timed."""
+        if not self.timed:
+            return self
+        force = self.external_force.copy()
+        held = self.fixed_positions.copy()
+        pressures = list(self.pressures)
+        for part in self.timed:
+            c = part.curve(t) - 1.0
+            if part.force is not None:
+                force += c * part.force
+            if part.motion is not None:
+                held += (part.motion(c + 1.0) - part.motion(1.0)) * self.fixed_mask
+            if part.pressure is not None:
+                pressures[part.pressure] = pressures[part.pressure].scaled(c + 1.0)
+        moved = self.held_at(held)
+        force.setflags(write=False)
+        moved.external_force, moved.pressures, moved.timed = force, tuple(pressures), ()
+        return moved
+
     @cached_property
     def neohookean(self):
         """(m,) bool: the elements with the Neo-Hookean base (the others are StVK)."""
@@ -335,7 +378,9 @@ def _cavity_loads(mesh, pressure, fixed_mask):
     return tuple(CavityLoad(mesh, p, fixed_mask) for p in given)
 
 
-def _traction_force(mesh, traction, faces):
+def traction_force(mesh, traction, faces):
+    """The nodal force (n, 3), N, of traction (3,) or (k, 3) N/m^2 per rest area on the
+    boundary faces (k, 3) (see Scene's traction)."""
     if traction is None or faces is None:
         raise ValueError("traction, traction_faces: give both (N/m^2 and the boundary faces)")
     faces = as_index_array(faces, "traction_faces", shape=(None, 3))

@@ -207,18 +207,21 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, method="aut
 
     method, options: how each step is solved (see step); one Method serves the whole rollout
     (a Stepper), so "reuse" and "lbfgs" keep their factorizations and curvature pairs from
-    step to step. callback(k, StepResult) is called after each step. Stops early, with
+    step to step. A scene whose loads follow load curves (Scene.following) is taken at the end
+    of each step, Scene.at((k + 1) dt). callback(k, StepResult) is called after each step. Stops early, with
     completed=False, at the first step whose solve fails (a step that spends a fixed iteration
     budget does not fail); what came before is kept.
     """
     check_scene(scene)
     steps = as_count(steps, "steps")
-    x = scene.with_fixed(scene.initial_positions() if x0 is None
-                    else check_positions(scene, x0, "x0"))
+    start = scene.at(0.0)
+    x = start.with_fixed(start.initial_positions() if x0 is None
+                         else check_positions(scene, x0, "x0"))
     v = np.zeros_like(x) if v0 is None else check_positions(scene, v0, "v0")
     stepper = Stepper(scene, dt, method, warn, **options)
     xs, vs, results = [x], [v], []
     for k in range(steps):
+        stepper.scene = scene.at((k + 1) * dt)
         res = stepper(x, v)
         results.append(res)
         if res.newton.failed:
