@@ -155,3 +155,63 @@ def write_mesh(path, mesh, x=None, scene=None):
               ".msh": {"file_format": "gmsh22", "binary": True}}.get(ext, {})
     with atomic_path(path, ext) as tmp:
         meshio.write(tmp, out, **kwargs)
+
+
+def write_tagged_mesh(path, mesh, volumes=None, surfaces=None, names=None, cell_data=None):
+    """Write a mesh as Gmsh 2.2 (.msh) with physical groups, as Gmsh itself would: volumes (m,)
+    int the group of each tet (default 1), surfaces {group: (k, 3) boundary triangles},
+    names {name: group} (a volume's or a surface's), cell_data {name: (m, ...)} fields of the
+    tets. read_tagged_mesh reads it back; a scene file names its groups. Atomic."""
+    path = check_output_path(path)
+    if not path.lower().endswith(".msh"):
+        raise ValueError(f"path: physical groups are written to Gmsh files (.msh), got {path!r}")
+    surfaces = surfaces or {}
+    tags = (np.ones(mesh.n_tets, np.int32) if volumes is None
+            else np.asarray(volumes, np.int32))
+    if tags.shape != (mesh.n_tets,):
+        raise ValueError(f"volumes: expected one group per tet, shape ({mesh.n_tets},), got "
+                         f"{tags.shape}")
+    triangles = [np.asarray(t, np.int64).reshape(-1, 3) for t in surfaces.values()]
+    groups = [np.full(len(t), g, np.int32) for g, t in zip(surfaces, triangles)]
+    cells, physical = [], []
+    if triangles:
+        cells.append(("triangle", np.concatenate(triangles)))
+        physical.append(np.concatenate(groups))
+    cells.append((TET_TYPES[mesh.order - 1], np.asarray(mesh.cells)))
+    physical.append(tags)
+    data = {"gmsh:physical": physical, "gmsh:geometrical": physical}
+    for name, field in (cell_data or {}).items():
+        field = np.asarray(field, dtype=float)
+        if field.shape[0] != mesh.n_tets:
+            raise ValueError(f"cell_data: {name!r} has {field.shape[0]} rows for "
+                             f"{mesh.n_tets} tets")
+        data[name] = ([np.zeros((len(cells[0][1]),) + field.shape[1:])] if triangles else []) \
+            + [field]
+    dims = {int(g): 2 for g in surfaces}
+    field_data = {name: np.array([g, dims.get(int(g), 3)]) for name, g in (names or {}).items()}
+    out = meshio.Mesh(mesh.vertices, cells, cell_data=data, field_data=field_data)
+    with atomic_path(path, ".msh") as tmp:
+        meshio.write(tmp, out, file_format="gmsh22", binary=True)  # see write_mesh
+
+
+def write_series(path, mesh, states, times, scene=None):
+    """Write states (k, n, 3) at times (k,) as a ParaView collection: path (.pvd) indexing one
+    .vtu per state (write_mesh's fields) named after it, _0000.vtu and on. Each file atomic."""
+    path = os.fspath(path)
+    if not path.lower().endswith(".pvd"):
+        raise ValueError(f"path: a series is a ParaView collection (.pvd), got {path!r}")
+    check_folder(path)
+    times = as_float_array(times, "times", shape=(None,))
+    if len(states) != times.size:
+        raise ValueError(f"states, times: {len(states)} states for {times.size} times")
+    stem = os.path.splitext(path)[0]
+    entries = []
+    for k, (x, t) in enumerate(zip(states, times)):
+        name = f"{stem}_{k:04d}.vtu"
+        write_mesh(name, mesh, x, scene)
+        entries.append(f'    <DataSet timestep="{t:.9g}" file="{os.path.basename(name)}"/>')
+    text = ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+            + "\n".join(entries) + "\n  </Collection>\n</VTKFile>\n")
+    with atomic_path(path, ".pvd") as tmp:
+        with open(tmp, "w") as f:
+            f.write(text)

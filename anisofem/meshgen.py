@@ -248,3 +248,71 @@ def tube(inner=0.01, outer=0.02, length=0.02, cells=(4, 8, 2), sweep=90.0, order
         quads = quads - quads // (nt + 1)
     pts, hexes = _extrude(section, quads, np.linspace(0.0, length, nz + 1), axis=2)
     return of_order(hexes_to_tets(pts, hexes), order)
+
+
+def actuator(radius=0.01, length=0.08, layer=0.002, cavity=0.75, cap=0.01, cells=(8, 4, 16),
+             order=1):
+    """A fiber-reinforced bending actuator along z from the base z = 0 to z = length (m): a body
+    of half-circular section (radius, flat side on y = 0) around a cavity, on a flat
+    strain-limiting layer (y from -layer to 0). The cavity fills the section's inner part (its
+    corners in the grid's reference square at |u| < cavity, 0 < w < cavity, mapped by the
+    elliptical grid map onto the half disc) from the base, where it is open, to `cap` below
+    the tip. cells: (across, up, along): across even, the cavity a whole number of cells across
+    and up.
+
+    Returns (TetMesh, volumes (m,) its group of each tet, surfaces {group: (k, 3) faces},
+    names {name: group}): "body" 1 and "layer" 2, surfaces "cavity" 3 (the cavity's walls),
+    "base" 4 (z = 0) and "tip" 5 (z = length); for io.write_tagged_mesh."""
+    nu, nw, nz = _check_cells(cells, "cells", 3)
+    su, sw = cavity * nu / 2, cavity * nw
+    if nu % 2 or abs(su - round(su)) > 1e-9 or abs(sw - round(sw)) > 1e-9 or \
+            not 0 < cavity < 1:
+        raise ValueError(f"cells, cavity: the cavity (|u| < {cavity}, w < {cavity}) must span "
+                         f"whole cells of {cells} (across even)")
+    if not 0 < cap < length or min(radius, layer) <= 0:
+        raise ValueError(f"radius, length, layer, cap: need positive sizes and cap < length, "
+                         f"got {radius}, {length}, {layer}, {cap}")
+    u = np.linspace(-1.0, 1.0, nu + 1)
+    w = np.concatenate([[-1.0], np.linspace(0.0, 1.0, nw + 1)])  # one row of layer below
+    U, W = np.meshgrid(u, w, indexing="ij")
+    up = np.clip(W, 0.0, None)
+    x = radius * U * np.sqrt(1.0 - up ** 2 / 2.0)
+    y = np.where(W < 0, layer * W, radius * up * np.sqrt(1.0 - U ** 2 / 2.0))
+    section = np.stack([x.ravel(), y.ravel()], axis=1)
+    quads = _grid_quads(nu, nw + 1)
+    z = np.linspace(0.0, length, nz + 1)
+    pts, hexes = _extrude(section, quads, z, axis=2)
+    cu = 0.5 * (u[:-1] + u[1:])
+    cw = 0.5 * (w[:-1] + w[1:])
+    cz = 0.5 * (z[:-1] + z[1:])
+    CU, CW = np.meshgrid(cu, cw, indexing="ij")
+    hollow = ((np.abs(CU) < cavity) & (CW > 0) & (CW < cavity)).ravel()
+    empty = hollow[None, :] & (cz < length - cap)[:, None]
+    keep = ~empty.ravel()
+    hexes = hexes[keep]
+    used, hexes = np.unique(hexes, return_inverse=True)
+    mesh = hexes_to_tets(pts[used], hexes.reshape(-1, 8))
+    layer_cells = np.repeat((np.tile(CW.ravel() < 0, nz))[keep], 5)
+    volumes = np.where(layer_cells, 2, 1)
+    X = mesh.vertices
+    faces = mesh.boundary_faces
+    corners = X[faces]
+    tol = 1e-9 * mesh.size
+    on_base = (np.abs(corners[:, :, 2]) < tol).all(axis=1)
+    on_tip = (np.abs(corners[:, :, 2] - length) < tol).all(axis=1)
+    outer = _on_outer_surface(corners, radius, layer, tol)
+    inside = ~(on_base | on_tip | outer)
+    surfaces = {3: faces[inside], 4: faces[on_base], 5: faces[on_tip]}
+    return (of_order(mesh, order), volumes,
+            surfaces, {"body": 1, "layer": 2, "cavity": 3, "base": 4, "tip": 5})
+
+
+def _on_outer_surface(corners, radius, layer, tol):
+    """(k,) whether boundary faces (k, 3, 3) lie on the actuator's outside: the half cylinder
+    r = radius above y = 0, the layer's bottom y = -layer and its sides |x| = radius."""
+    r = np.hypot(corners[:, :, 0], corners[:, :, 1])
+    y = corners[:, :, 1]
+    curved = ((np.abs(r - radius) < 1e-6 * radius) & (y >= -tol)).all(axis=1)
+    bottom = (np.abs(y + layer) < tol).all(axis=1)
+    sides = (np.abs(np.abs(corners[:, :, 0]) - radius) < tol).all(axis=1) & (y <= tol).all(axis=1)
+    return curved | bottom | sides

@@ -49,6 +49,8 @@ SCHEMA = {
         "angle": "the winding angle from the axis, degrees (90: hoops around it)",
         "angle_end": "the angle at the region's far end along the axis (default: angle), linear "
                      "in between",
+        "crossed": "true: a crossed winding, +angle and -angle on alternate tets (the two "
+                   "fiber families of a wound actuator; default false)",
     },
     "boundary": {
         "where": "a physical surface of the mesh file (its name, or its number), a side of the "
@@ -261,6 +263,11 @@ class _Reader:
         span = np.ptp(s)
         share = (s - s.min()) / span if span > 0 else np.zeros_like(s)
         angle = np.radians(start + (end - start) * share)
+        crossed = spec.get("crossed", False)
+        if not isinstance(crossed, bool):
+            raise self.error(f"{key}.crossed", f"true or false, got {crossed!r}")
+        if crossed:
+            angle[1::2] *= -1.0
         return np.cos(angle)[:, None] * axis + np.sin(angle)[:, None] * around
 
     # boundary conditions and loads

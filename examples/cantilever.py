@@ -12,9 +12,9 @@ import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
 
 import anisofem as af  # noqa: E402
+import anisofem.draw  # noqa: E402,F401
 
 os.makedirs("out", exist_ok=True)
 mesh = af.box_beam(size=(0.1, 0.02, 0.02), cells=(20, 4, 4))
@@ -22,7 +22,6 @@ clamped = af.metrics.end_vertices(mesh, axis=0, side="min")
 cases = {"no fibers": af.Material.paper(),
          "fibers along gravity": af.Material.paper((0, 0, 1), 1e5),
          "fibers along the beam": af.Material.paper((1, 0, 0), 1e5)}
-faces = mesh.boundary_faces
 results = {}
 for name, material in cases.items():
     scene = af.Scene(mesh, material, fixed=clamped, gravity=(0, 0, -9.81))
@@ -36,18 +35,9 @@ for name, material in cases.items():
 u_max = max(np.linalg.norm(x - mesh.vertices, axis=1).max() for x, _ in results.values())
 norm = matplotlib.colors.Normalize(0, 1e3 * u_max)
 fig = plt.figure(figsize=(12, 3.4))
-light = matplotlib.colors.LightSource(azdeg=315, altdeg=45)
 for k, (name, (x, sag)) in enumerate(results.items()):
     ax = fig.add_subplot(1, 3, k + 1, projection="3d")
-    ax.add_collection3d(Poly3DCollection(mesh.vertices[faces], facecolor=(0.6, 0.6, 0.6, 0.08),
-                                         edgecolor=(0.5, 0.5, 0.5, 0.15), lw=0.3))
-    u = 1e3 * np.linalg.norm(x - mesh.vertices, axis=1)[faces].mean(axis=1)
-    tri = x[faces]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    shade = light.shade_normals(normals / np.linalg.norm(normals, axis=1, keepdims=True))
-    colors = plt.cm.viridis(norm(u))
-    colors[:, :3] *= (0.45 + 0.55 * shade)[:, None]
-    ax.add_collection3d(Poly3DCollection(tri, facecolors=colors, edgecolor="none"))
+    af.draw.deformed_surface(ax, mesh, x, norm)
     ax.set(xlim=(0, 0.1), ylim=(-0.02, 0.02), zlim=(-0.035, 0.012), box_aspect=(10, 4, 4.7))
     ax.view_init(elev=14, azim=-62)
     ax.set_axis_off()
