@@ -158,13 +158,20 @@ def write_mesh(path, mesh, x=None, scene=None):
 
 
 def write_tagged_mesh(path, mesh, volumes=None, surfaces=None, names=None, cell_data=None):
-    """Write a mesh as Gmsh 2.2 (.msh) with physical groups, as Gmsh itself would: volumes (m,)
-    int the group of each tet (default 1), surfaces {group: (k, 3) boundary triangles},
-    names {name: group} (a volume's or a surface's), cell_data {name: (m, ...)} fields of the
-    tets. read_tagged_mesh reads it back; a scene file names its groups. Atomic."""
+    """Write a mesh with physical groups, as Gmsh would: volumes (m,) int the group of each tet
+    (default 1), surfaces {group: (k, 3) boundary triangles}, names {name: group} (a volume's
+    or a surface's; Gmsh files only), cell_data {name: (m, ...)} fields of the tets (.vtu and
+    .xdmf only: meshio's Gmsh reader loses cell fields beside surface triangles).
+    read_tagged_mesh reads it back; a scene file names its groups. Atomic."""
     path = check_output_path(path)
-    if not path.lower().endswith(".msh"):
-        raise ValueError(f"path: physical groups are written to Gmsh files (.msh), got {path!r}")
+    ext = os.path.splitext(path)[1].lower()
+    gmsh = ext == ".msh"
+    if gmsh and cell_data:
+        raise ValueError(f"cell_data: write cell fields to .vtu or .xdmf ({path!r} is Gmsh, "
+                         f"whose reader loses them)")
+    if names and not gmsh:
+        raise ValueError(f"names: group names are written to Gmsh files (.msh); {path!r} keeps "
+                         f"the groups' numbers only")
     surfaces = surfaces or {}
     tags = (np.ones(mesh.n_tets, np.int32) if volumes is None
             else np.asarray(volumes, np.int32))
@@ -179,19 +186,22 @@ def write_tagged_mesh(path, mesh, volumes=None, surfaces=None, names=None, cell_
         physical.append(np.concatenate(groups))
     cells.append((TET_TYPES[mesh.order - 1], np.asarray(mesh.cells)))
     physical.append(tags)
-    data = {"gmsh:physical": physical, "gmsh:geometrical": physical}
+    data = {"gmsh:physical": physical}
+    if gmsh:
+        data["gmsh:geometrical"] = physical
     for name, field in (cell_data or {}).items():
         field = np.asarray(field, dtype=float)
         if field.shape[0] != mesh.n_tets:
             raise ValueError(f"cell_data: {name!r} has {field.shape[0]} rows for "
                              f"{mesh.n_tets} tets")
-        data[name] = ([np.zeros((len(cells[0][1]),) + field.shape[1:])] if triangles else []) \
-            + [field]
+        data[name] = [np.zeros((len(c[1]),) + field.shape[1:]) for c in cells[:-1]] + [field]
     dims = {int(g): 2 for g in surfaces}
     field_data = {name: np.array([g, dims.get(int(g), 3)]) for name, g in (names or {}).items()}
     out = meshio.Mesh(mesh.vertices, cells, cell_data=data, field_data=field_data)
-    with atomic_path(path, ".msh") as tmp:
-        meshio.write(tmp, out, file_format="gmsh22", binary=True)  # see write_mesh
+    kwargs = ({"file_format": "gmsh22", "binary": True} if gmsh else  # see write_mesh
+              {"data_format": "XML"} if ext == ".xdmf" else {})
+    with atomic_path(path, ext) as tmp:
+        meshio.write(tmp, out, **kwargs)
 
 
 def write_series(path, mesh, states, times, scene=None):
