@@ -84,11 +84,16 @@ class Rung:
 
 
 def fem_rung(name, method="auto", dt_factor=1, **options):
-    """A Rung stepping by anisofem.step with `method` and its options (anisofem.methods)."""
+    """A Rung stepping by anisofem.step with `method` and its options (anisofem.methods),
+    through the scene's load curves from time 0 (Scene.at)."""
     def make(scene, dt):
         stepper = Stepper(scene, dt, method, **options)
+        taken = 0
 
         def advance(x, v):
+            nonlocal taken
+            taken += 1
+            stepper.scene = scene.at(taken * dt)  # loads on curves: at the step's end
             res = stepper(x, v)
             n = res.newton
             return res.x, res.v, {"failed": n.failed, "message": n.message,
@@ -363,12 +368,13 @@ def _physical_reference_only(rungs, inverted, notes):
 def _representable(rungs, scene, notes):
     """rungs without those that cannot model the scene, saying so in notes: the reduced ones
     where it has Neo-Hookean elements (the reduced model's energy is exact only for the StVK
-    base) or pressure; the surrogates where it has pressure (they take nodal forces only)."""
+    base), pressure or load curves; the surrogates where it has pressure or load curves."""
     left = {"reduced": "the reduced model needs the StVK base material"
             if scene.neohookean.any() else None}
-    if scene.pressures:
-        left = {"reduced": "the reduced model takes no pressure loads",
-                "surrogate": "the surrogates take nodal forces only, not pressure"}
+    if scene.pressures or scene.timed:
+        why = "pressure" if scene.pressures else "load curves"
+        left = {"reduced": f"the reduced model takes no {why}",
+                "surrogate": f"the surrogates take constant nodal forces, not {why}"}
     for kind, why in left.items():
         if why and any(r.kind == kind for r in rungs):
             notes.append(f"{kind} rungs not run: {why}")
@@ -416,7 +422,7 @@ def _rollout(rung, scene, dt, steps, label):
     n_own = steps // rung.dt_factor
     live = sys.stderr.isatty()
     advance = rung.make(scene, h)
-    x = scene.initial_positions()
+    x = scene.at(0.0).initial_positions()
     v = np.zeros_like(x)
     states = {0: (x, v)}
     seconds, infos, completed = [], [], True

@@ -14,7 +14,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ("onnx_cantilever.py", "onnx_cantilever.png", "wrote out/onnx_cantilever.png"),
     ("squeeze.py", "squeeze.png", "monotone under Neo-Hookean: True"),
     ("finger_control.py", "finger_control.png", "wrote out/finger_control.png"),
-    ("finger_control.py reduced", "finger_control.png", "wrote out/finger_control.png")])
+    ("finger_control.py reduced", "finger_control.png", "wrote out/finger_control.png"),
+    ("actuator.py", "actuator.png", "bending grows with pressure: True"),
+    ("actuator.py twist", "actuator_twist.png", "bending grows with pressure: True"),
+    ("two_region_part.py", "two_region_part.png", "converged: True")])
 def test_example_runs_and_draws(tmp_path, script, picture, says):
     script, *args = script.split()
     r = subprocess.run([sys.executable, os.path.join(ROOT, "examples", script), *args],
@@ -22,5 +25,11 @@ def test_example_runs_and_draws(tmp_path, script, picture, says):
     assert r.returncode == 0, r.stderr
     assert says in r.stdout
     assert (tmp_path / "out" / picture).stat().st_size > 30_000
+    if script == "actuator.py":  # the ramp's ParaView collection: one .vtu per pressure; the
+        # crossed winding bends without twisting, the graded one twists as it bends
+        assert len(list((tmp_path / "out").glob("actuator*_0*.vtu"))) == 11
+        last = [line for line in r.stdout.splitlines() if "kPa" in line][-1]
+        bent, twisted = (float(last.split(word)[1].split()[0]) for word in ("bent", "twisted"))
+        assert bent > 30 and (abs(twisted) > 20 if args else abs(twisted) < 2), last
     if script == "finger_control.py":  # the controller brings the tip to both targets
         assert r.stdout.count(": reached") == 2 and "missed" not in r.stdout, r.stdout
