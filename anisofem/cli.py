@@ -231,8 +231,11 @@ def _parser():
                formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="command", required=True)
     defaults = {"formatter_class": _ShowDefaults}
-    m = sub.add_parser("mesh", help="generate a mesh of one of the paper's shapes", **defaults)
-    m.add_argument("shape", choices=sorted(_SHAPES))
+    m = sub.add_parser("mesh", help="generate a mesh of one of the paper's shapes, or write a "
+                                    "scene file's mesh with its fibers and materials",
+                       **defaults)
+    m.add_argument("shape", help=f"a shape ({', '.join(sorted(_SHAPES))}) or a scene file "
+                                 f"(.toml)")
     _shape_arguments(m)
     m.add_argument("-o", "--output", required=True)
     s = sub.add_parser("solve", help="static equilibrium or a backward-Euler rollout", **defaults)
@@ -342,6 +345,17 @@ def main(argv=None):
 
 def _mesh(args):
     check_output_path(args.output)
+    if is_scene_file(args.shape):
+        _no_shape_flags(args)
+        if args.order is not None:
+            raise ValueError(f"--order: the scene file {args.shape} sets it")
+        scene = load_scene(args.shape)
+        write_mesh(args.output, scene.mesh, scene=scene)
+        print(f"{scene.mesh} with its fiber field -> {args.output}")
+        return 0
+    if args.shape not in _SHAPES:
+        raise ValueError(f"shape: expected one of {', '.join(sorted(_SHAPES))} or a scene file "
+                         f"(.toml), got {args.shape!r}")
     mesh = _of_order(_shape(args, args.shape), args.order)
     write_mesh(args.output, mesh)
     print(f"{mesh} -> {args.output}")

@@ -279,3 +279,14 @@ def test_schema_page_is_generated_from_the_code():
     with open(os.path.join(ROOT, "docs", "scenes.md")) as f:
         page = f.read()
     assert scenefile.schema_markdown() in page
+
+
+def test_readme_scene_file_loads(tmp_path):
+    """The README's scene file, next to the example actuator's mesh, is a scene."""
+    import re
+    import shutil
+    with open(os.path.join(ROOT, "README.md")) as f:
+        block, = re.findall(r"```toml\n(.*?)```", f.read(), flags=re.S)
+    shutil.copy(os.path.join(SCENES, "actuator.msh"), tmp_path / "actuator.msh")
+    scene = af.load_scene(scene_file(tmp_path, block))
+    assert scene.pressures[0].magnitude == 4.0e4 and scene.fixed_mask.any()

@@ -1,6 +1,6 @@
 """Write the example scene files' meshes next to them, as Gmsh files with named physical groups
 (what Gmsh's own Python API would write): actuator.msh (anisofem.meshgen.actuator) and
-part.msh (a 0.08 m bar in two halves, "left" and "right", with its ends named "base" and
+part.msh (a 0.08 m beam in two halves, "left" and "right", with its ends named "base" and
 "end").
 
     python examples/scenes/make_meshes.py
@@ -16,7 +16,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 
 def part_mesh():
-    """(mesh, volumes, surfaces, names) of the two-region bar."""
+    """(mesh, volumes, surfaces, names) of the two-region beam."""
     mesh = box_beam((0.08, 0.02, 0.02), (16, 4, 4))
     X, faces = mesh.vertices, mesh.boundary_faces
     volumes = np.where(X[mesh.tets].mean(axis=1)[:, 0] < 0.04, 1, 2)
