@@ -368,13 +368,14 @@ def _physical_reference_only(rungs, inverted, notes):
 def _representable(rungs, scene, notes):
     """rungs without those that cannot model the scene, saying so in notes: the reduced ones
     where it has Neo-Hookean elements (the reduced model's energy is exact only for the StVK
-    base), pressure or load curves; the surrogates where it has pressure or load curves."""
+    base) or load curves; the surrogates where it has pressure or load curves."""
     left = {"reduced": "the reduced model needs the StVK base material"
             if scene.neohookean.any() else None}
-    if scene.pressures or scene.timed:
-        why = "pressure" if scene.pressures else "load curves"
-        left = {"reduced": f"the reduced model takes no {why}",
-                "surrogate": f"the surrogates take constant nodal forces, not {why}"}
+    if scene.timed:
+        left = {"reduced": "the reduced rungs hold the loads constant, not on their curves",
+                "surrogate": "the surrogates take constant nodal forces, not load curves"}
+    elif scene.pressures:
+        left["surrogate"] = "the surrogates take nodal forces, not pressure"
     for kind, why in left.items():
         if why and any(r.kind == kind for r in rungs):
             notes.append(f"{kind} rungs not run: {why}")

@@ -107,6 +107,21 @@ class CavityLoad:
         c = np.einsum("qa,kai->kqi", dN[:, :, 1], X)
         return a, b, c, N, dN
 
+    def reduced_slots(self, x0, basis):
+        """The face points and tangents along a reduced basis: (w (K,), a0, b0, c0 (K, 3), A,
+        B, C (K, 3, r)), K = faces times rule points, so that at x0 + basis q the slots of
+        _slots are a0 + A q, b0 + B q, c0 + C q and V = -sum_K w a . (b x c)."""
+        a0, b0, c0, N, dN = self._slots(x0)
+        _, w = RULES[self.order]
+        r = basis.shape[1]
+        U = basis.reshape(-1, 3, r)[self.nodes]                 # (k, s, 3, r)
+        A = self.scale[:, None] * np.einsum("qa,kair->kqir", N, U)
+        B = np.einsum("qa,kair->kqir", dN[:, :, 0], U)
+        C = np.einsum("qa,kair->kqir", dN[:, :, 1], U)
+        k = a0.shape[0] * a0.shape[1]
+        return (np.tile(w, a0.shape[0]), a0.reshape(k, 3), b0.reshape(k, 3), c0.reshape(k, 3),
+                A.reshape(k, 3, r), B.reshape(k, 3, r), C.reshape(k, 3, r))
+
     def volume(self, x):
         """The cavity's volume V(x), m^3 (up to the constant share of a held cap), positions x
         (n, 3)."""

@@ -30,7 +30,7 @@ from . import kernels
 from .display import interpolate
 from .loads import Loads, default_loads, unseen_cases
 from .snapshots import static_states, principal_directions
-from .polynomial import build_bytes, polynomial
+from .polynomial import build_bytes, polynomial, with_pressure
 
 #: Default number of vibration modes; the basis holds them and their m (m + 1) / 2 modal
 #: derivatives, less dependent directions (6 modes: r = 27).
@@ -87,7 +87,9 @@ class ReducedModel:
     Parameters
     ----------
     scene : the Scene (mesh, material, fixed vertices, loads). The basis moves its initial
-        positions x0, and its external force is projected on the basis.
+        positions x0, its external force is projected on the basis and its pressures enter
+        the polynomial (exact: a cavity's volume is cubic in the positions). Loads on load
+        curves are taken as written.
     modes : vibration modes m of the rest Hessian with the lumped mass (default MODES).
     derivatives : add the modes' m (m + 1) / 2 modal derivatives (default: when snapshots is
         0). Linear modes alone do not follow large rotations.
@@ -117,9 +119,6 @@ class ReducedModel:
             raise ValueError("scene: the reduced model needs the StVK base material (its energy "
                              "is a polynomial in the reduced coordinates); this scene has "
                              "Neo-Hookean elements")
-        if scene.pressures:
-            raise ValueError("scene: the reduced model takes nodal forces, gravity and "
-                             "tractions; this scene has pressure loads")
         scene.check_static()
         modes = _count(modes, "modes", 1)
         snapshots = _count(snapshots, "snapshots", 0)
@@ -158,7 +157,8 @@ class ReducedModel:
             credit = max(self.snapshots.seconds - (time.perf_counter() - t1), 0.0)
         self.basis = np.zeros((3 * scene.mesh.n_vertices, U.shape[1]))
         self.basis[free] = U
-        self.polynomial = polynomial(scene.elements, self.x0, self.basis)
+        self.polynomial = with_pressure(polynomial(scene.elements, self.x0, self.basis),
+                                        scene.pressures, self.x0, self.basis)
         self.external = self.project(scene.external_force)
         self.build_seconds = time.perf_counter() - t0 + credit
         self.validation = self.validate() if validate else None

@@ -20,6 +20,9 @@ costs O(r^4 / 6) and no mesh data. With Y = S3[q] and X = S4[q, q] (r, r):
 
 S4 is stored as W4 (T, r), T = r (r + 1) (r + 2) / 6: row t holds S4[a, b, c, :] for the t-th
 sorted triple a <= b <= c, so X costs one pass over W4 (anisofem.reduced.kernels).
+
+A pressure on a cavity (anisofem.pressure) adds -p times the cavity's volume, a cubic of the
+positions: its part is summed into c0 to S3 (with_pressure), exact too.
 """
 import itertools
 import math
@@ -179,3 +182,27 @@ def _whitening(elements, block):
          + 8.0 * kappa[:, None, None] * delta[:, :, None] * delta[:, None, :])
     R = np.swapaxes(np.linalg.cholesky(D), -1, -2)  # D = R^T R
     return np.sqrt(elements.weights[block])[:, :, None, None] * R[:, None]
+
+
+def with_pressure(poly, cavities, x0, basis):
+    """poly with the pressures' energy -p (V(x0 + basis q) - V(X)) of cavities (CavityLoads)
+    added: V = -sum_K w a . (b x c) with each slot linear in q (CavityLoad.reduced_slots)."""
+    c0, c1, C2, S3 = poly.c0, poly.c1.copy(), poly.C2.copy(), poly.S3.copy()
+    for cavity in cavities:
+        w, a0, b0, c00, A, B, C = cavity.reduced_slots(x0, basis)
+        p = cavity.magnitude * w                                     # (K,) energy = p w f
+        bc = np.cross(b0, c00)
+        c0 += float(p @ np.einsum("ki,ki->k", a0, bc)) + cavity.magnitude * cavity.rest_volume
+        Bc = np.cross(B, c00[:, :, None], axis=1)                    # B_j x c0 (K, 3, r)
+        bC = np.cross(b0[:, :, None], C, axis=1)                     # b0 x C_j
+        c1 += np.einsum("k,kir,ki->r", p, A, bc) + np.einsum("k,ki,kir->r", p, a0, Bc + bC)
+        quadratic = (np.einsum("k,kir,kis->rs", p, A, Bc + bC)
+                     + np.einsum("k,ki,kirs->rs", p, a0,
+                                 np.cross(B[:, :, :, None], C[:, :, None, :], axis=1)))
+        C2 += quadratic + quadratic.T                                # 1/2 q C2 q
+        cubic = np.einsum("k,kir,kist->rst", p, A,
+                          np.cross(B[:, :, :, None], C[:, :, None, :], axis=1))
+        S3 += (cubic + cubic.transpose(0, 2, 1) + cubic.transpose(1, 0, 2)
+               + cubic.transpose(1, 2, 0) + cubic.transpose(2, 0, 1)
+               + cubic.transpose(2, 1, 0)) / 6.0
+    return Polynomial(c0, c1, C2, S3, poly.W4)
