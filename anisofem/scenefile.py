@@ -242,15 +242,7 @@ class _Reader:
 
     def helix(self, spec, tets, key):
         """Fibers wound about an axis: angle(s) from the axis, s along it over the tets."""
-        for needed in ("axis", "angle"):
-            if needed not in spec:
-                raise self.error(key, f"{needed}: required")
-        axis = _vector(self, spec["axis"], f"{key}.axis")
-        if not np.linalg.norm(axis) > 0:
-            raise self.error(f"{key}.axis", "a direction needs a nonzero vector")
-        axis = axis / np.linalg.norm(axis)
-        origin = _vector(self, spec.get("origin", [0.0, 0.0, 0.0]), f"{key}.origin")
-        start = _number(self, spec["angle"], f"{key}.angle")
+        axis, origin, start = self.turn(spec, key)
         end = _number(self, spec.get("angle_end", start), f"{key}.angle_end")
         c = self.mesh.vertices[self.mesh.tets[tets]].mean(axis=1) - origin
         s = c @ axis
@@ -350,17 +342,22 @@ class _Reader:
         if not isinstance(spec, dict):
             raise self.error(where, "expected {axis = [...], origin = [...], angle = degrees}")
         _keys(self, spec, "rotation", where)
-        for needed in ("axis", "angle"):
-            if needed not in spec:
-                raise self.error(where, f"{needed}: required")
-        axis = _vector(self, spec["axis"], f"{where}.axis")
-        if not np.linalg.norm(axis) > 0:
-            raise self.error(f"{where}.axis", "a direction needs a nonzero vector")
-        axis = axis / np.linalg.norm(axis)
-        origin = _vector(self, spec.get("origin", [0.0, 0.0, 0.0]), f"{where}.origin")
-        angle = math.radians(_number(self, spec["angle"], f"{where}.angle"))
+        axis, origin, degrees = self.turn(spec, where)
+        angle = math.radians(degrees)
         arm = self.mesh.vertices[vertices] - origin
         return lambda c: _rotated(arm, axis, c * angle) - arm
+
+    def turn(self, spec, key):
+        """(unit axis (3,), origin (3,) m, angle in degrees) of a table with axis, angle and
+        an optional origin (a helix, a rotation)."""
+        for needed in ("axis", "angle"):
+            if needed not in spec:
+                raise self.error(key, f"{needed}: required")
+        axis = _vector(self, spec["axis"], f"{key}.axis")
+        if not np.linalg.norm(axis) > 0:
+            raise self.error(f"{key}.axis", "a direction needs a nonzero vector")
+        origin = _vector(self, spec.get("origin", [0.0, 0.0, 0.0]), f"{key}.origin")
+        return axis / np.linalg.norm(axis), origin, _number(self, spec["angle"], f"{key}.angle")
 
     def curves(self, table):
         if not isinstance(table, dict):
