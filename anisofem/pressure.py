@@ -91,9 +91,13 @@ class CavityLoad:
 
     def scaled(self, share):
         """The same load at `share` of its pressure."""
+        return self.at(share * self.magnitude)
+
+    def at(self, magnitude):
+        """The same cavity at pressure `magnitude`, Pa."""
         out = object.__new__(CavityLoad)
         out.__dict__.update(self.__dict__)
-        out.magnitude = share * self.magnitude
+        out.magnitude = magnitude
         return out
 
     def _slots(self, x):

@@ -1,0 +1,125 @@
+"""Adjoint derivatives of a static equilibrium (anisofem.sensitivity) against central finite
+differences of full solves, for every parameter kind, both base laws and both element orders,
+at ordinary and extreme parameters; and the refusals."""
+import types
+
+import numpy as np
+import pytest
+
+import anisofem as af
+from anisofem.sensitivity import fiber_angles, fiber_direction, static_sensitivity
+
+LENGTH = 0.06
+
+#: (Young's modulus range, Pa; Poisson's ratio range; kappa range, Pa): ordinary and extreme
+#: (near-incompressible, fibers 100x stiffer than the base)
+REGIMES = {"ordinary": ((1e5, 1.3e5), (0.3, 0.4), (0.0, 2e5)),
+           "extreme": ((1e5, 1.3e5), (0.495, 0.499), (5e6, 1e7))}
+
+
+def cantilever(order, law, E, nu, kappa, angles):
+    mesh = af.box_beam((LENGTH, 0.01, 0.01), (6, 2, 2), order=order)
+    X = mesh.vertices
+    return af.Scene(mesh, af.Material(E, nu, 1000.0, fiber_direction(angles), kappa, model=law),
+                    fixed=np.flatnonzero(X[:, 0] < 1e-9), gravity=(0, 0, -9.81))
+
+
+def tip_height(scene):
+    """J(x) = the tip's mean z (m) and its gradient (n, 3)."""
+    X = scene.mesh.vertices
+    tip = np.flatnonzero(X[:, 0] > LENGTH - 1e-9)
+    gradient = np.zeros_like(X)
+    gradient[tip, 2] = 1.0 / tip.size
+    return (lambda x: float(x[tip, 2].mean())), gradient
+
+
+def solved(scene):
+    result = af.solve(scene, rtol=1e-12, warn=False)
+    assert result.converged
+    return result
+
+
+@pytest.mark.parametrize("regime", list(REGIMES))
+@pytest.mark.parametrize("law", ["stvk", "neohookean"])
+@pytest.mark.parametrize("order", [1, 2])
+def test_static_derivatives_against_finite_differences(order, law, regime):
+    """Each kind along a random direction of per-element changes: dJ/dp . delta against
+    (J(p + h delta) - J(p - h delta)) / 2h, h stated per kind, to 1e-6 relative."""
+    (E_lo, E_hi), (nu_lo, nu_hi), (k_lo, k_hi) = REGIMES[regime]
+    m = af.box_beam((LENGTH, 0.01, 0.01), (6, 2, 2)).n_tets
+    rng = np.random.default_rng(3)
+    p = {"E": rng.uniform(E_lo, E_hi, m), "nu": rng.uniform(nu_lo, nu_hi, m),
+         "kappa": rng.uniform(k_lo, k_hi, m),
+         "angles": np.stack([rng.uniform(-1, 1, m), rng.uniform(-0.7, 0.7, m)], axis=1)}
+
+    def scene_with(**changed):
+        return cantilever(order, law, **{"E": p["E"], "nu": p["nu"], "kappa": p["kappa"],
+                                         "angles": p["angles"]} | changed)
+    scene = scene_with()
+    J, gradient = tip_height(scene)
+    S = static_sensitivity(scene, solved(scene), gradient)
+    kinds = {  # name: (changed parameters at step t, adjoint slope, step h)
+        "young": (lambda t, d=rng.standard_normal(m) * p["E"]: {"E": p["E"] + t * d},
+                  lambda d: S.young @ d, 1e-4),
+        "poisson": (lambda t, d=rng.standard_normal(m) * 1e-3: {"nu": p["nu"] + t * d},
+                    lambda d: S.poisson @ d, 1e-3),
+        "kappa": (lambda t, d=rng.standard_normal(m) * 1e5: {"kappa": p["kappa"] + t * d},
+                  lambda d: S.kappa @ d, 1e-4),
+        "fiber_angles": (lambda t, d=rng.standard_normal((m, 2)): {"angles": p["angles"] + t * d},
+                         lambda d: np.sum(S.fiber_angles * d), 1e-5)}
+    for name, (change, slope, h) in kinds.items():
+        d = change.__defaults__[0]
+        fd = (J(solved(scene_with(**change(h))).x) - J(solved(scene_with(**change(-h))).x)) / (2 * h)
+        assert slope(d) == pytest.approx(fd, rel=1e-6), name
+        assert abs(fd) > 1e-12  # the objective moves with the parameter
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_pressure_derivative(order):
+    """d(the tube's inner wall radius)/dp against central differences of solves (h = 1 Pa)."""
+    from test_pressure import tube_scene
+    scene = tube_scene(order, (2, 6, 1), 2e3, fibers=1e5)
+    X = scene.mesh.vertices
+    inner = np.flatnonzero(np.abs(np.hypot(X[:, 0], X[:, 1]) - 0.01) < 1e-9)
+    gradient = np.zeros_like(X)
+    gradient[inner, :2] = X[inner, :2] / 0.01 / inner.size
+
+    def J(x):
+        return float(np.mean(np.hypot(x[inner, 0], x[inner, 1])))
+    S = static_sensitivity(scene, solved(scene), gradient)
+    h = 1.0
+    fd = (J(solved(scene.loaded(1 + h / 2e3)).x) - J(solved(scene.loaded(1 - h / 2e3)).x)) / (2 * h)
+    assert S.pressure[0] == pytest.approx(fd, rel=1e-6)
+    assert S.pressure[0] > 0
+
+
+def test_refused_where_the_derivative_is_not_defined():
+    """Not at a converged solve, and not at a saddle: a clamped column squeezed by 10% (past
+    its buckling strain, about 3%), held straight by its centerline, is an equilibrium of
+    the free column and a saddle."""
+    mesh = af.box_beam((0.1, 0.01, 0.01), (10, 2, 2))
+    X = mesh.vertices
+    ends = np.flatnonzero((X[:, 0] < 1e-9) | (X[:, 0] > 0.1 - 1e-9))
+    held = X[ends].copy()
+    held[:, 0] *= 0.9
+    scene = af.Scene(mesh, af.Material(1e5, 0.3), fixed=ends, fixed_positions=held)
+    _, gradient = tip_height(af.default_scene(mesh))
+    unconverged = af.solve(scene, max_iter=1, warn=False, continuation="never")
+    with pytest.raises(ValueError, match="did not converge"):
+        static_sensitivity(scene, unconverged, gradient)
+    straight = np.zeros((mesh.n_vertices, 3), bool)  # the centerline held in y and z: by
+    straight[ends] = True                             # the mesh's mirror symmetry, it pushes
+    axis = (np.abs(X[:, 1]) < 1e-9) & (np.abs(X[:, 2]) < 1e-9)  # on nothing there
+    straight[axis, 1:] = True
+    column = af.Scene(mesh, af.Material(1e5, 0.3), fixed=straight,
+                      fixed_positions=scene.fixed_positions)
+    x = solved(column).x
+    assert np.abs(af.gradient(scene, x)[~scene.fixed_mask]).max() < 1e-9  # an equilibrium
+    with pytest.raises(ValueError, match="saddle"):
+        static_sensitivity(scene, types.SimpleNamespace(converged=True, x=x), gradient)
+
+
+def test_fiber_angles_round_trip():
+    d = fiber_direction(np.random.default_rng(0).uniform(-1.5, 1.5, (20, 2)))
+    assert np.allclose(np.linalg.norm(d, axis=1), 1.0)
+    assert np.allclose(fiber_direction(fiber_angles(d)), d)
