@@ -27,8 +27,8 @@ against the cavity's force at unit pressure.
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse.linalg as spla
 
+from . import linsolve
 from ._validate import as_float_array
 from .densities import STVK
 from .potential import Potential, check_positions
@@ -72,29 +72,78 @@ def static_sensitivity(scene, result, gradient):
 
     Refused (ValueError) where the solve did not converge or stopped at a saddle: the
     derivative is not defined there. One factorization of the true Hessian at the answer."""
-    if not getattr(result, "converged", False):
-        raise ValueError("result: the static solve did not converge; its derivative is not "
-                         "defined")
-    x = check_positions(scene, result.x, "result.x")
+    x = _converged(scene, result, "result")
     dJ = as_float_array(gradient, "gradient", shape=(scene.mesh.n_vertices, 3))
     potential = Potential(scene)
-    verdict = stability(potential, x)
-    if not verdict.minimum:
-        raise ValueError(f"result: the equilibrium is a saddle (smallest Hessian eigenvalue "
-                         f"{verdict.smallest:.3g} N/m); its derivative is not defined")
-    layout = scene.layout("csr")
-    H = layout.matrix(potential.hessian_data(x, layout, want_grad=False)[2]).tocsc()
-    free = scene.free_dofs
-    lam = np.zeros(3 * scene.mesh.n_vertices)
-    lam[free] = spla.splu(H).solve(dJ.ravel()[free])
-    lam = lam.reshape(-1, 3)
+    lam = np.zeros_like(x)
+    lam[~scene.fixed_mask] = _definite(potential, x, "result")(dJ[~scene.fixed_mask])
     return Sensitivity(*(-s for s in force_derivatives(scene, x, lam)), adjoint=lam)
 
 
-def force_derivatives(scene, x, lam):
+def rollout_sensitivity(scene, rollout, gradients, dt):
+    """The Sensitivity of J = sum_k j_k(x_k) over a backward-Euler rollout (the Rollout of
+    anisofem.simulate on scene with step dt, s, from a start that does not depend on the
+    parameters), given gradients (k + 1, n, 3), dj_k/dx_k at each state (zero where a state
+    does not count). Its adjoint is the first step's.
+
+    Step k solves g_k = M (x_k+1 - 2 x_k + x_k-1) / dt^2 + dPsi/dx(x_k+1) - f = 0, so the
+    adjoint runs backward from the last step: H_k+1 mu_k = dj_k+1/dx + M (2 mu_k+1 - mu_k+2)
+    / dt^2, with H_k+1 the step's true Hessian at x_k+1, and dJ/dp = -sum_k mu_k^T dg_k/dp.
+    One factorization per step. Refused where a step did not converge or its Hessian is not
+    positive definite."""
+    if not getattr(rollout, "converged", False):
+        raise ValueError("rollout: a step did not converge (or the rollout stopped early); "
+                         "its derivative is not defined")
+    positions = np.asarray(rollout.positions)
+    steps = len(positions) - 1
+    dJ = as_float_array(gradients, "gradients", shape=(steps + 1,) + positions.shape[1:])
+    free = ~scene.fixed_mask
+    inertia = (scene.masses[:, None] * np.ones(3))[free] / dt ** 2
+    later, latest = np.zeros(free.sum()), np.zeros(free.sum())   # mu_k+1, mu_k+2
+    totals, first = None, None
+    for k in reversed(range(steps)):
+        now = scene.at((k + 1) * dt)
+        x = positions[k + 1]
+        step = Potential(now, x, dt)
+        mu = _definite(step, x, f"rollout step {k}")(dJ[k + 1][free] + inertia
+                                                     * (2.0 * later - latest))
+        full = np.zeros_like(x)
+        full[free] = mu
+        parts = force_derivatives(now, x, full, scene)
+        totals = [-s for s in parts] if totals is None else [t - s for t, s in
+                                                              zip(totals, parts)]
+        later, latest, first = mu, later, full
+    if totals is None:
+        raise ValueError("rollout: it holds no step")
+    return Sensitivity(*totals, adjoint=first)
+
+
+def _converged(scene, result, name):
+    if not getattr(result, "converged", False):
+        raise ValueError(f"{name}: the static solve did not converge; its derivative is not "
+                         f"defined")
+    return check_positions(scene, result.x, f"{name}.x")
+
+
+def _definite(potential, x, name):
+    """The solve of the true Hessian of potential at x over the free unknowns (a function of
+    the right-hand side), refused where it is not positive definite: a saddle."""
+    layout = potential.scene.layout("csr")
+    data = potential.hessian_data(x, layout, want_grad=False)[2]
+    try:
+        return linsolve.SuperLU().factor(layout, data)
+    except linsolve.FactorizationError:
+        verdict = stability(potential, x)
+        raise ValueError(f"{name}: the Hessian there is not positive definite (smallest "
+                         f"eigenvalue {verdict.smallest:.3g} N/m: a saddle, or a singular "
+                         f"state); the derivative is not defined") from None
+
+
+def force_derivatives(scene, x, lam, written=None):
     """lambda^T dg/dp at positions x (n, 3) for a vector lam (n, 3) over the vertices, per
     parameter kind (the module docstring): young, poisson, kappa (m,), fiber_angles (m, 2),
-    pressure (k,)."""
+    pressure (k,). written: the scene as written, where `scene` is it at a time of its load
+    curves (Scene.at): pressures are parameters of the written scene."""
     el = scene.elements
     F = np.einsum("eai,eqaj->eqij", x[el.tets], el.grads)              # (m, q, 3, 3)
     Gl = np.einsum("eai,eqaj->eqij", lam[el.tets], el.grads)
@@ -132,8 +181,10 @@ def force_derivatives(scene, x, lam):
     s_poisson = (-mu / (1 + nu)) * s_mu + (E_y * (1 + 2 * nu ** 2)
                                            / ((1 + nu) ** 2 * (1 - 2 * nu) ** 2)) * s_lam
     s_pressure = np.zeros(len(scene.pressures))
-    for k, cavity in enumerate(scene.pressures):
+    for k, (cavity, as_written) in enumerate(zip(scene.pressures,
+                                                 (written or scene).pressures)):
         unit = np.zeros_like(x)
-        cavity.at(1.0).add_gradient(x, unit)
+        factor = cavity.magnitude / as_written.magnitude if as_written.magnitude else 1.0
+        cavity.at(factor).add_gradient(x, unit)
         s_pressure[k] = float(np.sum(unit * lam))
     return s_young, s_poisson, s_kappa, s_angles, s_pressure

@@ -289,4 +289,4 @@ def test_readme_scene_file_loads(tmp_path):
         block, = re.findall(r"```toml\n(.*?)```", f.read(), flags=re.S)
     shutil.copy(os.path.join(SCENES, "actuator.msh"), tmp_path / "actuator.msh")
     scene = af.load_scene(scene_file(tmp_path, block))
-    assert scene.pressures[0].magnitude == 4.0e4 and scene.fixed_mask.any()
+    assert scene.pressures[0].magnitude == 2.0e4 and scene.fixed_mask.any()
