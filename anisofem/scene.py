@@ -277,6 +277,25 @@ class Scene:
         moved.external_force = total
         return moved
 
+    def with_material(self, material):
+        """The same scene (mesh, held vertices, loads) with another Material of the same
+        densities: for parameter studies and fits. Shares the mesh's patterns and the loads."""
+        if not isinstance(material, Material):
+            raise TypeError(f"material: expected an anisofem.Material, got "
+                            f"{type(material).__name__}")
+        params = material.per_element(self.mesh.n_tets)
+        if not np.array_equal(params["density"], self._params["density"]):
+            raise ValueError("material: another density changes the masses and the weight; "
+                             "build a new Scene")
+        for shared in ("dof_map", "free_dofs"):
+            getattr(self, shared)
+        moved = copy.copy(self)
+        moved.material, moved._params = material, params
+        for cached in ("elements", "full_layout", "force_unit", "gradient_roundoff",
+                       "neohookean"):
+            moved.__dict__.pop(cached, None)
+        return moved
+
     def following(self, timed):
         """The same scene with loads that follow load curves: timed, a sequence of
         anisofem.curves.Timed, each a part of this scene's loads as written (its force in

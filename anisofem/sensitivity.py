@@ -80,6 +80,21 @@ def static_sensitivity(scene, result, gradient):
     return Sensitivity(*(-s for s in force_derivatives(scene, x, lam)), adjoint=lam)
 
 
+def static_jacobian(scene, result, gradients):
+    """static_sensitivity of several objectives at once, gradients (r, n, 3): one
+    factorization, r back-substitutions; a Sensitivity whose arrays have a leading axis r (the
+    rows of a Jacobian, as a least-squares fit wants) and adjoint (r, n, 3)."""
+    x = _converged(scene, result, "result")
+    dJ = as_float_array(gradients, "gradients", shape=(None, scene.mesh.n_vertices, 3))
+    solve = _definite(Potential(scene), x, "result")
+    free = ~scene.fixed_mask
+    rows, adjoints = [], np.zeros_like(dJ)
+    for k in range(dJ.shape[0]):
+        adjoints[k][free] = solve(dJ[k][free])
+        rows.append([-s for s in force_derivatives(scene, x, adjoints[k])])
+    return Sensitivity(*(np.array(kind) for kind in zip(*rows)), adjoint=adjoints)
+
+
 def rollout_sensitivity(scene, rollout, gradients, dt):
     """The Sensitivity of J = sum_k j_k(x_k) over a backward-Euler rollout (the Rollout of
     anisofem.simulate on scene with step dt, s, from a start that does not depend on the

@@ -1,0 +1,285 @@
+"""Material parameters identified from measured marker displacements.
+
+Given markers at rest points X_i of a body and their measured displacements m_ci under one or
+more load cases c (each a Scene of the same body), fit minimizes
+
+    J(p) = 1/2 sum_c sum_i |u_c(X_i; p) - m_ci|^2 / s_c^2,
+
+u_c the static FEM displacement interpolated at the marker in its tet, s_c the case's largest
+measured displacement (so that each case counts by its relative misfit, as a measurement's
+noise grows with its range), over chosen parameters
+p (Young's modulus, Poisson's ratio, fiber stiffness, fiber azimuth or elevation, each one
+value over the whole body), by L-BFGS-B with bounds (scipy.optimize): each evaluation is one
+static solve per case, warm-started from the last, and its gradient one adjoint solve
+(anisofem.sensitivity). At the answer the Gauss-Newton Hessian J_r^T J_r, with J_r the
+residuals' Jacobian (one back-substitution per residual on one factorization per case),
+gives each parameter's standard deviation: sqrt of the diagonal of s^2 (J_r^T J_r)^-1, s^2
+the residuals' variance (their sum of squares over their count less the parameters').
+"""
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.optimize
+
+from ._validate import as_float_array
+from .material import Material
+from .reduced.display import locate
+from .scene import check_scene
+from .sensitivity import fiber_angles, fiber_direction, static_jacobian, static_sensitivity
+from .solve import solve
+
+#: What can be fitted: name -> (unit, how the optimizer sees it: "log" (positive, by its
+#: logarithm) or "plain", default bounds in the parameter's unit). Angles are in degrees.
+PARAMETERS = {"young": ("Pa", "log", (1e2, 1e10)),
+              "poisson": ("", "plain", (-0.99, 0.499)),
+              "kappa": ("Pa", "log", (1e-3, 1e12)),
+              "fiber_azimuth": ("deg", "plain", (-180.0, 180.0)),
+              "fiber_elevation": ("deg", "plain", (-89.0, 89.0))}
+
+#: The optimizer's variable is ZOOM times the parameter (or its logarithm): L-BFGS-B's first
+#: trial step has unit length, which is then a factor e in a stiffness, 0.1 in Poisson's
+#: ratio and 5 degrees in an angle.
+ZOOM = {"young": 1.0, "poisson": 10.0, "kappa": 1.0, "fiber_azimuth": 0.2,
+        "fiber_elevation": 0.2}
+
+
+@dataclass
+class FitResult:
+    """values {name: fitted value} (Pa, or degrees for fiber angles); deviations {name:
+    standard deviation from the Gauss-Newton Hessian}; marker_residuals (k,) the rms over the
+    cases of each marker's misfit, m; rms the misfit's root mean square over all markers and
+    cases, m; iterations;
+    evaluations (static solves per case); converged (L-BFGS-B met its tolerance); message
+    (why it stopped); seconds; history [(iteration, J, values)]."""
+    values: dict
+    deviations: dict
+    marker_residuals: np.ndarray
+    rms: float
+    iterations: int
+    evaluations: int
+    converged: bool
+    message: str
+    seconds: float
+    history: list = field(default_factory=list)
+
+
+class Markers:
+    """Marker rest points (k, 3), m, on a mesh: u (n, 3) -> their displacements (k, 3), and the
+    transpose for a gradient."""
+
+    def __init__(self, mesh, points):
+        points = as_float_array(points, "markers", shape=(None, 3))
+        if points.shape[0] == 0:
+            raise ValueError("markers: no marker given")
+        tets, weights = locate(mesh, points)
+        self.nodes = mesh.cells[tets]                       # (k, s)
+        self.shape = mesh.element.shape(weights[:, 1:])     # (k, s)
+
+    def at(self, u):
+        return np.einsum("ka,kai->ki", self.shape, u[self.nodes])
+
+    def spread(self, r, n):
+        """W^T r: marker vectors r (k, 3) onto the mesh's n nodes, (n, 3)."""
+        out = np.zeros((n, 3))
+        np.add.at(out, self.nodes.ravel(), (self.shape[:, :, None] * r[:, None, :]).reshape(-1, 3))
+        return out
+
+
+def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
+        progress=None):
+    """Fit `names` (keys of PARAMETERS) so that the scenes' (Scenes of one body, one per load
+    case) static displacements at marker rest points `markers` (k, 3) match `measured` (c, k,
+    3) (or (k, 3) for one case), m. start: {name: value} (default: the first scene's, the
+    element mean); bounds: {name: (low, high)} (default PARAMETERS'). progress(iteration, J,
+    values) after each iteration. Returns a FitResult."""
+    t0 = time.perf_counter()
+    scenes = [scenes] if not isinstance(scenes, (list, tuple)) else list(scenes)
+    for s in scenes:
+        check_scene(s)
+    base = scenes[0]
+    if any(s.mesh is not base.mesh for s in scenes):
+        raise ValueError("scenes: the load cases must share one mesh (the same body)")
+    names = list(names)
+    bad = [n for n in names if n not in PARAMETERS]
+    if bad or not names or len(set(names)) != len(names):
+        raise ValueError(f"names: expected distinct parameters among {', '.join(PARAMETERS)}, "
+                         f"got {names}")
+    measured = as_float_array(measured, "measured")
+    if measured.ndim == 2:
+        measured = measured[None]
+    probe = Markers(base.mesh, markers)
+    if measured.shape != (len(scenes), probe.nodes.shape[0], 3):
+        raise ValueError(f"measured: expected ({len(scenes)}, {probe.nodes.shape[0]}, 3) "
+                         f"displacements (cases, markers, xyz), got {measured.shape}")
+    layout = _Layout(base, names, start or {}, bounds or {})
+    problem = _Problem(scenes, probe, measured, layout)
+    history = []
+
+    def report(z):
+        history.append((len(history) + 1, problem.last_J, layout.values(z)))
+        if progress is not None:
+            progress(*history[-1])
+    z0 = layout.to_z(layout.start)
+    problem.normalize(z0)
+    answer = scipy.optimize.minimize(problem.objective, z0, jac=True, method="L-BFGS-B",
+                                     bounds=layout.z_bounds, callback=report,
+                                     options={"maxiter": max_iter, "ftol": 1e-12,
+                                              "gtol": 1e-10})
+    values = layout.values(answer.x)
+    residuals, jacobian = problem.residuals_and_jacobian(answer.x)
+    count = residuals.size
+    variance = float(residuals @ residuals) / max(count - len(names), 1)
+    normal = jacobian.T @ jacobian
+    try:
+        covariance = variance * np.linalg.inv(normal)
+        deviations = {n: float(math.sqrt(max(covariance[k, k], 0.0)))
+                      for k, n in enumerate(names)}
+    except np.linalg.LinAlgError:
+        deviations = {n: math.inf for n in names}
+    misfit = residuals.reshape(len(scenes), -1, 3) / problem.weight[:, None, None]   # m
+    per_marker = np.sqrt((misfit ** 2).sum(axis=2).mean(axis=0))
+    return FitResult(values, deviations, per_marker, float(np.sqrt((misfit ** 2).mean() * 3)),
+                     int(answer.nit), problem.evaluations, bool(answer.success),
+                     str(answer.message), time.perf_counter() - t0, history)
+
+
+class _Layout:
+    """The fitted parameters as the optimizer's variables z and back, and the per-element
+    material they make."""
+
+    def __init__(self, scene, names, start, bounds):
+        material, m = scene.material, scene.mesh.n_tets
+        params = material.per_element(m)
+        self.m, self.names = m, names
+        self.model = [("stvk", "neohookean")[c] for c in params["model"]]
+        self.density = params["density"]
+        nu = params["lam"] / (2.0 * (params["lam"] + params["mu"]))
+        self.base = {"young": params["mu"] * 2.0 * (1.0 + nu), "poisson": nu,
+                     "kappa": params["kappa"],
+                     "fiber_azimuth": np.degrees(fiber_angles(params["fiber"])[:, 0]),
+                     "fiber_elevation": np.degrees(fiber_angles(params["fiber"])[:, 1])}
+        for n in start:
+            if n not in names:
+                raise ValueError(f"start: {n!r} is not fitted (fitted: {', '.join(names)})")
+        self.start = {n: float(start.get(n, self.base[n].mean())) for n in names}
+        self.bounds = {}
+        for n in names:
+            low, high = bounds.get(n, PARAMETERS[n][2])
+            if not low < high or not low <= self.start[n] <= high:
+                raise ValueError(f"bounds: {n} needs low < high around its start "
+                                 f"{self.start[n]:g}, got ({low:g}, {high:g})")
+            if PARAMETERS[n][1] == "log" and low <= 0:
+                raise ValueError(f"bounds: {n} is fitted by its logarithm; its lower bound "
+                                 f"must be > 0, got {low:g}")
+            self.bounds[n] = (low, high)
+        self.z_bounds = [tuple(self._z(n, b) for b in self.bounds[n]) for n in names]
+
+    def _z(self, name, value):
+        return ZOOM[name] * (math.log(value) if PARAMETERS[name][1] == "log" else value)
+
+    def to_z(self, values):
+        return np.array([self._z(n, values[n]) for n in self.names])
+
+    def values(self, z):
+        out = {}
+        for n, v in zip(self.names, z):
+            v = float(v) / ZOOM[n]
+            out[n] = math.exp(v) if PARAMETERS[n][1] == "log" else v
+        return out
+
+    def material(self, z):
+        p = {n: np.array(v, dtype=float) for n, v in self.base.items()}
+        for n, v in self.values(z).items():
+            p[n] = np.full(self.m, v)
+        angles = np.radians(np.stack([p["fiber_azimuth"], p["fiber_elevation"]], axis=1))
+        return Material(p["young"], p["poisson"], self.density, fiber_direction(angles),
+                        p["kappa"], model=self.model)
+
+    def chain(self, z, s, scaled=True):
+        """dJ/dz (len(names),) from a Sensitivity s (per element) at z, or (r, len(names)) from
+        one with a leading axis; scaled=False: dJ/dp in the parameters' units."""
+        values = self.values(z)
+        columns = []
+        for n in self.names:
+            per_element = {"young": s.young, "poisson": s.poisson, "kappa": s.kappa,
+                           "fiber_azimuth": s.fiber_angles[..., 0],
+                           "fiber_elevation": s.fiber_angles[..., 1]}[n]
+            total = per_element.sum(axis=-1)
+            if n.startswith("fiber"):
+                total = total * (math.pi / 180.0)        # per degree
+            if scaled:
+                total = total * (values[n] if PARAMETERS[n][1] == "log" else 1.0) / ZOOM[n]
+            columns.append(total)
+        return np.stack(columns, axis=-1)
+
+
+class _Problem:
+    """The fit's objective over the optimizer's variables, with warm starts per case."""
+
+    def __init__(self, scenes, markers, measured, layout):
+        self.scenes, self.markers, self.measured, self.layout = scenes, markers, measured, layout
+        scale = np.abs(measured).max(axis=(1, 2))
+        if not (scale > 0).all():
+            raise ValueError(f"measured: load case {int(np.argmin(scale))} moves no marker")
+        self.weight = 1.0 / scale                                  # 1 / s_c, 1/m
+        self.states = [s.initial_positions() for s in scenes]
+        self.evaluations, self.last_J, self.largest, self.scale = 0, math.nan, 0.0, 1.0
+
+    def _solve(self, z):
+        material = self.layout.material(z)
+        out = []
+        for k, scene in enumerate(self.scenes):
+            moved = scene.with_material(material)
+            result = solve(moved, x0=self.states[k], warn=False)
+            if not result.converged:
+                raise RuntimeError(f"fit: the static solve of load case {k} failed at "
+                                   f"{self.layout.values(z)} ({result.message})")
+            self.states[k] = result.x
+            out.append((moved, result))
+        self.evaluations += 1
+        return out
+
+    def normalize(self, z0):
+        """Scale the objective so that its gradient at the start has unit norm: L-BFGS-B's
+        first step (steepest descent to the bounds' Cauchy point) then has about unit length
+        (ZOOM)."""
+        self.scale = 1.0
+        _, g = self.objective(z0)
+        norm = float(np.linalg.norm(g))
+        self.scale = 1.0 / norm if norm > 0 else 1.0
+
+    def objective(self, z):
+        """(J, dJ/dz) at z, times scale (normalize); where a case's solve fails (a trial point
+        far out), a value above every one seen so far, so that the line search steps back."""
+        J, gradient = 0.0, np.zeros(len(z))
+        try:
+            solved = self._solve(z)
+        except RuntimeError:
+            return 10.0 * self.scale * max(self.largest, 1.0), np.zeros(len(z))
+        for k, (scene, result) in enumerate(solved):
+            r = self.weight[k] * (self.markers.at(result.x - scene.mesh.vertices)
+                                  - self.measured[k])
+            J += 0.5 * float(np.sum(r * r))
+            dJ = self.weight[k] * self.markers.spread(r, scene.mesh.n_vertices)
+            gradient += self.layout.chain(z, static_sensitivity(scene, result, dJ))
+        self.last_J, self.largest = J, max(self.largest, J)
+        return self.scale * J, self.scale * gradient
+
+    def residuals_and_jacobian(self, z):
+        """The weighted residuals (c k 3,) at z and their Jacobian (c k 3, len(names)) in the
+        parameters."""
+        residuals, rows = [], []
+        n = self.scenes[0].mesh.n_vertices
+        for k, (scene, result) in enumerate(self._solve(z)):
+            r = self.weight[k] * (self.markers.at(result.x - scene.mesh.vertices)
+                                  - self.measured[k])
+            residuals.append(r.ravel())
+            unit = np.zeros((r.size, n, 3))
+            for i in range(r.size):
+                e = np.zeros(r.size)
+                e[i] = self.weight[k]
+                unit[i] = self.markers.spread(e.reshape(-1, 3), n)
+            rows.append(self.layout.chain(z, static_jacobian(scene, result, unit), False))
+        return np.concatenate(residuals), np.concatenate(rows)
