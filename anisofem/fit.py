@@ -90,10 +90,11 @@ class Markers:
 def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
         progress=None):
     """Fit `names` (keys of PARAMETERS) so that the scenes' (Scenes of one body, one per load
-    case) static displacements at marker rest points `markers` (k, 3) match `measured` (c, k,
-    3) (or (k, 3) for one case), m. start: {name: value} (default: the first scene's, the
-    element mean); bounds: {name: (low, high)} (default PARAMETERS'). progress(iteration, J,
-    values) after each iteration. Returns a FitResult."""
+    case) static displacements at marker rest points match the measured ones, m: markers
+    (k, 3) and measured (k, 3) for one case, or a list of each, one per case. start: {name:
+    value} (default: the first scene's, the element mean); bounds: {name: (low, high)}
+    (default PARAMETERS'). progress(iteration, J, values) after each iteration. Returns a
+    FitResult (its marker_residuals: the markers of all cases in order)."""
     t0 = time.perf_counter()
     scenes = [scenes] if not isinstance(scenes, (list, tuple)) else list(scenes)
     for s in scenes:
@@ -106,15 +107,10 @@ def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
     if bad or not names or len(set(names)) != len(names):
         raise ValueError(f"names: expected distinct parameters among {', '.join(PARAMETERS)}, "
                          f"got {names}")
-    measured = as_float_array(measured, "measured")
-    if measured.ndim == 2:
-        measured = measured[None]
-    probe = Markers(base.mesh, markers)
-    if measured.shape != (len(scenes), probe.nodes.shape[0], 3):
-        raise ValueError(f"measured: expected ({len(scenes)}, {probe.nodes.shape[0]}, 3) "
-                         f"displacements (cases, markers, xyz), got {measured.shape}")
+    markers, measured = _per_case(markers, measured, len(scenes))
+    probes = [Markers(base.mesh, points) for points in markers]
     layout = _Layout(base, names, start or {}, bounds or {})
-    problem = _Problem(scenes, probe, measured, layout)
+    problem = _Problem(scenes, probes, measured, layout)
     history = []
 
     def report(z):
@@ -138,11 +134,25 @@ def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
                       for k, n in enumerate(names)}
     except np.linalg.LinAlgError:
         deviations = {n: math.inf for n in names}
-    misfit = residuals.reshape(len(scenes), -1, 3) / problem.weight[:, None, None]   # m
-    per_marker = np.sqrt((misfit ** 2).sum(axis=2).mean(axis=0))
-    return FitResult(values, deviations, per_marker, float(np.sqrt((misfit ** 2).mean() * 3)),
+    misfit = np.concatenate([r.reshape(-1, 3) / w for r, w in
+                             zip(np.split(residuals, problem.ends[:-1]), problem.weight)])  # m
+    per_marker = np.linalg.norm(misfit, axis=1)
+    return FitResult(values, deviations, per_marker, float(np.sqrt((per_marker ** 2).mean())),
                      int(answer.nit), problem.evaluations, bool(answer.success),
                      str(answer.message), time.perf_counter() - t0, history)
+
+
+def _per_case(markers, measured, cases):
+    """(markers, measured): lists of (k_c, 3) arrays, one per case, checked."""
+    if cases == 1 and not isinstance(markers, (list, tuple)):
+        markers, measured = [markers], [measured]
+    if not isinstance(markers, (list, tuple)) or not isinstance(measured, (list, tuple)) or \
+            len(markers) != cases or len(measured) != cases:
+        raise ValueError(f"markers, measured: give one array of each per load case ({cases})")
+    points = [as_float_array(m, f"markers[{c}]", shape=(None, 3)) for c, m in enumerate(markers)]
+    moved = [as_float_array(m, f"measured[{c}]", shape=(len(points[c]), 3))
+             for c, m in enumerate(measured)]
+    return points, moved
 
 
 class _Layout:
@@ -220,10 +230,11 @@ class _Problem:
 
     def __init__(self, scenes, markers, measured, layout):
         self.scenes, self.markers, self.measured, self.layout = scenes, markers, measured, layout
-        scale = np.abs(measured).max(axis=(1, 2))
+        scale = np.array([np.abs(m).max() for m in measured])
         if not (scale > 0).all():
             raise ValueError(f"measured: load case {int(np.argmin(scale))} moves no marker")
         self.weight = 1.0 / scale                                  # 1 / s_c, 1/m
+        self.ends = np.cumsum([3 * len(m) for m in measured])
         self.states = [s.initial_positions() for s in scenes]
         self.evaluations, self.last_J, self.largest, self.scale = 0, math.nan, 0.0, 1.0
 
@@ -259,10 +270,10 @@ class _Problem:
         except RuntimeError:
             return 10.0 * self.scale * max(self.largest, 1.0), np.zeros(len(z))
         for k, (scene, result) in enumerate(solved):
-            r = self.weight[k] * (self.markers.at(result.x - scene.mesh.vertices)
+            r = self.weight[k] * (self.markers[k].at(result.x - scene.mesh.vertices)
                                   - self.measured[k])
             J += 0.5 * float(np.sum(r * r))
-            dJ = self.weight[k] * self.markers.spread(r, scene.mesh.n_vertices)
+            dJ = self.weight[k] * self.markers[k].spread(r, scene.mesh.n_vertices)
             gradient += self.layout.chain(z, static_sensitivity(scene, result, dJ))
         self.last_J, self.largest = J, max(self.largest, J)
         return self.scale * J, self.scale * gradient
@@ -273,13 +284,13 @@ class _Problem:
         residuals, rows = [], []
         n = self.scenes[0].mesh.n_vertices
         for k, (scene, result) in enumerate(self._solve(z)):
-            r = self.weight[k] * (self.markers.at(result.x - scene.mesh.vertices)
+            r = self.weight[k] * (self.markers[k].at(result.x - scene.mesh.vertices)
                                   - self.measured[k])
             residuals.append(r.ravel())
             unit = np.zeros((r.size, n, 3))
             for i in range(r.size):
                 e = np.zeros(r.size)
                 e[i] = self.weight[k]
-                unit[i] = self.markers.spread(e.reshape(-1, 3), n)
+                unit[i] = self.markers[k].spread(e.reshape(-1, 3), n)
             rows.append(self.layout.chain(z, static_jacobian(scene, result, unit), False))
         return np.concatenate(residuals), np.concatenate(rows)
