@@ -1,4 +1,4 @@
-"""Command line: `python -m anisofem {mesh,solve,trade,bench}`.
+"""Command line: `python -m anisofem {mesh,solve,trade,fit,bench}`.
 
   python -m anisofem mesh box --cells 10 2 2 -o beam.msh
   python -m anisofem solve beam.msh --fixed x-min --gravity 0 0 -9.81 --fiber 1 0 0 \\
@@ -9,19 +9,21 @@
   python -m anisofem bench --large --huge
 """
 import argparse
+import os
 import re
 import sys
 
 import numpy as np
 
 from . import bench, bench_large, bench_load, convergence, ladder, meshgen, methods, robustness
-from .files import check_folder, write_json
+from . import fit as fitting
+from .files import atomic_path, check_folder, write_json
 from .io import check_output_path, read_mesh, write_mesh
 from .inversion import inversion
 from .material import MODELS, Material
 from .metrics import end_vertices, tip_displacement
 from .scene import Scene
-from .scenefile import load_scene
+from .scenefile import dump, load_scene
 from .solve import CONTINUATION, simulate, solve
 
 #: Each shape: (its mesh from the shape flags, the flags it takes with their defaults, the end
@@ -279,6 +281,25 @@ def _parser():
                         "quoted: --rungs 'reduced m5' 'cg amg')")
     t.add_argument("--json", help="write the result here")
     t.add_argument("--png", help="write the Pareto plot here")
+    f = sub.add_parser("fit", help="identify material parameters from measured marker "
+                                   "displacements (one scene file per load case)", **defaults)
+    f.add_argument("scenes", nargs="+", help="scene files (.toml), one per load case, of one "
+                                             "body")
+    f.add_argument("--markers", nargs="+", required=True, metavar="CSV",
+                   help="one per scene: rows x, y, z, ux, uy, uz (a marker's rest position and "
+                        "measured displacement, m; a header line is skipped)")
+    f.add_argument("--params", nargs="+", required=True, choices=list(fitting.PARAMETERS),
+                   help="what is fitted, one value over the whole body (fiber angles in "
+                        "degrees: azimuth about z from x, elevation toward z)")
+    f.add_argument("--start", nargs="+", default=[], metavar="NAME=VALUE",
+                   help="start values (default: the scene's)")
+    f.add_argument("--bounds", nargs="+", default=[], metavar="NAME=LOW:HIGH",
+                   help="bounds (default: " + ", ".join(
+                       f"{n} {lo:g}:{hi:g}" for n, (_, _, (lo, hi)) in
+                       fitting.PARAMETERS.items()) + ")")
+    f.add_argument("--max-iter", type=int, default=100, help="L-BFGS-B iterations at most")
+    f.add_argument("-o", "--output", help="write the fitted scene file here (.toml)")
+    f.add_argument("--json", help="write the fitted values, deviations and residuals here")
     b = sub.add_parser("bench", help="speed of the kernels and solvers (table + JSON)",
                        **defaults)
     b.add_argument("--sizes", nargs="+", default=list(bench.SIZES), choices=list(bench.SIZES))
@@ -458,7 +479,90 @@ def _bench(args):
     return 0
 
 
-_COMMANDS = {"mesh": _mesh, "solve": _solve, "trade": _trade, "bench": _bench}
+def _fit(args):
+    """python -m anisofem fit: progress per iteration, the values with their deviations, the
+    residual per marker, the fitted scene file."""
+    import tomllib
+
+    if len(args.markers) != len(args.scenes):
+        raise ValueError(f"--markers: one CSV per scene ({len(args.scenes)}), got "
+                         f"{len(args.markers)}")
+    for path, name in ((args.output, "--output"), (args.json, "--json")):
+        if path:
+            check_folder(path, name)
+    if args.output and not is_scene_file(args.output):
+        raise ValueError(f"--output: a scene file (.toml), got {args.output!r}")
+    scenes = [load_scene(p) for p in args.scenes]
+    tables = [_marker_table(p) for p in args.markers]
+    start = dict(_assignment(a, "--start", float) for a in args.start)
+    bounds = dict(_assignment(a, "--bounds", _interval) for a in args.bounds)
+
+    def progress(k, J, values):
+        shown = ", ".join(f"{n} = {v:.6g}" for n, v in values.items())
+        print(f"iteration {k}: J = {J:.4e}, {shown}", flush=True)
+    result = fitting.fit(scenes, [t[:, :3] for t in tables], [t[:, 3:] for t in tables],
+                         args.params, start, bounds, args.max_iter, progress)
+    print(f"stopped after {result.iterations} iterations ({result.evaluations} solves per "
+          f"case, {result.seconds:.1f} s): {result.message}")
+    for n, v in result.values.items():
+        unit = fitting.PARAMETERS[n][0]
+        print(f"  {n} = {v:.6g} +- {result.deviations[n]:.2g} {unit}".rstrip())
+    worst = np.argsort(result.marker_residuals)[::-1][:3]
+    print(f"misfit: rms {1e3 * result.rms:.4g} mm over {result.marker_residuals.size} markers; "
+          "largest: " + ", ".join(f"marker {k} {1e3 * result.marker_residuals[k]:.3g} mm"
+                                  for k in worst))
+    if args.json:
+        write_json(args.json, {"values": result.values, "deviations": result.deviations,
+                               "marker_residuals_m": result.marker_residuals.tolist(),
+                               "rms_m": result.rms, "iterations": result.iterations,
+                               "converged": result.converged, "message": result.message})
+        print(f"-> {args.json}")
+    if args.output:
+        with open(args.scenes[0], "rb") as fh:
+            table = tomllib.load(fh)
+        fitted = fitting.fitted_table(table, scenes[0], result.values, args.scenes[0],
+                                      args.output)
+        with atomic_path(args.output, ".toml") as tmp:
+            with open(tmp, "w") as fh:
+                fh.write(f"# {args.scenes[0]} with the values fitted by python -m anisofem fit\n"
+                         + dump(fitted))
+        print(f"-> {args.output}")
+    return 0 if result.converged else 1
+
+
+def _marker_table(path):
+    """(k, 6) rows of a marker CSV: x, y, z, ux, uy, uz in m (a header line skipped)."""
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"--markers: no such file {path!r}")
+    try:
+        rows = np.loadtxt(path, delimiter=",", ndmin=2)
+    except ValueError:
+        rows = np.loadtxt(path, delimiter=",", ndmin=2, skiprows=1)
+    if rows.shape[1] != 6 or rows.shape[0] == 0:
+        raise ValueError(f"--markers: {path} needs rows x, y, z, ux, uy, uz; got shape "
+                         f"{rows.shape}")
+    return rows
+
+
+def _interval(text):
+    low, sep, high = text.partition(":")
+    if not sep:
+        raise ValueError(f"expected LOW:HIGH, got {text!r}")
+    return float(low), float(high)
+
+
+def _assignment(text, flag, parse):
+    name, sep, value = text.partition("=")
+    if not sep or name not in fitting.PARAMETERS:
+        raise ValueError(f"{flag}: expected NAME=VALUE with NAME one of "
+                         f"{', '.join(fitting.PARAMETERS)}, got {text!r}")
+    try:
+        return name, parse(value)
+    except ValueError as err:
+        raise ValueError(f"{flag}: {name}: {err}") from None
+
+
+_COMMANDS = {"mesh": _mesh, "solve": _solve, "trade": _trade, "bench": _bench, "fit": _fit}
 
 
 if __name__ == "__main__":

@@ -100,7 +100,8 @@ def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
     for s in scenes:
         check_scene(s)
     base = scenes[0]
-    if any(s.mesh is not base.mesh for s in scenes):
+    if any(not (np.array_equal(s.mesh.cells, base.mesh.cells)
+                and np.array_equal(s.mesh.vertices, base.mesh.vertices)) for s in scenes):
         raise ValueError("scenes: the load cases must share one mesh (the same body)")
     names = list(names)
     bad = [n for n in names if n not in PARAMETERS]
@@ -153,6 +154,44 @@ def _per_case(markers, measured, cases):
     moved = [as_float_array(m, f"measured[{c}]", shape=(len(points[c]), 3))
              for c, m in enumerate(measured)]
     return points, moved
+
+
+#: Where a fitted value goes in a scene file's [material] table
+MATERIAL_KEYS = {"young": "young", "poisson": "poisson", "kappa": "fiber_stiffness"}
+
+
+def fitted_table(table, scene, values, scene_path, output_path):
+    """A copy of a scene file's table (tomllib's dict, of the scene at scene_path) with the
+    fitted values (one over the whole body) in [material] and taken out of its regions, its
+    mesh path made relative to output_path's folder: the fitted scene file's table.
+    ValueError where a fitted fiber angle joins an unfitted one that varies over the body."""
+    import copy
+    import os
+    out = copy.deepcopy(table)
+    mesh = os.path.join(os.path.dirname(os.path.abspath(scene_path)), table["mesh"])
+    out["mesh"] = os.path.relpath(mesh, os.path.dirname(os.path.abspath(output_path)))
+    material = out.setdefault("material", {})
+    changed = [MATERIAL_KEYS[n] for n in values if n in MATERIAL_KEYS]
+    for n in values:
+        if n in MATERIAL_KEYS:
+            material[MATERIAL_KEYS[n]] = float(values[n])
+    if any(n.startswith("fiber") for n in values):
+        angles = np.degrees(fiber_angles(scene.elements.fiber))
+        pair = []
+        for k, n in enumerate(("fiber_azimuth", "fiber_elevation")):
+            if n in values:
+                pair.append(values[n])
+            elif np.ptp(angles[:, k]) > 1e-9:
+                raise ValueError(f"--output: the fitted fiber angle joins a {n} that varies "
+                                 f"over the body; fit both angles to write one direction")
+            else:
+                pair.append(float(angles[0, k]))
+        material["fiber"] = [float(c) for c in fiber_direction(np.radians([pair]))[0]]
+        changed.append("fiber")
+    for region in out.get("regions", {}).values():
+        for key in changed:
+            region.pop(key, None)
+    return out
 
 
 class _Layout:

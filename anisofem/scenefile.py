@@ -387,7 +387,11 @@ class _Reader:
     def vertices(self, where, key):
         """(k,) the vertices of a place (a surface's, a side's or a box's)."""
         if isinstance(where, str) and where not in SIDES:
-            return np.unique(self.surface(where, key))
+            faces = self.surface(where, key)
+            if self.mesh.order == 2:  # and the midside nodes of the faces' edges
+                faces = np.concatenate([faces.ravel(), self.mesh.edge_nodes(
+                    faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2))])
+            return np.unique(faces)
         inside = self.place(where, key)
         found = np.flatnonzero(inside(self.mesh.vertices))
         if found.size == 0:
@@ -507,3 +511,40 @@ def schema_markdown():
         lines += [f"| `{k}` | {v} |" for k, v in keys.items()]
         lines.append("")
     return "\n".join(lines)
+
+
+def dump(table):
+    """A scene file's table (as load_scene reads it, tomllib's dict) as TOML text: top-level
+    values, then [material], [regions.NAME], [[boundary]] and [curves.NAME] tables; nested
+    tables inline."""
+    lines = [f"{k} = {_toml(v)}" for k, v in table.items() if not isinstance(v, (dict, list))
+             or (isinstance(v, list) and not (v and isinstance(v[0], dict)))]
+    for k, v in table.items():
+        if isinstance(v, dict) and k in ("regions", "curves"):
+            for name, sub in v.items():
+                lines += ["", f"[{k}.{_key(name)}]"] + [f"{a} = {_toml(b)}" for a, b in
+                                                        sub.items()]
+        elif isinstance(v, dict):
+            lines += ["", f"[{k}]"] + [f"{a} = {_toml(b)}" for a, b in v.items()]
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            for entry in v:
+                lines += ["", f"[[{k}]]"] + [f"{a} = {_toml(b)}" for a, b in entry.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _key(name):
+    return name if name.replace("_", "").replace("-", "").isalnum() and not name.isdigit() \
+        else '"' + name + '"'
+
+
+def _toml(value):
+    """One TOML value: a bool, number, string, list or inline table."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(float(value)) if isinstance(value, float) else str(value)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{_key(k)} = {_toml(v)}" for k, v in value.items()) + "}"
+    return "[" + ", ".join(_toml(v) for v in value) + "]"

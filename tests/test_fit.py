@@ -81,3 +81,44 @@ def test_fit_refusals():
         fit(cases[0], points, np.ones((4, 3)), ["kappa"], bounds={"kappa": (1e6, 1e7)})
     with pytest.raises(ValueError, match="moves no marker"):
         fit(cases[0], points, np.zeros((4, 3)), ["kappa"])
+
+
+def test_fit_command(tmp_path):
+    """python -m anisofem fit on scene files and marker CSVs: progress, values, the fitted
+    scene file (which loads, with the values in its material) and the JSON; bad input ends
+    with one line and exit status 2."""
+    import json
+    import subprocess
+    import sys
+    import tomllib
+    mesh = af.box_beam(SIZE, (10, 2, 2))
+    X, base = mesh.vertices, mesh.faces_where(lambda c: c[:, 0] < 1e-9)
+    af.io.write_tagged_mesh(tmp_path / "beam.msh", mesh, surfaces={1: base}, names={"base": 1})
+    text = ('mesh = "beam.msh"\ngravity = [0, 0, -9.81]\n[material]\npoisson = 0.45\n'
+            'fiber_stiffness = {kappa}\nfiber = [1, 0, 0]\n[[boundary]]\nwhere = "base"\n'
+            'held = true\n')
+    (tmp_path / "truth.toml").write_text(text.format(kappa=3e5))
+    (tmp_path / "start.toml").write_text(text.format(kappa=1e5))
+    points = markers()
+    truth = af.load_scene(tmp_path / "truth.toml")
+    u = Markers(mesh, points).at(af.solve(truth).x - X)
+    np.savetxt(tmp_path / "m.csv", np.c_[points, u], delimiter=",", header="x,y,z,ux,uy,uz",
+               comments="")
+    run = [sys.executable, "-m", "anisofem", "fit", "start.toml", "--markers", "m.csv",
+           "--params", "kappa"]
+    r = subprocess.run(run + ["-o", "out/fitted.toml", "--json", "out/fit.json"],
+                       cwd=tmp_path, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "iteration 1:" in r.stdout and "kappa = " in r.stdout and "misfit: rms" in r.stdout
+    fitted = af.load_scene(tmp_path / "out" / "fitted.toml")
+    assert fitted.elements.kappa[0] == pytest.approx(3e5, rel=1e-6)
+    with open(tmp_path / "out" / "fitted.toml", "rb") as f:
+        assert tomllib.load(f)["mesh"] == "../beam.msh"
+    assert json.loads((tmp_path / "out" / "fit.json").read_text())["converged"]
+    for bad, message in ((["--params", "kappa", "--start", "kapa=1"], "--start: expected"),
+                         (["--params", "kappa", "--markers", "m.csv", "m.csv"],
+                          "--markers: one CSV per scene")):
+        r = subprocess.run(run[:7] + bad, cwd=tmp_path, capture_output=True,
+                           text=True)
+        assert r.returncode == 2 and message in r.stderr, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1

@@ -290,3 +290,15 @@ def test_readme_scene_file_loads(tmp_path):
     shutil.copy(os.path.join(SCENES, "actuator.msh"), tmp_path / "actuator.msh")
     scene = af.load_scene(scene_file(tmp_path, block))
     assert scene.pressures[0].magnitude == 2.0e4 and scene.fixed_mask.any()
+
+
+def test_named_surfaces_hold_midside_nodes_on_quadratic_tets(tmp_path):
+    """order = 2 raises the file's linear tets; a surface named in the file then holds its
+    faces' midside nodes too, as the side rule does."""
+    two_halves(tmp_path)
+    by_name = af.load_scene(scene_file(tmp_path, BAR.replace('gravity', 'order = 2\ngravity')))
+    by_side = af.load_scene(scene_file(tmp_path, BAR.replace('gravity', 'order = 2\ngravity')
+                                       .replace('"base"', '"x-min"'), "side.toml"))
+    assert by_name.mesh.order == 2
+    assert np.array_equal(by_name.fixed_mask, by_side.fixed_mask)
+    assert by_name.fixed_mask.all(axis=1).sum() == 25   # 3 x 3 corners and 16 midside nodes
