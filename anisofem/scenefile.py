@@ -14,6 +14,7 @@ import warnings
 import numpy as np
 
 from .curves import LoadCurve, Timed
+from .fibers import helix_directions, helix_frame, segments
 from .io import read_tagged_mesh
 from .material import MODELS, Material
 from .meshgen import of_order
@@ -49,6 +50,9 @@ SCHEMA = {
         "angle": "the winding angle from the axis, degrees (90: hoops around it)",
         "angle_end": "the angle at the region's far end along the axis (default: angle), linear "
                      "in between",
+        "segments": "[a1, a2, ...] degrees: the winding angle in equal segments along the axis "
+                    "over the region, from its start (instead of angle and angle_end; what "
+                    "python -m anisofem design writes)",
         "crossed": "true: a crossed winding, +angle and -angle on alternate tets (the two "
                    "fiber families of a wound actuator; default false)",
     },
@@ -241,26 +245,36 @@ class _Reader:
         return d / norms[:, None]
 
     def helix(self, spec, tets, key):
-        """Fibers wound about an axis: angle(s) from the axis, s along it over the tets."""
-        axis, origin, start = self.turn(spec, key)
-        end = _number(self, spec.get("angle_end", start), f"{key}.angle_end")
-        c = self.mesh.vertices[self.mesh.tets[tets]].mean(axis=1) - origin
-        s = c @ axis
-        radial = c - s[:, None] * axis
-        r = np.linalg.norm(radial, axis=1)
-        if (r <= PLACE_TOLERANCE * self.mesh.size).any():
-            raise self.error(key, "a tet's center lies on the axis, where a helix has no "
-                                  "direction")
-        around = np.cross(axis, radial / r[:, None])
-        span = np.ptp(s)
-        share = (s - s.min()) / span if span > 0 else np.zeros_like(s)
-        angle = np.radians(start + (end - start) * share)
+        """Fibers wound about an axis (anisofem.fibers): the winding angle linear from angle to
+        angle_end along the axis over the tets, or constant in each of equal segments."""
+        if "segments" in spec:
+            if "angle" in spec or "angle_end" in spec:
+                raise self.error(key, "give segments, or angle (and angle_end), not both")
+            angles = spec["segments"]
+            if not isinstance(angles, list) or not angles or \
+                    not all(isinstance(a, (int, float)) and not isinstance(a, bool)
+                            and math.isfinite(a) for a in angles):
+                raise self.error(f"{key}.segments", f"expected a list of angles in degrees, "
+                                                    f"got {angles!r}")
+            axis, origin, _ = self.turn(spec | {"angle": 0.0}, key)
+        else:
+            axis, origin, start = self.turn(spec, key)
+            end = _number(self, spec.get("angle_end", start), f"{key}.angle_end")
+        try:
+            s, around = helix_frame(self.mesh.vertices[self.mesh.tets[tets]].mean(axis=1), axis,
+                                    origin)
+        except ValueError as err:
+            raise self.error(key, str(err)) from None
+        if "segments" in spec:
+            angle = np.radians(np.asarray(angles, dtype=float)[segments(s, len(angles))])
+        else:
+            span = np.ptp(s)
+            share = (s - s.min()) / span if span > 0 else np.zeros_like(s)
+            angle = np.radians(start + (end - start) * share)
         crossed = spec.get("crossed", False)
         if not isinstance(crossed, bool):
             raise self.error(f"{key}.crossed", f"true or false, got {crossed!r}")
-        if crossed:
-            angle[1::2] *= -1.0
-        return np.cos(angle)[:, None] * axis + np.sin(angle)[:, None] * around
+        return helix_directions(axis, around, angle, crossed)
 
     # boundary conditions and loads
 
