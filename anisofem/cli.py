@@ -1,4 +1,4 @@
-"""Command line: `python -m anisofem {mesh,solve,trade,fit,bench}`.
+"""Command line: `python -m anisofem {mesh,solve,trade,fit,design,bench}`.
 
   python -m anisofem mesh box --cells 10 2 2 -o beam.msh
   python -m anisofem solve beam.msh --fixed x-min --gravity 0 0 -9.81 --fiber 1 0 0 \\
@@ -23,7 +23,7 @@ from .inversion import inversion
 from .material import MODELS, Material
 from .metrics import end_vertices, tip_displacement
 from .scene import Scene
-from .scenefile import dump, load_scene
+from .scenefile import SceneFile, dump, load_scene
 from .solve import CONTINUATION, simulate, solve
 
 #: Each shape: (its mesh from the shape flags, the flags it takes with their defaults, the end
@@ -288,9 +288,10 @@ def _parser():
     f.add_argument("--markers", nargs="+", required=True, metavar="CSV",
                    help="one per scene: rows x, y, z, ux, uy, uz (a marker's rest position and "
                         "measured displacement, m; a header line is skipped)")
-    f.add_argument("--params", nargs="+", required=True, choices=list(fitting.PARAMETERS),
-                   help="what is fitted, one value over the whole body (fiber angles in "
-                        "degrees: azimuth about z from x, elevation toward z)")
+    f.add_argument("--params", nargs="+", required=True, metavar="NAME",
+                   help=f"what is fitted, one value over the whole body: "
+                        f"{', '.join(fitting.PARAMETERS)} (fiber angles in degrees: azimuth "
+                        f"about z from x, elevation toward z)")
     f.add_argument("--start", nargs="+", default=[], metavar="NAME=VALUE",
                    help="start values (default: the scene's)")
     f.add_argument("--bounds", nargs="+", default=[], metavar="NAME=LOW:HIGH",
@@ -300,6 +301,25 @@ def _parser():
     f.add_argument("--max-iter", type=int, default=100, help="L-BFGS-B iterations at most")
     f.add_argument("-o", "--output", help="write the fitted scene file here (.toml)")
     f.add_argument("--json", help="write the fitted values, deviations and residuals here")
+    d = sub.add_parser("design", help="design a region's fiber winding angles, one per "
+                                      "segment along its helix's axis, so that the body's tip "
+                                      "comes to rest at a target", **defaults)
+    d.add_argument("scene", help="a scene file (.toml) whose region has helix fibers")
+    d.add_argument("--region", required=True, help="the physical volume whose fibers change")
+    d.add_argument("--tip", required=True,
+                   help="the tip: a physical surface or a side (x-max, ...) whose vertices' "
+                        "mean is moved")
+    d.add_argument("--target", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"),
+                   help="where the tip should come to rest, m")
+    d.add_argument("--segments", type=int, default=4, help="winding angles along the axis")
+    d.add_argument("--start", type=float, help="start angle of every segment, degrees "
+                                               "(default: the scene's helix angle)")
+    d.add_argument("--bounds", default="0:90", metavar="LOW:HIGH", help="degrees")
+    d.add_argument("--smooth", type=float, default=1e-3,
+                   help="weight of the squared angle steps between neighbouring segments, "
+                        "per radian^2")
+    d.add_argument("--max-iter", type=int, default=100, help="L-BFGS-B iterations at most")
+    d.add_argument("-o", "--output", help="write the designed scene file here (.toml)")
     b = sub.add_parser("bench", help="speed of the kernels and solvers (table + JSON)",
                        **defaults)
     b.add_argument("--sizes", nargs="+", default=list(bench.SIZES), choices=list(bench.SIZES))
@@ -492,6 +512,10 @@ def _fit(args):
             check_folder(path, name)
     if args.output and not is_scene_file(args.output):
         raise ValueError(f"--output: a scene file (.toml), got {args.output!r}")
+    unknown = [n for n in args.params if n not in fitting.PARAMETERS]
+    if unknown:
+        raise ValueError(f"--params: {unknown[0]!r} is not a parameter; fit "
+                         f"{', '.join(fitting.PARAMETERS)}")
     scenes = [load_scene(p) for p in args.scenes]
     tables = [_marker_table(p) for p in args.markers]
     start = dict(_assignment(a, "--start", float) for a in args.start)
@@ -530,6 +554,66 @@ def _fit(args):
     return 0 if result.converged else 1
 
 
+def _design(args):
+    """python -m anisofem design: each iteration's objective and gradient norm, the angles,
+    where the tip comes to rest, the designed scene file."""
+    from .design import Helix, design
+    if args.output:
+        check_folder(args.output, "--output")
+        if not is_scene_file(args.output):
+            raise ValueError(f"--output: a scene file (.toml), got {args.output!r}")
+    if args.segments < 1:
+        raise ValueError(f"--segments: at least 1, got {args.segments}")
+    low, high = _interval(args.bounds)
+    scene_file = SceneFile(args.scene)
+    spec = _region_helix(scene_file.table, args.region)
+    helix = Helix(scene_file.region(args.region), *_axis_origin(spec), args.segments,
+                  bool(spec.get("crossed", False)))
+    start = args.start if args.start is not None else float(
+        np.mean(spec["segments"]) if "segments" in spec else spec["angle"])
+
+    def progress(k, J, g, angles):
+        print(f"iteration {k}: J = {J:.4e}, |dJ/dangles| = {g:.3e}, angles "
+              + " ".join(f"{a:.2f}" for a in angles), flush=True)
+    result = design(scene_file.scene, helix, scene_file.vertices(args.tip), args.target, start,
+                    (low, high), args.smooth, args.max_iter, progress)
+    print(f"stopped after {result.iterations} iterations ({result.evaluations} solves, "
+          f"{result.seconds:.1f} s): {result.message}")
+    print("angles (degrees): " + " ".join(f"{a:.3f}" for a in result.angles))
+    print(f"tip at {np.array2string(result.tip, precision=6)} m, "
+          f"{1e3 * result.distance:.4g} mm from the target")
+    if args.output:
+        table = fitting.moved_mesh_path(scene_file.table, args.scene, args.output)
+        region = table.setdefault("regions", {}).setdefault(args.region, {})
+        region["fiber"] = {"helix": {k: v for k, v in spec.items()
+                                     if k not in ("angle", "angle_end", "segments")}
+                           | {"segments": [round(float(a), 6) for a in result.angles]}}
+        with atomic_path(args.output, ".toml") as tmp:
+            with open(tmp, "w") as fh:
+                fh.write(f"# {args.scene} with fiber angles designed by python -m anisofem "
+                         f"design\n" + dump(table))
+        print(f"-> {args.output}")
+    return 0 if result.converged else 1
+
+
+def _region_helix(table, region):
+    """The helix spec (a dict) of the region's fibers in a scene file's table (the region's
+    own, else [material]'s); ValueError where they are not a helix."""
+    for where in (table.get("regions", {}).get(region, {}), table.get("material", {})):
+        if "fiber" in where:
+            fiber = where["fiber"]
+            if isinstance(fiber, dict) and "helix" in fiber:
+                return fiber["helix"]
+            break
+    raise ValueError(f"--region: the fibers of {region!r} are not a helix (fiber = {{helix = "
+                     f"{{...}}}}); design changes a helix's winding angles")
+
+
+def _axis_origin(spec):
+    axis = np.asarray(spec["axis"], dtype=float)
+    return axis / np.linalg.norm(axis), np.asarray(spec.get("origin", [0.0, 0.0, 0.0]), float)
+
+
 def _marker_table(path):
     """(k, 6) rows of a marker CSV: x, y, z, ux, uy, uz in m (a header line skipped)."""
     if not os.path.isfile(path):
@@ -562,7 +646,8 @@ def _assignment(text, flag, parse):
         raise ValueError(f"{flag}: {name}: {err}") from None
 
 
-_COMMANDS = {"mesh": _mesh, "solve": _solve, "trade": _trade, "bench": _bench, "fit": _fit}
+_COMMANDS = {"mesh": _mesh, "solve": _solve, "trade": _trade, "bench": _bench, "fit": _fit,
+             "design": _design}
 
 
 if __name__ == "__main__":

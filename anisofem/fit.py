@@ -16,13 +16,15 @@ residuals' Jacobian (one back-substitution per residual on one factorization per
 gives each parameter's standard deviation: sqrt of the diagonal of s^2 (J_r^T J_r)^-1, s^2
 the residuals' variance (their sum of squares over their count less the parameters').
 """
+import copy
 import math
+import os
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.optimize
 
+from . import lbfgsb
 from ._validate import as_float_array
 from .material import Material
 from .reduced.display import locate
@@ -114,16 +116,12 @@ def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
     problem = _Problem(scenes, probes, measured, layout)
     history = []
 
-    def report(z):
-        history.append((len(history) + 1, problem.last_J, layout.values(z)))
+    def report(z, J):
+        history.append((len(history) + 1, J, layout.values(z)))
         if progress is not None:
             progress(*history[-1])
-    z0 = layout.to_z(layout.start)
-    problem.normalize(z0)
-    answer = scipy.optimize.minimize(problem.objective, z0, jac=True, method="L-BFGS-B",
-                                     bounds=layout.z_bounds, callback=report,
-                                     options={"maxiter": max_iter, "ftol": 1e-12,
-                                              "gtol": 1e-10})
+    answer = lbfgsb.minimize(problem.objective, layout.to_z(layout.start), layout.z_bounds,
+                             max_iter, report)
     values = layout.values(answer.x)
     residuals, jacobian = problem.residuals_and_jacobian(answer.x)
     count = residuals.size
@@ -160,16 +158,21 @@ def _per_case(markers, measured, cases):
 MATERIAL_KEYS = {"young": "young", "poisson": "poisson", "kappa": "fiber_stiffness"}
 
 
+def moved_mesh_path(table, scene_path, output_path):
+    """A deep copy of a scene file's table (of the file at scene_path) whose mesh path is
+    relative to output_path's folder, for a scene file written there."""
+    out = copy.deepcopy(table)
+    mesh = os.path.join(os.path.dirname(os.path.abspath(scene_path)), table["mesh"])
+    out["mesh"] = os.path.relpath(mesh, os.path.dirname(os.path.abspath(output_path)))
+    return out
+
+
 def fitted_table(table, scene, values, scene_path, output_path):
     """A copy of a scene file's table (tomllib's dict, of the scene at scene_path) with the
     fitted values (one over the whole body) in [material] and taken out of its regions, its
     mesh path made relative to output_path's folder: the fitted scene file's table.
     ValueError where a fitted fiber angle joins an unfitted one that varies over the body."""
-    import copy
-    import os
-    out = copy.deepcopy(table)
-    mesh = os.path.join(os.path.dirname(os.path.abspath(scene_path)), table["mesh"])
-    out["mesh"] = os.path.relpath(mesh, os.path.dirname(os.path.abspath(output_path)))
+    out = moved_mesh_path(table, scene_path, output_path)
     material = out.setdefault("material", {})
     changed = [MATERIAL_KEYS[n] for n in values if n in MATERIAL_KEYS]
     for n in values:
@@ -275,7 +278,7 @@ class _Problem:
         self.weight = 1.0 / scale                                  # 1 / s_c, 1/m
         self.ends = np.cumsum([3 * len(m) for m in measured])
         self.states = [s.initial_positions() for s in scenes]
-        self.evaluations, self.last_J, self.largest, self.scale = 0, math.nan, 0.0, 1.0
+        self.evaluations = 0
 
     def _solve(self, z):
         material = self.layout.material(z)
@@ -291,31 +294,16 @@ class _Problem:
         self.evaluations += 1
         return out
 
-    def normalize(self, z0):
-        """Scale the objective so that its gradient at the start has unit norm: L-BFGS-B's
-        first step (steepest descent to the bounds' Cauchy point) then has about unit length
-        (ZOOM)."""
-        self.scale = 1.0
-        _, g = self.objective(z0)
-        norm = float(np.linalg.norm(g))
-        self.scale = 1.0 / norm if norm > 0 else 1.0
-
     def objective(self, z):
-        """(J, dJ/dz) at z, times scale (normalize); where a case's solve fails (a trial point
-        far out), a value above every one seen so far, so that the line search steps back."""
+        """(J, dJ/dz) at z."""
         J, gradient = 0.0, np.zeros(len(z))
-        try:
-            solved = self._solve(z)
-        except RuntimeError:
-            return 10.0 * self.scale * max(self.largest, 1.0), np.zeros(len(z))
-        for k, (scene, result) in enumerate(solved):
+        for k, (scene, result) in enumerate(self._solve(z)):
             r = self.weight[k] * (self.markers[k].at(result.x - scene.mesh.vertices)
                                   - self.measured[k])
             J += 0.5 * float(np.sum(r * r))
             dJ = self.weight[k] * self.markers[k].spread(r, scene.mesh.n_vertices)
             gradient += self.layout.chain(z, static_sensitivity(scene, result, dJ))
-        self.last_J, self.largest = J, max(self.largest, J)
-        return self.scale * J, self.scale * gradient
+        return J, gradient
 
     def residuals_and_jacobian(self, z):
         """The weighted residuals (c k 3,) at z and their Jacobian (c k 3, len(names)) in the

@@ -94,6 +94,18 @@ class Material:
                 f"{self.fiber_direction.tolist() if self.fiber_direction.ndim == 1 else 'array'}"
                 f", fiber_stiffness={show(self.fiber_stiffness)}, model={model!r})")
 
+    def replaced(self, **changes):
+        """The same material with some parameters changed (the constructor's names)."""
+        model = ([MODELS[int(c)] for c in self.model] if self.model.ndim
+                 else MODELS[int(self.model)])
+        given = {"young": self.young, "poisson": self.poisson, "density": self.density,
+                 "fiber_direction": self.fiber_direction,
+                 "fiber_stiffness": self.fiber_stiffness, "model": model}
+        unknown = set(changes) - set(given)
+        if unknown:
+            raise TypeError(f"changes: unknown material parameter {sorted(unknown)[0]!r}")
+        return Material(**(given | changes))
+
     def per_element(self, m):
         """Broadcast to m elements: dict of mu, lam, kappa, density (m,), fiber (m, 3) and
         model (m,) int8 (index into MODELS)."""

@@ -98,15 +98,31 @@ class SceneFileError(ValueError):
 
 def load_scene(path):
     """The Scene a TOML scene file describes (SCHEMA; docs/scenes.md)."""
-    path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"path: no such scene file {path!r}")
-    with open(path, "rb") as f:
-        try:
-            table = tomllib.load(f)
-        except tomllib.TOMLDecodeError as err:
-            raise SceneFileError(f"{path}: not TOML ({err})") from None
-    return _Reader(path).scene(table)
+    return SceneFile(path).scene
+
+
+class SceneFile:
+    """A scene file read: path, table (tomllib's dict), scene (the Scene), and the names it
+    uses: region(name) the (m,) bool mask of a physical volume's tets, vertices(where) the
+    vertices of a place (a surface, a side or a box, as a [[boundary]] entry names it)."""
+
+    def __init__(self, path):
+        self.path = os.fspath(path)
+        if not os.path.isfile(self.path):
+            raise FileNotFoundError(f"path: no such scene file {self.path!r}")
+        with open(self.path, "rb") as f:
+            try:
+                self.table = tomllib.load(f)
+            except tomllib.TOMLDecodeError as err:
+                raise SceneFileError(f"{self.path}: not TOML ({err})") from None
+        self._reader = _Reader(self.path)
+        self.scene = self._reader.scene(self.table)
+
+    def region(self, name):
+        return self._reader.region(name, name)
+
+    def vertices(self, where):
+        return self._reader.vertices(where, where)
 
 
 class _Reader:

@@ -41,7 +41,9 @@ KINDS = ("young", "poisson", "kappa", "fiber_angles", "pressure")
 @dataclass
 class Sensitivity:
     """dJ/dp at a static equilibrium: young, poisson, kappa (m,) per element (J per Pa, J);
-    fiber_angles (m, 2) per element, d/d(azimuth, elevation) in J per radian; pressure (k,)
+    fiber_angles (m, 2) per element, d/d(azimuth, elevation) in J per radian;
+    fiber_direction (m, 3) per element, d/dd of the direction taken as free (its part along d
+    is no change of a unit direction; any other parametrization chains through it); pressure (k,)
     one per scene pressure, J per Pa; adjoint (n, 3) the solution lambda of H lambda = dJ/dx
     (zero on fixed components), m/N times the objective's unit. Sum a per-element array over
     a region's elements for a parameter shared by the region."""
@@ -49,6 +51,7 @@ class Sensitivity:
     poisson: np.ndarray
     kappa: np.ndarray
     fiber_angles: np.ndarray
+    fiber_direction: np.ndarray
     pressure: np.ndarray
     adjoint: np.ndarray
 
@@ -157,7 +160,7 @@ def _definite(potential, x, name):
 def force_derivatives(scene, x, lam, written=None):
     """lambda^T dg/dp at positions x (n, 3) for a vector lam (n, 3) over the vertices, per
     parameter kind (the module docstring): young, poisson, kappa (m,), fiber_angles (m, 2),
-    pressure (k,). written: the scene as written, where `scene` is it at a time of its load
+    fiber_direction (m, 3), pressure (k,). written: the scene as written, where `scene` is it at a time of its load
     curves (Scene.at): pressures are parameters of the written scene."""
     el = scene.elements
     F = np.einsum("eai,eqaj->eqij", x[el.tets], el.grads)              # (m, q, 3, 3)
@@ -202,4 +205,4 @@ def force_derivatives(scene, x, lam, written=None):
         factor = cavity.magnitude / as_written.magnitude if as_written.magnitude else 1.0
         cavity.at(factor).add_gradient(x, unit)
         s_pressure[k] = float(np.sum(unit * lam))
-    return s_young, s_poisson, s_kappa, s_angles, s_pressure
+    return s_young, s_poisson, s_kappa, s_angles, s_d, s_pressure
