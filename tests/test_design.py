@@ -63,7 +63,7 @@ def test_design_command(tmp_path):
 
 def test_design_refusals():
     scene, helix, tip = actuator()
-    with pytest.raises(ValueError, match=r"target: expected shape \(3,\)"):
+    with pytest.raises(ValueError, match=r"target: expected shape \(3\), got \(2,\)"):
         design(scene, helix, tip, np.zeros(2), 75.0)
     with pytest.raises(ValueError, match="bounds: need low < high around the start"):
         design(scene, helix, tip, np.zeros(3), 75.0, bounds=(80, 90))
