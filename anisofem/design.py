@@ -13,7 +13,7 @@ its segment's angle: dd/dalpha = -sin(alpha) a + cos(alpha) e_t.
 """
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -37,20 +37,13 @@ class Helix:
 
 
 @dataclass
-class DesignResult:
-    """angles (count,) degrees per segment; tip (3,) m where the designed body's tip comes to
-    rest; distance |tip - target|, m; iterations; evaluations (static solves); converged
-    (L-BFGS-B met its tolerance); message; seconds; history [(iteration, J, |dJ/dalpha|,
-    angles)]."""
+class DesignResult(lbfgsb.Outcome):
+    """An Outcome (its history: (iteration, J, |dJ/dalpha|, angles)) and angles (count,)
+    degrees per segment; tip (3,) m where the designed body's tip comes to rest; distance |tip
+    - target|, m."""
     angles: np.ndarray
     tip: np.ndarray
     distance: float
-    iterations: int
-    evaluations: int
-    converged: bool
-    message: str
-    seconds: float
-    history: list = field(default_factory=list)
 
 
 def design(scene, helix, tip, target, start, bounds=(0.0, 90.0), smooth=1e-3, max_iter=100,
@@ -85,9 +78,9 @@ def design(scene, helix, tip, target, start, bounds=(0.0, 90.0), smooth=1e-3, ma
                              max_iter, report)
     x = problem.solved(answer.x)[1].x
     where = x[tip].mean(axis=0)
-    return DesignResult(np.degrees(answer.x), where, float(np.linalg.norm(where - target)),
-                        int(answer.nit), problem.evaluations, bool(answer.success),
-                        str(answer.message), time.perf_counter() - t0, history)
+    return DesignResult(int(answer.nit), problem.evaluations, bool(answer.success),
+                        str(answer.message), time.perf_counter() - t0, history,
+                        np.degrees(answer.x), where, float(np.linalg.norm(where - target)))
 
 
 def tip_at(scene, helix, tip, angles):

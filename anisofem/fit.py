@@ -20,7 +20,7 @@ import copy
 import math
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -48,23 +48,15 @@ ZOOM = {"young": 1.0, "poisson": 10.0, "kappa": 1.0, "fiber_azimuth": 0.2,
 
 
 @dataclass
-class FitResult:
-    """values {name: fitted value} (Pa, or degrees for fiber angles); deviations {name:
-    standard deviation from the Gauss-Newton Hessian}; marker_residuals (k,) the rms over the
-    cases of each marker's misfit, m; rms the misfit's root mean square over all markers and
-    cases, m; iterations;
-    evaluations (static solves per case); converged (L-BFGS-B met its tolerance); message
-    (why it stopped); seconds; history [(iteration, J, values)]."""
+class FitResult(lbfgsb.Outcome):
+    """An Outcome (its history: (iteration, J, values)) and values {name: fitted value} (Pa,
+    or degrees for fiber angles); deviations {name: standard deviation from the Gauss-Newton
+    Hessian}; marker_residuals (k,) each marker's misfit, m, the markers of all cases in
+    order; rms their root mean square, m."""
     values: dict
     deviations: dict
     marker_residuals: np.ndarray
     rms: float
-    iterations: int
-    evaluations: int
-    converged: bool
-    message: str
-    seconds: float
-    history: list = field(default_factory=list)
 
 
 class Markers:
@@ -136,9 +128,9 @@ def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
     misfit = np.concatenate([r.reshape(-1, 3) / w for r, w in
                              zip(np.split(residuals, problem.ends[:-1]), problem.weight)])  # m
     per_marker = np.linalg.norm(misfit, axis=1)
-    return FitResult(values, deviations, per_marker, float(np.sqrt((per_marker ** 2).mean())),
-                     int(answer.nit), problem.evaluations, bool(answer.success),
-                     str(answer.message), time.perf_counter() - t0, history)
+    return FitResult(int(answer.nit), problem.evaluations, bool(answer.success),
+                     str(answer.message), time.perf_counter() - t0, history, values, deviations,
+                     per_marker, float(np.sqrt((per_marker ** 2).mean())))
 
 
 def _per_case(markers, measured, cases):

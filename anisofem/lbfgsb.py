@@ -3,8 +3,23 @@ that its gradient at the start has unit norm (L-BFGS-B's first step, steepest de
 bounds' Cauchy point, then has about unit length in the caller's variables), and a trial point
 whose solve fails (raises RuntimeError) reads as a value above every one seen, so that the
 line search steps back instead of stopping."""
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.optimize
+
+
+@dataclass
+class Outcome:
+    """How a minimization ended: iterations; evaluations (static solves, per load case);
+    converged (L-BFGS-B met its tolerance); message (why it stopped); seconds; history, one
+    row per iteration."""
+    iterations: int
+    evaluations: int
+    converged: bool
+    message: str
+    seconds: float
+    history: list
 
 
 class _Scaled:
