@@ -18,7 +18,7 @@ import numpy as np
 from . import bench, bench_large, bench_load, convergence, ladder, meshgen, methods, robustness
 from . import fit as fitting
 from .files import atomic_path, check_folder, write_json
-from .io import check_output_path, read_mesh, write_mesh
+from .io import check_output_path, read_mesh, write_mesh, write_series
 from .inversion import inversion
 from .material import MODELS, Material
 from .metrics import end_vertices, tip_displacement
@@ -243,7 +243,9 @@ def _parser():
     s = sub.add_parser("solve", help="static equilibrium or a backward-Euler rollout", **defaults)
     s.add_argument("mesh", help="a scene file (.toml, docs/scenes.md) or a mesh file meshio "
                                 "reads (.msh, .vtu, .xdmf, ...)")
-    s.add_argument("-o", "--output", required=True, help="result file (.vtu, .xdmf, .msh)")
+    s.add_argument("-o", "--output", required=True,
+                   help="result file (.vtu, .xdmf, .msh), or a ParaView series (.pvd) of every "
+                        "step or ramp increment")
     _scene_arguments(s)
     _order_argument(s)
     s.add_argument("--steps", type=int, default=0,
@@ -262,6 +264,9 @@ def _parser():
     s.add_argument("--continuation", default="auto", choices=CONTINUATION,
                    help="static solve: ramp the load in increments where the whole load fails "
                         "(auto), from the start (always) or never")
+    s.add_argument("--ramp", type=int, default=0, metavar="K",
+                   help="static solves at 1/K, 2/K, ..., 1 of the loads (each from the last), "
+                        "every one written when --output is a series (.pvd)")
     t = sub.add_parser("trade", help="the speed/accuracy trade of every solver rung on a scene "
                                      "(table, JSON, Pareto plot; minutes)", **defaults)
     add_scene_arguments(t)
@@ -404,7 +409,14 @@ def _mesh(args):
 
 
 def _solve(args):
-    check_output_path(args.output)
+    series = args.output.lower().endswith(".pvd")
+    if series:
+        check_folder(args.output, "--output")
+    else:
+        check_output_path(args.output)
+    if args.ramp < 0 or (args.ramp and args.steps):
+        raise ValueError(f"--ramp: a number of static increments >= 1, without --steps; got "
+                         f"{args.ramp}")
     if is_scene_file(args.mesh):
         scene = _scene_file(args, args.mesh, "x-min")
     else:
@@ -415,12 +427,24 @@ def _solve(args):
         return command.run(args, scene, command.check(args, scene))
     how = {"method": args.method, "rtol": args.rtol, "iterations": args.iterations}
     methods.make(n_unknowns=scene.n_free, **how)  # bad options fail here, before the solve
+    states, times = None, None
     if args.steps:
         roll = simulate(scene, args.steps, args.dt, **how)
         x, ok = roll.positions[-1], roll.completed
+        states, times = roll.positions, args.dt * np.arange(len(roll.positions))
         budget = (f" (a budget of {args.iterations} iterations per step)"
                   if args.iterations else "")
         print(f"{len(roll.positions) - 1} steps, converged: {roll.converged}{budget}")
+    elif args.ramp:
+        states, times, x, ok = [scene.initial_positions()], [0.0], None, True
+        for k in range(1, args.ramp + 1):
+            res = solve(scene.loaded(k / args.ramp), x0=x, continuation=args.continuation,
+                        **how)
+            x, ok = res.x, ok and res.converged
+            states.append(x)
+            times.append(k / args.ramp)
+            print(f"{k}/{args.ramp} of the loads: {res.iterations} Newton iterations, "
+                  f"converged: {res.converged}")
     else:
         res = solve(scene, continuation=args.continuation, **how)
         x, ok = res.x, res.converged
@@ -433,7 +457,12 @@ def _solve(args):
     if not inv.physical:
         print(f"not physical: {inv.inverted} of {mesh.n_tets} elements turned inside out "
               f"(smallest det F {inv.min_volume_ratio:.3g}; the 'inverted' field marks them)")
-    write_mesh(args.output, mesh, x, scene)
+    if series:
+        if states is None:
+            states, times = [scene.initial_positions(), x], [0.0, 1.0]
+        write_series(args.output, mesh, states, times, scene)
+    else:
+        write_mesh(args.output, mesh, x, scene)
     print(f"-> {args.output}")
     return 0 if ok else 1
 

@@ -115,7 +115,13 @@ def test_fit_command(tmp_path):
     with open(tmp_path / "out" / "fitted.toml", "rb") as f:
         assert tomllib.load(f)["mesh"] == "../beam.msh"
     assert json.loads((tmp_path / "out" / "fit.json").read_text())["converged"]
+    rows = np.loadtxt(tmp_path / "m.csv", delimiter=",", skiprows=1)
+    rows[3, 4] = np.nan
+    np.savetxt(tmp_path / "nan.csv", rows, delimiter=",")
     for bad, message in ((["--params", "kappa", "--start", "kapa=1"], "--start: expected"),
+                         (["--params", "kapa"], "--params: 'kapa' is not a parameter"),
+                         (["--params", "kappa", "--markers", "nan.csv"],
+                          r"measured[0]: contains NaN or inf (at index [[3, 1]])"),
                          (["--params", "kappa", "--markers", "m.csv", "m.csv"],
                           "--markers: one CSV per scene")):
         r = subprocess.run(run[:7] + bad, cwd=tmp_path, capture_output=True,

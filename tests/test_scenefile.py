@@ -302,3 +302,20 @@ def test_named_surfaces_hold_midside_nodes_on_quadratic_tets(tmp_path):
     assert by_name.mesh.order == 2
     assert np.array_equal(by_name.fixed_mask, by_side.fixed_mask)
     assert by_name.fixed_mask.all(axis=1).sum() == 25   # 3 x 3 corners and 16 midside nodes
+
+
+def test_solve_ramps_a_scene_file_into_a_series(tmp_path):
+    """solve --ramp K: static answers at 1/K, ..., 1 of the loads, written as a ParaView
+    collection whose last state is the whole load's answer."""
+    two_halves(tmp_path)
+    path = scene_file(tmp_path, BAR)
+    r = subprocess.run([sys.executable, "-m", "anisofem", "solve", str(path), "--ramp", "3",
+                        "-o", str(tmp_path / "out" / "ramp.pvd")], capture_output=True,
+                       text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.count("of the loads:") == 3
+    files = sorted((tmp_path / "out").glob("ramp_*.vtu"))
+    assert len(files) == 4 and "ramp_0003.vtu" in (tmp_path / "out" / "ramp.pvd").read_text()
+    scene = af.load_scene(path)
+    last = meshio.read(files[-1]).point_data["displacement"]
+    assert np.allclose(last, af.solve(scene).x - scene.mesh.vertices, atol=1e-9)
