@@ -10,6 +10,7 @@ Newton with the Hessian's negative eigenvalues clamped and a backtracking line s
 energy decrease is the exact quartic in the step length (no difference of two energies, so
 the search ranks points below the energy's round-off).
 """
+import copy
 import math
 import os
 import time
@@ -173,6 +174,19 @@ class ReducedModel:
         both = _basis.mass_orthonormal(np.hstack([U, fitted]), mass)
         self.fitted = both.shape[1] - U.shape[1]
         return both
+
+    def with_material(self, material):
+        """The same model (basis, loads) with the energy of another Material of the same
+        densities: what a design or control loop evaluates at fixed basis (the polynomial
+        rebuilt, no eigen-solve, no validation)."""
+        moved = copy.copy(self)
+        moved.scene = self.scene.with_material(material)
+        if (moved.scene.elements.model != STVK).any():
+            raise ValueError("material: the reduced model needs the StVK base material")
+        moved.polynomial = with_pressure(polynomial(moved.scene.elements, self.x0, self.basis),
+                                         moved.scene.pressures, self.x0, self.basis)
+        moved.validation = None
+        return moved
 
     def validate(self, cases=None, seed=0):
         """The model against the full FEM on cases it was not built from (a Validation): with
