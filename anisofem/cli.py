@@ -294,9 +294,9 @@ def _parser():
                    help="one per scene: rows x, y, z, ux, uy, uz (a marker's rest position and "
                         "measured displacement, m; a header line is skipped)")
     f.add_argument("--params", nargs="+", required=True, metavar="NAME",
-                   help=f"what is fitted, one value over the whole body: "
-                        f"{', '.join(fitting.PARAMETERS)} (fiber angles in degrees: azimuth "
-                        f"about z from x, elevation toward z)")
+                   help=f"what is fitted: {', '.join(fitting.PARAMETERS)}, one value over the "
+                        f"whole body, or NAME@REGION over a physical volume (fiber angles in "
+                        f"degrees: azimuth about z from x, elevation toward z)")
     f.add_argument("--start", nargs="+", default=[], metavar="NAME=VALUE",
                    help="start values (default: the scene's)")
     f.add_argument("--bounds", nargs="+", default=[], metavar="NAME=LOW:HIGH",
@@ -531,8 +531,6 @@ def _bench(args):
 def _fit(args):
     """python -m anisofem fit: progress per iteration, the values with their deviations, the
     residual per marker, the fitted scene file."""
-    import tomllib
-
     if len(args.markers) != len(args.scenes):
         raise ValueError(f"--markers: one CSV per scene ({len(args.scenes)}), got "
                          f"{len(args.markers)}")
@@ -541,11 +539,13 @@ def _fit(args):
             check_folder(path, name)
     if args.output and not is_scene_file(args.output):
         raise ValueError(f"--output: a scene file (.toml), got {args.output!r}")
-    unknown = [n for n in args.params if n not in fitting.PARAMETERS]
+    unknown = [n for n in args.params if n.partition("@")[0] not in fitting.PARAMETERS]
     if unknown:
         raise ValueError(f"--params: {unknown[0]!r} is not a parameter; fit "
-                         f"{', '.join(fitting.PARAMETERS)}")
-    scenes = [load_scene(p) for p in args.scenes]
+                         f"{', '.join(fitting.PARAMETERS)}, each alone or as NAME@REGION")
+    first = SceneFile(args.scenes[0])
+    regions = {r: first.region(r) for r in {n.partition("@")[2] for n in args.params} if r}
+    scenes = [first.scene] + [load_scene(p) for p in args.scenes[1:]]
     tables = [_marker_table(p) for p in args.markers]
     start = dict(_assignment(a, "--start", float) for a in args.start)
     bounds = dict(_assignment(a, "--bounds", _interval) for a in args.bounds)
@@ -554,11 +554,11 @@ def _fit(args):
         shown = ", ".join(f"{n} = {v:.6g}" for n, v in values.items())
         print(f"iteration {k}: J = {J:.4e}, {shown}", flush=True)
     result = fitting.fit(scenes, [t[:, :3] for t in tables], [t[:, 3:] for t in tables],
-                         args.params, start, bounds, args.max_iter, progress)
+                         args.params, start, bounds, args.max_iter, progress, regions)
     print(f"stopped after {result.iterations} iterations ({result.evaluations} solves per "
           f"case, {result.seconds:.1f} s): {result.message}")
     for n, v in result.values.items():
-        unit = fitting.PARAMETERS[n][0]
+        unit = fitting.PARAMETERS[n.partition("@")[0]][0]
         print(f"  {n} = {v:.6g} +- {result.deviations[n]:.2g} {unit}".rstrip())
     worst = np.argsort(result.marker_residuals)[::-1][:3]
     print(f"misfit: rms {1e3 * result.rms:.4g} mm over {result.marker_residuals.size} markers; "
@@ -571,10 +571,8 @@ def _fit(args):
                                "converged": result.converged, "message": result.message})
         print(f"-> {args.json}")
     if args.output:
-        with open(args.scenes[0], "rb") as fh:
-            table = tomllib.load(fh)
-        fitted = fitting.fitted_table(table, scenes[0], result.values, args.scenes[0],
-                                      args.output)
+        fitted = fitting.fitted_table(first.table, scenes[0], result.values, args.scenes[0],
+                                      args.output, regions)
         with atomic_path(args.output, ".toml") as tmp:
             with open(tmp, "w") as fh:
                 fh.write(f"# {args.scenes[0]} with the values fitted by python -m anisofem fit\n"

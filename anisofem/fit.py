@@ -82,13 +82,15 @@ class Markers:
 
 
 def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
-        progress=None):
-    """Fit `names` (keys of PARAMETERS) so that the scenes' (Scenes of one body, one per load
-    case) static displacements at marker rest points match the measured ones, m: markers
-    (k, 3) and measured (k, 3) for one case, or a list of each, one per case. start: {name:
-    value} (default: the first scene's, the element mean); bounds: {name: (low, high)}
-    (default PARAMETERS'). progress(iteration, J, values) after each iteration. Returns a
-    FitResult (its marker_residuals: the markers of all cases in order)."""
+        progress=None, regions=None):
+    """Fit `names` so that the scenes' (Scenes of one body, one per load case) static
+    displacements at marker rest points match the measured ones, m: markers (k, 3) and
+    measured (k, 3) for one case, or a list of each, one per case. A name is a key of
+    PARAMETERS (one value over the whole body) or "KEY@REGION" (one value over the tets of
+    regions[REGION], an (m,) bool mask). start: {name: value} (default: the first scene's,
+    the mean over its tets); bounds: {name: (low, high)} (default PARAMETERS'). progress(
+    iteration, J, values) after each iteration. Returns a FitResult (its marker_residuals:
+    the markers of all cases in order)."""
     t0 = time.perf_counter()
     scenes = [scenes] if not isinstance(scenes, (list, tuple)) else list(scenes)
     for s in scenes:
@@ -98,13 +100,14 @@ def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
                 and np.array_equal(s.mesh.vertices, base.mesh.vertices)) for s in scenes):
         raise ValueError("scenes: the load cases must share one mesh (the same body)")
     names = list(names)
-    bad = [n for n in names if n not in PARAMETERS]
+    bad = [n for n in names if n.partition("@")[0] not in PARAMETERS]
     if bad or not names or len(set(names)) != len(names):
-        raise ValueError(f"names: expected distinct parameters among {', '.join(PARAMETERS)}, "
-                         f"got {names}")
+        raise ValueError(f"names: expected distinct parameters among {', '.join(PARAMETERS)} "
+                         f"(each alone or as KEY@REGION), got {names}")
+    masks = _masks(names, regions or {}, base.mesh.n_tets)
     markers, measured = _per_case(markers, measured, len(scenes))
     probes = [Markers(base.mesh, points) for points in markers]
-    layout = _Layout(base, names, start or {}, bounds or {})
+    layout = _Layout(base, names, masks, start or {}, bounds or {})
     problem = _Problem(scenes, probes, measured, layout)
     history = []
 
@@ -133,6 +136,24 @@ def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
                      per_marker, float(np.sqrt((per_marker ** 2).mean())))
 
 
+def _masks(names, regions, m):
+    """{name: (m,) bool} the tets each fitted name covers (KEY@REGION: the region's)."""
+    out = {}
+    for n in names:
+        _, _, region = n.partition("@")
+        if not region:
+            out[n] = np.ones(m, bool)
+            continue
+        if region not in regions:
+            raise ValueError(f"names: {n!r} names the region {region!r}, which regions does not "
+                             f"hold (it holds: {', '.join(regions) or 'none'})")
+        mask = np.asarray(regions[region], dtype=bool)
+        if mask.shape != (m,) or not mask.any():
+            raise ValueError(f"regions: {region!r} must be a non-empty ({m},) bool mask of tets")
+        out[n] = mask
+    return out
+
+
 def _per_case(markers, measured, cases):
     """(markers, measured): lists of (k_c, 3) arrays, one per case, checked."""
     if cases == 1 and not isinstance(markers, (list, tuple)):
@@ -159,33 +180,46 @@ def moved_mesh_path(table, scene_path, output_path):
     return out
 
 
-def fitted_table(table, scene, values, scene_path, output_path):
+def fitted_table(table, scene, values, scene_path, output_path, regions=None):
     """A copy of a scene file's table (tomllib's dict, of the scene at scene_path) with the
-    fitted values (one over the whole body) in [material] and taken out of its regions, its
-    mesh path made relative to output_path's folder: the fitted scene file's table.
-    ValueError where a fitted fiber angle joins an unfitted one that varies over the body."""
+    fitted values in it, its mesh path made relative to output_path's folder: the fitted scene
+    file's table. A whole-body value goes to [material] and out of every region; a
+    KEY@REGION value to [regions.REGION]. regions: {name: (m,) bool} of the REGION names.
+    ValueError where a fitted fiber angle joins an unfitted one that varies over its tets."""
     out = moved_mesh_path(table, scene_path, output_path)
-    material = out.setdefault("material", {})
-    changed = [MATERIAL_KEYS[n] for n in values if n in MATERIAL_KEYS]
-    for n in values:
-        if n in MATERIAL_KEYS:
-            material[MATERIAL_KEYS[n]] = float(values[n])
-    if any(n.startswith("fiber") for n in values):
-        angles = np.degrees(fiber_angles(scene.elements.fiber))
-        pair = []
-        for k, n in enumerate(("fiber_azimuth", "fiber_elevation")):
-            if n in values:
-                pair.append(values[n])
-            elif np.ptp(angles[:, k]) > 1e-9:
-                raise ValueError(f"--output: the fitted fiber angle joins a {n} that varies "
-                                 f"over the body; fit both angles to write one direction")
-            else:
-                pair.append(float(angles[0, k]))
-        material["fiber"] = [float(c) for c in fiber_direction(np.radians([pair]))[0]]
-        changed.append("fiber")
-    for region in out.get("regions", {}).values():
-        for key in changed:
-            region.pop(key, None)
+    angles = np.degrees(fiber_angles(scene.elements.fiber))
+    groups = {}                                 # region (None: the body) -> {kind: value}
+    for n, v in values.items():
+        kind, _, region = n.partition("@")
+        groups.setdefault(region or None, {})[kind] = float(v)
+    for region in sorted(groups, key=lambda r: r is not None):   # the body first
+        given = groups[region]
+        target = (out.setdefault("material", {}) if region is None else
+                  out.setdefault("regions", {}).setdefault(region, {}))
+        written = []
+        for kind, key in MATERIAL_KEYS.items():
+            if kind in given:
+                target[key] = given[kind]
+                written.append(key)
+        if any(k.startswith("fiber") for k in given):
+            tets = (np.ones(len(angles), bool) if region is None
+                    else np.asarray(regions[region], bool))
+            pair = []
+            for c, kind in enumerate(("fiber_azimuth", "fiber_elevation")):
+                if kind in given:
+                    pair.append(given[kind])
+                elif np.ptp(angles[tets, c]) > 1e-9:
+                    raise ValueError(f"--output: the fitted fiber angle joins a {kind} that "
+                                     f"varies over its tets; fit both angles to write one "
+                                     f"direction")
+                else:
+                    pair.append(float(angles[tets, c][0]))
+            target["fiber"] = [float(c) for c in fiber_direction(np.radians([pair]))[0]]
+            written.append("fiber")
+        if region is None:
+            for other in out.get("regions", {}).values():
+                for key in written:
+                    other.pop(key, None)
     return out
 
 
@@ -193,10 +227,11 @@ class _Layout:
     """The fitted parameters as the optimizer's variables z and back, and the per-element
     material they make."""
 
-    def __init__(self, scene, names, start, bounds):
+    def __init__(self, scene, names, masks, start, bounds):
         material, m = scene.material, scene.mesh.n_tets
         params = material.per_element(m)
-        self.m, self.names = m, names
+        self.m, self.names, self.masks = m, names, masks
+        self.kinds = {n: n.partition("@")[0] for n in names}
         self.model = [("stvk", "neohookean")[c] for c in params["model"]]
         self.density = params["density"]
         nu = params["lam"] / (2.0 * (params["lam"] + params["mu"]))
@@ -207,21 +242,23 @@ class _Layout:
         for n in start:
             if n not in names:
                 raise ValueError(f"start: {n!r} is not fitted (fitted: {', '.join(names)})")
-        self.start = {n: float(start.get(n, self.base[n].mean())) for n in names}
+        self.start = {n: float(start.get(n, self.base[self.kinds[n]][masks[n]].mean()))
+                      for n in names}
         self.bounds = {}
         for n in names:
-            low, high = bounds.get(n, PARAMETERS[n][2])
+            low, high = bounds.get(n, PARAMETERS[self.kinds[n]][2])
             if not low < high or not low <= self.start[n] <= high:
                 raise ValueError(f"bounds: {n} needs low < high around its start "
                                  f"{self.start[n]:g}, got ({low:g}, {high:g})")
-            if PARAMETERS[n][1] == "log" and low <= 0:
+            if PARAMETERS[self.kinds[n]][1] == "log" and low <= 0:
                 raise ValueError(f"bounds: {n} is fitted by its logarithm; its lower bound "
                                  f"must be > 0, got {low:g}")
             self.bounds[n] = (low, high)
         self.z_bounds = [tuple(self._z(n, b) for b in self.bounds[n]) for n in names]
 
     def _z(self, name, value):
-        return ZOOM[name] * (math.log(value) if PARAMETERS[name][1] == "log" else value)
+        kind = self.kinds[name]
+        return ZOOM[kind] * (math.log(value) if PARAMETERS[kind][1] == "log" else value)
 
     def to_z(self, values):
         return np.array([self._z(n, values[n]) for n in self.names])
@@ -229,14 +266,15 @@ class _Layout:
     def values(self, z):
         out = {}
         for n, v in zip(self.names, z):
-            v = float(v) / ZOOM[n]
-            out[n] = math.exp(v) if PARAMETERS[n][1] == "log" else v
+            kind = self.kinds[n]
+            v = float(v) / ZOOM[kind]
+            out[n] = math.exp(v) if PARAMETERS[kind][1] == "log" else v
         return out
 
     def material(self, z):
         p = {n: np.array(v, dtype=float) for n, v in self.base.items()}
         for n, v in self.values(z).items():
-            p[n] = np.full(self.m, v)
+            p[self.kinds[n]][self.masks[n]] = v
         angles = np.radians(np.stack([p["fiber_azimuth"], p["fiber_elevation"]], axis=1))
         return Material(p["young"], p["poisson"], self.density, fiber_direction(angles),
                         p["kappa"], model=self.model)
@@ -247,14 +285,15 @@ class _Layout:
         values = self.values(z)
         columns = []
         for n in self.names:
+            kind = self.kinds[n]
             per_element = {"young": s.young, "poisson": s.poisson, "kappa": s.kappa,
                            "fiber_azimuth": s.fiber_angles[..., 0],
-                           "fiber_elevation": s.fiber_angles[..., 1]}[n]
-            total = per_element.sum(axis=-1)
-            if n.startswith("fiber"):
+                           "fiber_elevation": s.fiber_angles[..., 1]}[kind]
+            total = per_element[..., self.masks[n]].sum(axis=-1)
+            if kind.startswith("fiber"):
                 total = total * (math.pi / 180.0)        # per degree
             if scaled:
-                total = total * (values[n] if PARAMETERS[n][1] == "log" else 1.0) / ZOOM[n]
+                total = total * (values[n] if PARAMETERS[kind][1] == "log" else 1.0) / ZOOM[kind]
             columns.append(total)
         return np.stack(columns, axis=-1)
 

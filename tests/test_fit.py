@@ -128,3 +128,37 @@ def test_fit_command(tmp_path):
                            text=True)
         assert r.returncode == 2 and message in r.stderr, r.stderr
         assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_fit_per_region_from_the_command(tmp_path):
+    """kappa@soft and kappa@stiff: two regions' fiber stiffnesses from one load case (data from
+    the same mesh, no noise: recovered to 1e-6), written into each region's table."""
+    import subprocess
+    import sys
+    mesh = af.box_beam(SIZE, (10, 2, 2))
+    X = mesh.vertices
+    volumes = np.where(X[mesh.tets].mean(axis=1)[:, 0] < 0.05, 1, 2)
+    base = mesh.faces_where(lambda c: c[:, 0] < 1e-9)
+    af.io.write_tagged_mesh(tmp_path / "beam.msh", mesh, volumes, {3: base},
+                            {"soft": 1, "stiff": 2, "base": 3})
+    text = ('mesh = "beam.msh"\ngravity = [0, 0, -9.81]\n[material]\npoisson = 0.45\n'
+            'fiber = [1, 0, 0]\nfiber_stiffness = 1e5\n[regions.soft]\nfiber_stiffness = {soft}\n'
+            '[regions.stiff]\nfiber_stiffness = {stiff}\n[[boundary]]\nwhere = "base"\n'
+            'held = true\n')
+    (tmp_path / "truth.toml").write_text(text.format(soft=5e4, stiff=4e5))
+    (tmp_path / "start.toml").write_text(text.format(soft=1e5, stiff=1e5))
+    truth = af.load_scene(tmp_path / "truth.toml")
+    points = markers()
+    u = Markers(mesh, points).at(af.solve(truth).x - X)
+    np.savetxt(tmp_path / "m.csv", np.c_[points, u], delimiter=",")
+    r = subprocess.run([sys.executable, "-m", "anisofem", "fit", "start.toml", "--markers",
+                        "m.csv", "--params", "kappa@soft", "kappa@stiff", "-o", "fitted.toml"],
+                       cwd=tmp_path, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    fitted = af.load_scene(tmp_path / "fitted.toml").elements.kappa
+    assert fitted[volumes == 1] == pytest.approx(5e4, rel=1e-6)
+    assert fitted[volumes == 2] == pytest.approx(4e5, rel=1e-6)
+    r = subprocess.run([sys.executable, "-m", "anisofem", "fit", "start.toml", "--markers",
+                        "m.csv", "--params", "kappa@hard"], cwd=tmp_path, capture_output=True,
+                       text=True)
+    assert r.returncode == 2 and "no physical volume 'hard'; it has: soft, stiff" in r.stderr
