@@ -593,11 +593,9 @@ def _design(args):
         raise ValueError(f"--segments: at least 1, got {args.segments}")
     low, high = _interval(args.bounds)
     scene_file = SceneFile(args.scene)
-    spec = _region_helix(scene_file.table, args.region)
-    helix = Helix(scene_file.region(args.region), *_axis_origin(spec), args.segments,
-                  bool(spec.get("crossed", False)))
-    start = args.start if args.start is not None else float(
-        np.mean(spec["segments"]) if "segments" in spec else spec["angle"])
+    axis, origin, crossed, angle = scene_file.helix(args.region)
+    helix = Helix(scene_file.region(args.region), axis, origin, args.segments, crossed)
+    start = args.start if args.start is not None else angle
 
     def progress(k, J, g, angles):
         print(f"iteration {k}: J = {J:.4e}, |dJ/dangles| = {g:.3e}, angles "
@@ -612,33 +610,15 @@ def _design(args):
     if args.output:
         table = fitting.moved_mesh_path(scene_file.table, args.scene, args.output)
         region = table.setdefault("regions", {}).setdefault(args.region, {})
-        region["fiber"] = {"helix": {k: v for k, v in spec.items()
-                                     if k not in ("angle", "angle_end", "segments")}
-                           | {"segments": [round(float(a), 6) for a in result.angles]}}
+        region["fiber"] = {"helix": {"axis": axis.tolist(), "origin": origin.tolist(),
+                                     "crossed": crossed,
+                                     "segments": [round(float(a), 6) for a in result.angles]}}
         with atomic_path(args.output, ".toml") as tmp:
             with open(tmp, "w") as fh:
                 fh.write(f"# {args.scene} with fiber angles designed by python -m anisofem "
                          f"design\n" + dump(table))
         print(f"-> {args.output}")
     return 0 if result.converged else 1
-
-
-def _region_helix(table, region):
-    """The helix spec (a dict) of the region's fibers in a scene file's table (the region's
-    own, else [material]'s); ValueError where they are not a helix."""
-    for where in (table.get("regions", {}).get(region, {}), table.get("material", {})):
-        if "fiber" in where:
-            fiber = where["fiber"]
-            if isinstance(fiber, dict) and "helix" in fiber:
-                return fiber["helix"]
-            break
-    raise ValueError(f"--region: the fibers of {region!r} are not a helix (fiber = {{helix = "
-                     f"{{...}}}}); design changes a helix's winding angles")
-
-
-def _axis_origin(spec):
-    axis = np.asarray(spec["axis"], dtype=float)
-    return axis / np.linalg.norm(axis), np.asarray(spec.get("origin", [0.0, 0.0, 0.0]), float)
 
 
 def _marker_table(path):

@@ -234,8 +234,7 @@ class _Layout:
         self.kinds = {n: n.partition("@")[0] for n in names}
         self.model = [("stvk", "neohookean")[c] for c in params["model"]]
         self.density = params["density"]
-        nu = params["lam"] / (2.0 * (params["lam"] + params["mu"]))
-        self.base = {"young": params["mu"] * 2.0 * (1.0 + nu), "poisson": nu,
+        self.base = {"young": params["young"], "poisson": params["poisson"],
                      "kappa": params["kappa"],
                      "fiber_azimuth": np.degrees(fiber_angles(params["fiber"])[:, 0]),
                      "fiber_elevation": np.degrees(fiber_angles(params["fiber"])[:, 1])}
@@ -325,12 +324,16 @@ class _Problem:
         self.evaluations += 1
         return out
 
+    def _residual(self, k, scene, result):
+        """Case k's weighted misfit (k_c, 3) at its solve's answer."""
+        return self.weight[k] * (self.markers[k].at(result.x - scene.mesh.vertices)
+                                 - self.measured[k])
+
     def objective(self, z):
         """(J, dJ/dz) at z."""
         J, gradient = 0.0, np.zeros(len(z))
         for k, (scene, result) in enumerate(self._solve(z)):
-            r = self.weight[k] * (self.markers[k].at(result.x - scene.mesh.vertices)
-                                  - self.measured[k])
+            r = self._residual(k, scene, result)
             J += 0.5 * float(np.sum(r * r))
             dJ = self.weight[k] * self.markers[k].spread(r, scene.mesh.n_vertices)
             gradient += self.layout.chain(z, static_sensitivity(scene, result, dJ))
@@ -342,13 +345,9 @@ class _Problem:
         residuals, rows = [], []
         n = self.scenes[0].mesh.n_vertices
         for k, (scene, result) in enumerate(self._solve(z)):
-            r = self.weight[k] * (self.markers[k].at(result.x - scene.mesh.vertices)
-                                  - self.measured[k])
+            r = self._residual(k, scene, result)
             residuals.append(r.ravel())
-            unit = np.zeros((r.size, n, 3))
-            for i in range(r.size):
-                e = np.zeros(r.size)
-                e[i] = self.weight[k]
-                unit[i] = self.markers[k].spread(e.reshape(-1, 3), n)
+            unit = np.array([self.markers[k].spread(e.reshape(-1, 3), n)
+                             for e in self.weight[k] * np.eye(r.size)])
             rows.append(self.layout.chain(z, static_jacobian(scene, result, unit), False))
         return np.concatenate(residuals), np.concatenate(rows)

@@ -107,11 +107,12 @@ class Material:
         return Material(**(given | changes))
 
     def per_element(self, m):
-        """Broadcast to m elements: dict of mu, lam, kappa, density (m,), fiber (m, 3) and
-        model (m,) int8 (index into MODELS)."""
+        """Broadcast to m elements: dict of young, poisson, mu, lam, kappa, density (m,), fiber
+        (m, 3) and model (m,) int8 (index into MODELS)."""
         young = per_element(self.young, "young", m)
         nu = per_element(self.poisson, "poisson", m)
         return {
+            "young": young, "poisson": nu,
             "mu": young / (2.0 * (1.0 + nu)),
             "lam": young * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)),
             "kappa": per_element(self.fiber_stiffness, "fiber_stiffness", m),
@@ -119,6 +120,17 @@ class Material:
             "density": per_element(self.density, "density", m),
             "model": _per_element_model(self.model, m),
         }
+
+
+def lame_slopes(mu, lam, d_mu, d_lam):
+    """(dX/dyoung, dX/dpoisson) of any X from its slopes d_mu = dX/dmu and d_lam = dX/dlam (per
+    Pa) at the Lame parameters mu, lam (Pa; arrays broadcast): mu = E / (2 (1 + nu)) and
+    lam = E nu / ((1 + nu) (1 - 2 nu))."""
+    young = mu * (3 * lam + 2 * mu) / (lam + mu)
+    nu = lam / (2 * (lam + mu))
+    return ((mu * d_mu + lam * d_lam) / young,
+            -mu / (1 + nu) * d_mu + young * (1 + 2 * nu ** 2) / ((1 + nu) ** 2 * (1 - 2 * nu) ** 2)
+            * d_lam)
 
 
 def _model_codes(model):

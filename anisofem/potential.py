@@ -143,9 +143,7 @@ class Potential:
         Hessian is left out of the PSD-projected one: the elastic part is PSD by itself.)"""
         total = 0.0
         for cavity in self.scene.pressures:
-            total += cavity.energy(x)
-            if grad is not None:
-                cavity.add_gradient(x, grad)
+            total += cavity.energy(x, grad)
         return total
 
     def _loads(self, x, grad):

@@ -77,7 +77,7 @@ class CavityLoad:
     (3,) the field F = scale (x - origin); magnitude p, Pa; rest_volume V(X), m^3.
     """
 
-    def __init__(self, mesh, pressure, fixed_mask, magnitude=None):
+    def __init__(self, mesh, pressure, fixed_mask):
         corners, self.owner = _oriented_faces(mesh, pressure.faces)
         self.nodes = corners if mesh.order == 1 else np.concatenate(
             [corners, mesh.edge_nodes(corners[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2))
@@ -85,8 +85,10 @@ class CavityLoad:
         cells = mesh.cells[self.owner]
         self.local = np.argmax(cells[:, None, :] == self.nodes[:, :, None], axis=2)
         self.scale, self.origin = _closing_field(mesh, corners, fixed_mask)
-        self.magnitude = pressure.magnitude if magnitude is None else magnitude
-        self.order = mesh.order
+        self.magnitude = pressure.magnitude
+        points, self.weights = RULES[mesh.order]
+        self.shapes, self.slopes = _triangle_shapes(mesh.order, points)
+        self._positions = {}   # per Hessian layout: where each face block lands (add_hessian)
         self.rest_volume = self.volume(mesh.vertices)
 
     def scaled(self, share):
@@ -101,57 +103,54 @@ class CavityLoad:
         return out
 
     def _slots(self, x):
-        """The face points a = s (x - o), tangents b, c (k, q, 3) at the rule's points, and the
-        shape values (q, s) and derivatives (q, s, 2) there."""
-        points, _ = RULES[self.order]
-        N, dN = _triangle_shapes(self.order, points)
+        """The face points a = s (x - o) and tangents b, c (k, q, 3) at the rule's points."""
         X = x[self.nodes]
-        a = self.scale * (np.einsum("qa,kai->kqi", N, X) - self.origin)
-        b = np.einsum("qa,kai->kqi", dN[:, :, 0], X)
-        c = np.einsum("qa,kai->kqi", dN[:, :, 1], X)
-        return a, b, c, N, dN
+        a = self.scale * (np.einsum("qa,kai->kqi", self.shapes, X) - self.origin)
+        b = np.einsum("qa,kai->kqi", self.slopes[:, :, 0], X)
+        c = np.einsum("qa,kai->kqi", self.slopes[:, :, 1], X)
+        return a, b, c
 
     def reduced_slots(self, x0, basis):
         """The face points and tangents along a reduced basis: (w (K,), a0, b0, c0 (K, 3), A,
         B, C (K, 3, r)), K = faces times rule points, so that at x0 + basis q the slots of
         _slots are a0 + A q, b0 + B q, c0 + C q and V = -sum_K w a . (b x c)."""
-        a0, b0, c0, N, dN = self._slots(x0)
-        _, w = RULES[self.order]
+        a0, b0, c0 = self._slots(x0)
         r = basis.shape[1]
         U = basis.reshape(-1, 3, r)[self.nodes]                 # (k, s, 3, r)
-        A = self.scale[:, None] * np.einsum("qa,kair->kqir", N, U)
-        B = np.einsum("qa,kair->kqir", dN[:, :, 0], U)
-        C = np.einsum("qa,kair->kqir", dN[:, :, 1], U)
+        A = self.scale[:, None] * np.einsum("qa,kair->kqir", self.shapes, U)
+        B = np.einsum("qa,kair->kqir", self.slopes[:, :, 0], U)
+        C = np.einsum("qa,kair->kqir", self.slopes[:, :, 1], U)
         k = a0.shape[0] * a0.shape[1]
-        return (np.tile(w, a0.shape[0]), a0.reshape(k, 3), b0.reshape(k, 3), c0.reshape(k, 3),
+        return (np.tile(self.weights, a0.shape[0]), a0.reshape(k, 3), b0.reshape(k, 3), c0.reshape(k, 3),
                 A.reshape(k, 3, r), B.reshape(k, 3, r), C.reshape(k, 3, r))
 
     def volume(self, x):
         """The cavity's volume V(x), m^3 (up to the constant share of a held cap), positions x
         (n, 3)."""
-        a, b, c, _, _ = self._slots(x)
-        _, weights = RULES[self.order]
-        return -float(np.einsum("q,kqi,kqi->", weights, a, np.cross(b, c)))
+        a, b, c = self._slots(x)
+        return -float(np.einsum("q,kqi,kqi->", self.weights, a, np.cross(b, c)))
 
-    def energy(self, x):
-        """-p (V(x) - V(X)), J."""
-        return -self.magnitude * (self.volume(x) - self.rest_volume)
-
-    def add_gradient(self, x, grad):
-        """Add the term's gradient, -p dV/dx, into grad (n, 3), N."""
-        a, b, c, N, dN = self._slots(x)
-        _, w = RULES[self.order]
-        # d(a . b x c): s (b x c) through a, (c x a) through b, (a x b) through c
-        g = (np.einsum("q,qn,kqi->kni", w, N, self.scale * np.cross(b, c))
-             + np.einsum("q,qn,kqi->kni", w, dN[:, :, 0], np.cross(c, a))
-             + np.einsum("q,qn,kqi->kni", w, dN[:, :, 1], np.cross(a, b)))
-        np.add.at(grad, self.nodes.ravel(), (self.magnitude * g).reshape(-1, 3))
+    def energy(self, x, grad=None):
+        """-p (V(x) - V(X)), J; with grad (n, 3), the term's gradient -p dV/dx (N) is added
+        into it, from the same evaluation."""
+        a, b, c = self._slots(x)
+        bc = np.cross(b, c)
+        value = self.magnitude * (float(np.einsum("q,kqi,kqi->", self.weights, a, bc))
+                                  + self.rest_volume)
+        if grad is not None:
+            # d(a . b x c): s (b x c) through a, (c x a) through b, (a x b) through c
+            w, N, dN = self.weights, self.shapes, self.slopes
+            g = (np.einsum("q,qn,kqi->kni", w, N, self.scale * bc)
+                 + np.einsum("q,qn,kqi->kni", w, dN[:, :, 0], np.cross(c, a))
+                 + np.einsum("q,qn,kqi->kni", w, dN[:, :, 1], np.cross(a, b)))
+            np.add.at(grad, self.nodes.ravel(), (self.magnitude * g).reshape(-1, 3))
+        return value
 
     def face_hessians(self, x):
         """(k, 3s, 3s) each face's block of the term's Hessian, -p d2V/dx2, N/m, over its nodes
         (3 a + i)."""
-        a, b, c, N, dN = self._slots(x)
-        _, w = RULES[self.order]
+        a, b, c = self._slots(x)
+        w, N, dN = self.weights, self.shapes, self.slopes
         S = np.diag(self.scale)
         ab = -np.einsum("ij,kqjl->kqil", S, _skew(c))   # d2/da db of a . (b x c)
         ac = np.einsum("ij,kqjl->kqil", S, _skew(b))    # d2/da dc
@@ -167,13 +166,14 @@ class CavityLoad:
     def add_hessian(self, x, layout, data):
         """Add the term's Hessian into data, the entries of `layout` (an anisofem.assembly
         layout over the mesh's tets: each face's block lands through its owner tet's)."""
-        blocks = self.face_hessians(x)
-        width = math.isqrt(layout.map.shape[1])  # 3 times the nodes of a tet
-        dofs = (3 * self.local[:, :, None] + np.arange(3)).reshape(len(self.local), -1)
-        where = layout.map[self.owner[:, None, None],
-                           dofs[:, :, None] * width + dofs[:, None, :]]
-        keep = where >= 0
-        np.add.at(data, where[keep], blocks[keep])
+        if id(layout) not in self._positions:
+            width = math.isqrt(layout.map.shape[1])  # 3 times the nodes of a tet
+            dofs = (3 * self.local[:, :, None] + np.arange(3)).reshape(len(self.local), -1)
+            where = layout.map[self.owner[:, None, None],
+                               dofs[:, :, None] * width + dofs[:, None, :]]
+            self._positions[id(layout)] = (layout, where >= 0, where[where >= 0])
+        _, keep, where = self._positions[id(layout)]
+        np.add.at(data, where, self.face_hessians(x)[keep])
 
 
 def _skew(v):

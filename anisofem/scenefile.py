@@ -6,6 +6,7 @@ error that lists the ones the file has, and an unknown key names the nearest val
 holds every key with what it means; docs/scenes.md is generated from it (schema_markdown).
 """
 import difflib
+import inspect
 import math
 import os
 import tomllib
@@ -121,6 +122,24 @@ class SceneFile:
     def region(self, name):
         return self._reader.region(name, name)
 
+    def helix(self, region):
+        """(unit axis (3,), origin (3,) m, crossed, the winding angle in degrees: angle, or the
+        mean of segments) of the helix fibers of a region (its own fiber key, else
+        [material]'s); ValueError where they are not a helix."""
+        for where in (self.table.get("regions", {}).get(region, {}),
+                      self.table.get("material", {})):
+            if "fiber" in where:
+                fiber = where["fiber"]
+                if isinstance(fiber, dict) and "helix" in fiber:
+                    spec = fiber["helix"]
+                    angle = (float(np.mean(spec["segments"])) if "segments" in spec else
+                             spec["angle"])
+                    axis, origin, _ = self._reader.turn(spec | {"angle": angle}, region)
+                    return axis, origin, bool(spec.get("crossed", False)), angle
+                break
+        raise ValueError(f"region: the fibers of {region!r} are not a helix (fiber = {{helix "
+                         f"= {{...}}}}); design changes a helix's winding angles")
+
     def vertices(self, where):
         return self._reader.vertices(where, where)
 
@@ -170,9 +189,11 @@ class _Reader:
         m = self.mesh.n_tets
         base = table.get("material", {})
         _keys(self, base, "material", "material")
-        values = {"law": np.full(m, "stvk", dtype=object), "young": np.full(m, 1e5),
-                  "poisson": np.full(m, 0.48), "density": np.full(m, 1000.0),
-                  "fiber_stiffness": np.zeros(m), "fiber": np.tile([1.0, 0.0, 0.0], (m, 1))}
+        default = {k: p.default for k, p in inspect.signature(Material).parameters.items()}
+        values = {"law": np.full(m, default["model"], dtype=object),
+                  "fiber": np.tile(np.array(default["fiber_direction"], float), (m, 1)),
+                  "fiber_stiffness": np.full(m, float(default["fiber_stiffness"]))}
+        values |= {k: np.full(m, float(default[k])) for k in ("young", "poisson", "density")}
         self.assign(values, base, np.ones(m, bool), "material")
         regions = table.get("regions", {})
         if not isinstance(regions, dict):
@@ -185,7 +206,7 @@ class _Reader:
             self.assign(values, changes, self.region(name, key), key)
         kappa = values["fiber_stiffness"]
         fiber = values["fiber"]
-        fiber[kappa == 0] = (1.0, 0.0, 0.0)  # unused where there is no fiber term
+        fiber[kappa == 0] = default["fiber_direction"]  # unused where there is no fiber term
         try:
             return Material(values["young"], values["poisson"], values["density"], fiber, kappa,
                             model=list(values["law"]))

@@ -24,13 +24,14 @@ sin a cos b, sin b): azimuth a about z from x and elevation b toward z (so it st
 A pressure's magnitude p: g holds p dW/dx (anisofem.pressure), so lambda^T dg/dp is lambda
 against the cavity's force at unit pressure.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from . import linsolve
 from ._validate import as_float_array
 from .densities import STVK
+from .material import lame_slopes
 from .potential import Potential, check_positions
 from .stability import stability
 
@@ -75,26 +76,25 @@ def static_sensitivity(scene, result, gradient):
 
     Refused (ValueError) where the solve did not converge or stopped at a saddle: the
     derivative is not defined there. One factorization of the true Hessian at the answer."""
-    x = _converged(scene, result, "result")
     dJ = as_float_array(gradient, "gradient", shape=(scene.mesh.n_vertices, 3))
-    potential = Potential(scene)
-    lam = np.zeros_like(x)
-    lam[~scene.fixed_mask] = _definite(potential, x, "result")(dJ[~scene.fixed_mask])
-    return Sensitivity(*(-s for s in force_derivatives(scene, x, lam)), adjoint=lam)
+    rows = static_jacobian(scene, result, dJ[None])
+    return Sensitivity(*(getattr(rows, f.name)[0] for f in fields(Sensitivity)))
 
 
 def static_jacobian(scene, result, gradients):
     """static_sensitivity of several objectives at once, gradients (r, n, 3): one
-    factorization, r back-substitutions; a Sensitivity whose arrays have a leading axis r (the
-    rows of a Jacobian, as a least-squares fit wants) and adjoint (r, n, 3)."""
+    factorization and the state's terms once, then r back-substitutions; a Sensitivity whose
+    arrays have a leading axis r (the rows of a Jacobian, as a least-squares fit wants) and
+    adjoint (r, n, 3)."""
     x = _converged(scene, result, "result")
     dJ = as_float_array(gradients, "gradients", shape=(None, scene.mesh.n_vertices, 3))
     solve = _definite(Potential(scene), x, "result")
+    terms = _StateTerms(scene, x)
     free = ~scene.fixed_mask
     rows, adjoints = [], np.zeros_like(dJ)
     for k in range(dJ.shape[0]):
         adjoints[k][free] = solve(dJ[k][free])
-        rows.append([-s for s in force_derivatives(scene, x, adjoints[k])])
+        rows.append([-s for s in terms.contract(adjoints[k])])
     return Sensitivity(*(np.array(kind) for kind in zip(*rows)), adjoint=adjoints)
 
 
@@ -127,7 +127,7 @@ def rollout_sensitivity(scene, rollout, gradients, dt):
                                                      * (2.0 * later - latest))
         full = np.zeros_like(x)
         full[free] = mu
-        parts = force_derivatives(now, x, full, scene)
+        parts = _StateTerms(now, x, scene).contract(full)
         totals = [-s for s in parts] if totals is None else [t - s for t, s in
                                                               zip(totals, parts)]
         later, latest, first = mu, later, full
@@ -157,52 +157,56 @@ def _definite(potential, x, name):
                          f"state); the derivative is not defined") from None
 
 
-def force_derivatives(scene, x, lam, written=None):
-    """lambda^T dg/dp at positions x (n, 3) for a vector lam (n, 3) over the vertices, per
-    parameter kind (the module docstring): young, poisson, kappa (m,), fiber_angles (m, 2),
-    fiber_direction (m, 3), pressure (k,). written: the scene as written, where `scene` is it at a time of its load
-    curves (Scene.at): pressures are parameters of the written scene."""
-    el = scene.elements
-    F = np.einsum("eai,eqaj->eqij", x[el.tets], el.grads)              # (m, q, 3, 3)
-    Gl = np.einsum("eai,eqaj->eqij", lam[el.tets], el.grads)
-    w = el.weights
-    C = np.einsum("eqki,eqkj->eqij", F, F)
-    stvk = (el.model == STVK)[:, None, None, None]
-    E = 0.5 * (C - np.eye(3))
-    trE = np.trace(E, axis1=-2, axis2=-1)
-    J = np.linalg.det(F)
-    safe = np.where(J > 0, J, 1.0)
-    FinvT = np.swapaxes(np.linalg.inv(np.where((J > 0)[..., None, None], F, np.eye(3))), -1, -2)
-    dP_mu = np.where(stvk, 2.0 * F @ E, F - FinvT)
-    dP_lam = np.where(stvk, trE[..., None, None] * F, np.log(safe)[..., None, None] * FinvT)
-    s_mu = np.einsum("eq,eqij,eqij->e", w, dP_mu, Gl)
-    s_lam = np.einsum("eq,eqij,eqij->e", w, dP_lam, Gl)
-    d = el.fiber
-    I4m1 = np.einsum("ei,eqij,ej->eq", d, C, d) - 1.0
-    u = np.einsum("eqij,ej->eqi", F, d)
-    h = np.einsum("eqij,ej->eqi", Gl, d)
-    s_kappa = np.einsum("eq,eq,eqi,eqi->e", w, 4.0 * I4m1, u, h)
-    g_d = 4.0 * el.kappa[:, None, None] * (
-        2.0 * np.einsum("eqi,eqi->eq", u, h)[..., None] * np.einsum("eqij,ej->eqi", C, d)
-        + I4m1[..., None] * (np.einsum("eqki,eqk->eqi", F, h)
-                             + np.einsum("eqki,eqk->eqi", Gl, u)))
-    s_d = np.einsum("eq,eqi->ei", w, g_d)                               # (m, 3)
-    a, b = fiber_angles(d).T
-    dd = np.stack([np.stack([-np.sin(a) * np.cos(b), np.cos(a) * np.cos(b), 0 * a], axis=1),
-                   np.stack([-np.cos(a) * np.sin(b), -np.sin(a) * np.sin(b), np.cos(b)],
-                            axis=1)], axis=1)                            # (m, 2, 3)
-    s_angles = np.einsum("ei,eki->ek", s_d, dd)
-    mu, lam_ = el.mu, el.lam
-    E_y = mu * (3 * lam_ + 2 * mu) / (lam_ + mu)
-    nu = lam_ / (2 * (lam_ + mu))
-    s_young = (mu * s_mu + lam_ * s_lam) / E_y
-    s_poisson = (-mu / (1 + nu)) * s_mu + (E_y * (1 + 2 * nu ** 2)
-                                           / ((1 + nu) ** 2 * (1 - 2 * nu) ** 2)) * s_lam
-    s_pressure = np.zeros(len(scene.pressures))
-    for k, (cavity, as_written) in enumerate(zip(scene.pressures,
-                                                 (written or scene).pressures)):
-        unit = np.zeros_like(x)
-        factor = cavity.magnitude / as_written.magnitude if as_written.magnitude else 1.0
-        cavity.at(factor).add_gradient(x, unit)
-        s_pressure[k] = float(np.sum(unit * lam))
-    return s_young, s_poisson, s_kappa, s_angles, s_d, s_pressure
+class _StateTerms:
+    """What lambda^T dg/dp needs of a state x (n, 3), computed once: each quadrature point's F,
+    C, dP/dmu, dP/dlam and fiber terms, and each pressure's force at unit magnitude. written:
+    the scene as written, where `scene` is it at a time of its load curves (Scene.at):
+    pressures are parameters of the written scene."""
+
+    def __init__(self, scene, x, written=None):
+        el = self.el = scene.elements
+        F = self.F = np.einsum("eai,eqaj->eqij", x[el.tets], el.grads)       # (m, q, 3, 3)
+        C = self.C = np.einsum("eqki,eqkj->eqij", F, F)
+        stvk = (el.model == STVK)[:, None, None, None]
+        E = 0.5 * (C - np.eye(3))
+        trE = np.trace(E, axis1=-2, axis2=-1)
+        J = np.linalg.det(F)
+        safe = np.where(J > 0, J, 1.0)
+        FinvT = np.swapaxes(np.linalg.inv(np.where((J > 0)[..., None, None], F, np.eye(3))),
+                            -1, -2)
+        self.dP_mu = np.where(stvk, 2.0 * F @ E, F - FinvT)
+        self.dP_lam = np.where(stvk, trE[..., None, None] * F,
+                               np.log(safe)[..., None, None] * FinvT)
+        d = el.fiber
+        self.I4m1 = np.einsum("ei,eqij,ej->eq", d, C, d) - 1.0
+        self.u = np.einsum("eqij,ej->eqi", F, d)
+        self.Cd = np.einsum("eqij,ej->eqi", C, d)
+        a, b = fiber_angles(d).T
+        self.dd = np.stack([np.stack([-np.sin(a) * np.cos(b), np.cos(a) * np.cos(b), 0 * a],
+                                     axis=1),
+                            np.stack([-np.cos(a) * np.sin(b), -np.sin(a) * np.sin(b),
+                                      np.cos(b)], axis=1)], axis=1)          # (m, 2, 3)
+        self.units = []
+        for cavity, as_written in zip(scene.pressures, (written or scene).pressures):
+            unit = np.zeros_like(x)
+            cavity.at(cavity.magnitude / as_written.magnitude if as_written.magnitude
+                      else 1.0).energy(x, unit)
+            self.units.append(unit)
+
+    def contract(self, lam):
+        """(young, poisson, kappa (m,), fiber_angles (m, 2), fiber_direction (m, 3), pressure
+        (k,)): lambda^T dg/dp for lam (n, 3)."""
+        el, w = self.el, self.el.weights
+        Gl = np.einsum("eai,eqaj->eqij", lam[el.tets], el.grads)
+        s_mu = np.einsum("eq,eqij,eqij->e", w, self.dP_mu, Gl)
+        s_lam = np.einsum("eq,eqij,eqij->e", w, self.dP_lam, Gl)
+        h = np.einsum("eqij,ej->eqi", Gl, el.fiber)
+        s_kappa = np.einsum("eq,eq,eqi,eqi->e", w, 4.0 * self.I4m1, self.u, h)
+        g_d = 4.0 * el.kappa[:, None, None] * (
+            2.0 * np.einsum("eqi,eqi->eq", self.u, h)[..., None] * self.Cd
+            + self.I4m1[..., None] * (np.einsum("eqki,eqk->eqi", self.F, h)
+                                      + np.einsum("eqki,eqk->eqi", Gl, self.u)))
+        s_d = np.einsum("eq,eqi->ei", w, g_d)                                # (m, 3)
+        s_young, s_poisson = lame_slopes(el.mu, el.lam, s_mu, s_lam)
+        return (s_young, s_poisson, s_kappa, np.einsum("ei,eki->ek", s_d, self.dd), s_d,
+                np.array([float(np.sum(unit * lam)) for unit in self.units]))

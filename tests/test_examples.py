@@ -1,4 +1,4 @@
-"""Every example runs as a user would run it and draws its picture."""
+"""Every example runs as a user would run it and draws its picture (identify.py: fits)."""
 import os
 import subprocess
 import sys
@@ -17,14 +17,22 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ("finger_control.py reduced", "finger_control.png", "wrote out/finger_control.png"),
     ("actuator.py", "actuator.png", "bending grows with pressure: True"),
     ("actuator.py twist", "actuator_twist.png", "bending grows with pressure: True"),
-    ("two_region_part.py", "two_region_part.png", "converged: True")])
+    ("two_region_part.py", "two_region_part.png", "converged: True"),
+    ("identify.py", None, "stopped after")])
 def test_example_runs_and_draws(tmp_path, script, picture, says):
     script, *args = script.split()
     r = subprocess.run([sys.executable, os.path.join(ROOT, "examples", script), *args],
                        cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     assert says in r.stdout
-    assert (tmp_path / "out" / picture).stat().st_size > 30_000
+    if picture is not None:
+        assert (tmp_path / "out" / picture).stat().st_size > 30_000
+    if script == "identify.py":  # the fit recovers the truth the example made (10 deg, 2e5 Pa)
+        values = dict(line.split()[:3:2] for line in r.stdout.splitlines()
+                      if line.startswith("  ") and "+-" in line)
+        assert abs(float(values["fiber_elevation"]) - 10.0) < 2.0, r.stdout
+        assert abs(float(values["kappa"]) / 2e5 - 1.0) < 0.1, r.stdout
+        assert (tmp_path / "out" / "identify" / "fitted.toml").exists()
     if script == "actuator.py":  # the ramp's ParaView collection: one .vtu per pressure; the
         # crossed winding bends without twisting, the graded one twists as it bends
         assert len(list((tmp_path / "out").glob("actuator*_0*.vtu"))) == 11

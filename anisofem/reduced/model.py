@@ -186,6 +186,7 @@ class ReducedModel:
         moved.polynomial = with_pressure(polynomial(moved.scene.elements, self.x0, self.basis),
                                          moved.scene.pressures, self.x0, self.basis)
         moved.validation = None
+        moved.__dict__.pop("_stiffness_parts", None)  # reduced.sensitivity's, of the old one
         return moved
 
     def validate(self, cases=None, seed=0):

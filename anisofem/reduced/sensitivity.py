@@ -20,6 +20,7 @@ import dataclasses
 import numpy as np
 
 from .._validate import as_float_array
+from ..material import lame_slopes
 from .polynomial import polynomial
 
 #: The whole-body stiffnesses a reduced rollout's gradient is taken for.
@@ -31,14 +32,11 @@ def stiffness_polynomials(model):
     by (1 + s) (None where it is zero everywhere)}: the model's polynomial with the stiffness
     doubled, less the model's (pressure left out of both: it does not depend on them). Built
     once per model."""
-    # built once per polynomial (a pass over the mesh's quadrature points, like the model's
-    # own build), so that later gradients cost r^4 a step; with_material's copies share the
-    # store and key their own polynomial
-    store = model.__dict__.setdefault("_stiffness_parts", {})
-    key = id(model.polynomial)
-    if key not in store or store[key][0] is not model.polynomial:
-        store[key] = (model.polynomial, _build_parts(model))
-    return store[key][1]
+    # built once per model (a pass over the mesh's quadrature points, like the model's own
+    # build), so that later gradients cost r^4 a step; ReducedModel.with_material drops it
+    if "_stiffness_parts" not in model.__dict__:
+        model._stiffness_parts = _build_parts(model)
+    return model._stiffness_parts
 
 
 def _build_parts(model):
@@ -91,13 +89,7 @@ def _chain(scene, per_scale):
     """From dJ/ds for each of mu, lam, kappa scaled by (1 + s) over the body to dJ/dp per Pa
     of the body's mean Young's modulus and kappa, and per unit of Poisson's ratio."""
     el = scene.elements
-    mu, lam = float(np.mean(el.mu)), float(np.mean(el.lam))
-    E = mu * (3 * lam + 2 * mu) / (lam + mu)
-    nu = lam / (2 * (lam + mu))
-    d_mu, d_lam = per_scale["mu"] / mu, per_scale["lam"] / lam      # per Pa of mu, of lam
-    kappa = float(np.mean(el.kappa))
-    return {"young": (mu * d_mu + lam * d_lam) / E,
-            "poisson": (-mu / (1 + nu)) * d_mu
-            + E * (1 + 2 * nu ** 2) / ((1 + nu) ** 2 * (1 - 2 * nu) ** 2) * d_lam,
-            "kappa": per_scale["kappa"] / kappa if per_scale.get("kappa") is not None
-            and kappa > 0 else float("nan")}
+    mu, lam, kappa = float(np.mean(el.mu)), float(np.mean(el.lam)), float(np.mean(el.kappa))
+    young, poisson = lame_slopes(mu, lam, per_scale["mu"] / mu, per_scale["lam"] / lam)
+    return {"young": young, "poisson": poisson,
+            "kappa": per_scale["kappa"] / kappa if kappa > 0 else float("nan")}
