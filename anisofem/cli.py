@@ -158,9 +158,7 @@ def _scene_file(args, name, fixed_default):
     if given:
         raise ValueError(f"--{given[0]}: the scene file {name} sets the scene (its mesh, "
                          f"materials, boundary and loads); change it there")
-    scene = load_scene(name)
-    args.gravity = tuple(float(g) for g in scene.gravity)
-    return scene
+    return load_scene(name)
 
 
 def _scene(args, mesh):

@@ -369,15 +369,16 @@ def _representable(rungs, scene, notes):
     """rungs without those that cannot model the scene, saying so in notes: the reduced ones
     where it has Neo-Hookean elements (the reduced model's energy is exact only for the StVK
     base) or load curves; the surrogates where it has pressure or load curves."""
-    left = {"reduced": "the reduced model needs the StVK base material"
-            if scene.neohookean.any() else None}
-    if scene.timed:
-        left = {"reduced": "the reduced rungs hold the loads constant, not on their curves",
-                "surrogate": "the surrogates take constant nodal forces, not load curves"}
-    elif scene.pressures:
+    left = {}
+    if scene.neohookean.any():
+        left["reduced"] = "the reduced model needs the StVK base material"
+    if scene.pressures:
         left["surrogate"] = "the surrogates take nodal forces, not pressure"
+    if scene.timed:
+        left["reduced"] = "the reduced rungs hold the loads constant, not on their curves"
+        left["surrogate"] = "the surrogates take constant nodal forces, not load curves"
     for kind, why in left.items():
-        if why and any(r.kind == kind for r in rungs):
+        if any(r.kind == kind for r in rungs):
             notes.append(f"{kind} rungs not run: {why}")
             rungs = [r for r in rungs if r.kind != kind]
     return rungs

@@ -24,6 +24,10 @@ MIDSIDE_TOLERANCE = 1e-6
 #: the edges (0,1), (1,3), (0,3), (0,2), (1,2), (3,2) of the old labels.
 _SWAPPED_MIDSIDES = [4, 8, 7, 6, 5, 9]
 
+#: The faces of a tet, opposite to its vertices 0 to 3, each ordered so that its normal points
+#: out of a positively oriented tet.
+TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+
 #: A rest tet is rejected as zero-volume when 6 |V| / l_max^3 is below this (l_max: its
 #: longest edge; 0.707 for a regular tet). Nearly flat elements above it are accepted.
 MIN_SHAPE_QUALITY = 1e-9
@@ -234,15 +238,33 @@ class TetMesh:
         pairs.sort(axis=1)
         return np.unique(pairs, axis=0)
 
-    @cached_property
+    @property
     def boundary_faces(self):
         """(k, 3) boundary triangles, ordered so that their normal points out of the mesh."""
-        # faces opposite to vertex 0..3, each ordered outward for a positively oriented tet
-        local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-        faces = self.tets[:, local].reshape(-1, 3)
+        return self._boundary[0]
+
+    @cached_property
+    def _boundary(self):
+        """(boundary faces (k, 3) ordered outward, the tet (k,) each bounds)."""
+        faces = self.tets[:, TET_FACES].reshape(-1, 3)
         key = np.sort(faces, axis=1)
         _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-        return faces[counts[inverse.ravel()] == 1]
+        at = np.flatnonzero(counts[inverse.ravel()] == 1)
+        return faces[at], at // 4
+
+    def find_boundary_faces(self, faces, name):
+        """(the faces (k, 3) as the boundary faces they name, ordered outward; the tet (k,)
+        each bounds) of vertex triples `faces` (k, 3) in any order; ValueError naming `name`
+        and the first that is no boundary face of the mesh."""
+        oriented, owners = self._boundary
+        table = {tuple(k): i for i, k in enumerate(np.sort(oriented, axis=1).tolist())}
+        found = []
+        for i, f in enumerate(np.sort(faces, axis=1).tolist()):
+            if tuple(f) not in table:
+                raise ValueError(f"{name}: face {i} {faces[i].tolist()} is not a boundary face "
+                                 f"of the mesh")
+            found.append(table[tuple(f)])
+        return oriented[found], owners[found]
 
     def faces_where(self, predicate):
         """Boundary faces whose centroid c (k, 3) satisfies predicate(c) -> (k,) bool."""

@@ -39,10 +39,6 @@ RULES = {1: (np.array([[1 / 3, 1 / 3]]), np.array([0.5])),
                        [_B, _B], [1 - 2 * _B, _B], [_B, 1 - 2 * _B]]),
              np.array([_WA] * 3 + [_WB] * 3))}
 
-#: The boundary faces of a tet, opposite to its vertices 0 to 3, each ordered so that its
-#: normal points out of a positively oriented tet.
-TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-
 #: A rim plane's offset is the same as another's within this share of the mesh's size.
 PLANE_TOLERANCE = 1e-9
 
@@ -78,7 +74,9 @@ class CavityLoad:
     """
 
     def __init__(self, mesh, pressure, fixed_mask):
-        corners, self.owner = _oriented_faces(mesh, pressure.faces)
+        corners, self.owner = mesh.find_boundary_faces(pressure.faces, "pressure faces")
+        if len(np.unique(np.sort(corners, axis=1), axis=0)) < len(corners):
+            raise ValueError("pressure faces: a face is given twice")
         self.nodes = corners if mesh.order == 1 else np.concatenate(
             [corners, mesh.edge_nodes(corners[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2))
              .reshape(-1, 3)], axis=1)
@@ -199,30 +197,6 @@ def _triangle_shapes(order, points):
                          4 * (L[:, i, None] * dL[None, j] + L[:, j, None] * dL[None, i])],
                         axis=1)
     return N, dN
-
-
-def _oriented_faces(mesh, faces):
-    """Each of `faces` (k, 3) as the boundary face it names, ordered outward from the body, and
-    the tet it bounds; ValueError naming the first that is not a boundary face."""
-    tets = mesh.tets
-    candidates = tets[:, TET_FACES].reshape(-1, 3)
-    key = np.sort(candidates, axis=1)
-    unique, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.ravel()
-    boundary = counts[inverse] == 1
-    order = np.flatnonzero(boundary)
-    table = {tuple(k): i for k, i in zip(key[order].tolist(), order.tolist())}
-    found = []
-    for n, f in enumerate(np.sort(faces, axis=1).tolist()):
-        at = table.get(tuple(f))
-        if at is None:
-            raise ValueError(f"pressure faces: face {n} {faces[n].tolist()} is not a boundary "
-                             f"face of the mesh")
-        found.append(at)
-    found = np.array(found, dtype=np.int64)
-    if np.unique(found).size != found.size:
-        raise ValueError("pressure faces: a face is given twice")
-    return candidates[found], found // 4
 
 
 def _closing_field(mesh, faces, fixed_mask):

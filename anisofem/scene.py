@@ -405,11 +405,7 @@ def traction_force(mesh, traction, faces):
     faces = as_index_array(faces, "traction_faces", shape=(None, 3))
     k = faces.shape[0]
     t = per_element(traction, "traction", k, width=3)
-    boundary = {tuple(f) for f in np.sort(mesh.boundary_faces, axis=1).tolist()}
-    for i, f in enumerate(np.sort(faces, axis=1).tolist()):
-        if tuple(f) not in boundary:
-            raise ValueError(f"traction_faces: face {i} {faces[i].tolist()} is not a boundary "
-                             f"face of the mesh")
+    mesh.find_boundary_faces(faces, "traction_faces")
     X = mesh.vertices[faces]
     area = 0.5 * np.linalg.norm(np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), axis=1)
     f = np.zeros((mesh.n_vertices, 3))

@@ -128,7 +128,7 @@ def _reduced(argv):
                    None if args.display is None else read_mesh(args.display))
         built = body_of(args, scene, args.body, "--body") if args.body else scene
         model = ReducedModel(built, modes=args.modes, snapshots=args.snapshots)
-        header = reduced.write(model, args.output, title=args.scene, gravity=args.gravity,
+        header = reduced.write(model, args.output, title=args.scene, gravity=scene.gravity,
                                display=display)
     except BAD_INPUT as err:
         fail(parser, err)
