@@ -14,8 +14,9 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse.csgraph import connected_components
+
+from .domains import edge_graph, held_distance
 
 #: Directions a drag declared in any direction is built from: the 6 axes and the 8 diagonals.
 ANY_DIRECTION = tuple(tuple(np.array(d, float) / np.linalg.norm(d)) for d in
@@ -144,18 +145,10 @@ def free_ends(scene):
     """The free ends of a scene's body: lists of vertex indices, the vertices at least
     END_SHARE of the farthest distance from the held vertices through the mesh (along its
     edges: the far end of each arm, not a point across a gap), split into connected pieces."""
-    x = scene.mesh.vertices
-    n = x.shape[0]
-    cells = scene.mesh.cells[:, :4]
-    pairs = np.unique(np.sort(np.vstack([cells[:, [i, j]] for i in range(4)
-                                         for j in range(i + 1, 4)]), axis=1), axis=0)
-    length = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1)
-    edges = sp.coo_matrix((length, (pairs[:, 0], pairs[:, 1])), shape=(n, n)).tocsr()
-    held = np.flatnonzero(scene.fixed_mask.any(axis=1))
-    distance = dijkstra(edges, directed=False, indices=held, min_only=True)
-    distance[~np.isfinite(distance)] = -1.0  # vertices no tet holds
+    graph = edge_graph(scene.mesh)
+    distance = held_distance(scene, graph)
     far = np.flatnonzero(distance >= END_SHARE * distance.max())
-    count, label = connected_components(edges[far][:, far], directed=False)
+    count, label = connected_components(graph[far][:, far], directed=False)
     return [far[label == c] for c in range(count)]
 
 

@@ -196,8 +196,8 @@ class ReducedModel:
         where the full answer does not move)."""
         if self.loads is not None:
             cases = VALIDATION_CASES if cases is None else _count(cases, "cases", 1)
-            return self._validate_rollouts(unseen_cases(self.scene, self.loads, REDRAWS * cases,
-                                                        seed), cases)
+            return validate_rollouts(self, unseen_cases(self.scene, self.loads, REDRAWS * cases,
+                                                          seed), cases)
         t0 = time.perf_counter()
         full = solve(self.scene, warn=False)
         seconds = time.perf_counter() - t0
@@ -211,36 +211,6 @@ class ReducedModel:
             float(np.linalg.norm(d[tip].mean(0)) / np.linalg.norm(u[tip].mean(0))),
             float(np.linalg.norm(d, axis=1).max() / np.linalg.norm(u, axis=1).max()), seconds,
             bool(full.converged and report.converged))
-
-    def _validate_rollouts(self, drawn, cases):
-        """Validation over rollouts of the first `cases` of `drawn` [(drag index or None, extra
-        force (n, 3))] whose full rollout turns no element inside out."""
-        tip_error = field_error = seconds = 0.0
-        converged, used, inverted = True, 0, 0
-        zero = np.zeros_like(self.x0)
-        for which, force in drawn:
-            if used == cases:
-                break
-            phases = ((force, HOLD_STEPS), (zero, HOLD_STEPS))
-            t0 = time.perf_counter()
-            full, full_ok = full_rollout(self.scene, phases, VALIDATION_DT)
-            seconds += time.perf_counter() - t0
-            if any((volume_change(self.scene.mesh, x) <= -1.0).any() for x in full):
-                inverted += 1
-                continue
-            used += 1
-            reduced, reduced_ok = self.rollout(phases, VALIDATION_DT)
-            converged &= full_ok and reduced_ok
-            u, d = full - self.x0, reduced[:len(full)] - full
-            size = np.linalg.norm(u, axis=2)
-            tip = (np.asarray(self.loads.drags[which].vertices) if which is not None
-                   else moving_tip(u[int(np.argmax(size.max(axis=1)))]))
-            tip_u = np.linalg.norm(u[:, tip].mean(axis=1), axis=1).max()
-            tip_error = max(tip_error, float(np.linalg.norm(d[:, tip].mean(axis=1),
-                                                            axis=1).max() / tip_u))
-            field_error = max(field_error, float(np.linalg.norm(d, axis=2).max() / size.max()))
-        return Validation(tip_error if used else math.nan, field_error if used else math.nan,
-                          seconds, bool(converged), used, inverted)
 
     def rollout(self, phases, dt):
         """Positions (k + 1, n, 3) from rest through phases ((extra nodal force (n, 3) N or
@@ -320,6 +290,38 @@ class ReducedModel:
 _MESSAGES = {kernels.CONVERGED: "converged", kernels.SPENT: "{} iterations spent",
              kernels.NO_DESCENT: "line search found no decrease",
              kernels.NOT_FINITE: "non-finite force"}
+
+
+def validate_rollouts(model, drawn, cases):
+    """A reduced model's Validation over rollouts of the first `cases` of `drawn` [(drag index or
+    None, extra force (n, 3))] whose full rollout turns no element inside out: `model` has
+    scene, x0, loads and rollout(phases, dt) -> (positions (k + 1, n, 3), converged)."""
+    tip_error = field_error = seconds = 0.0
+    converged, used, inverted = True, 0, 0
+    zero = np.zeros_like(model.x0)
+    for which, force in drawn:
+        if used == cases:
+            break
+        phases = ((force, HOLD_STEPS), (zero, HOLD_STEPS))
+        t0 = time.perf_counter()
+        full, full_ok = full_rollout(model.scene, phases, VALIDATION_DT)
+        seconds += time.perf_counter() - t0
+        if any((volume_change(model.scene.mesh, x) <= -1.0).any() for x in full):
+            inverted += 1
+            continue
+        used += 1
+        reduced, reduced_ok = model.rollout(phases, VALIDATION_DT)
+        converged &= full_ok and reduced_ok
+        u, d = full - model.x0, reduced[:len(full)] - full
+        size = np.linalg.norm(u, axis=2)
+        tip = (np.asarray(model.loads.drags[which].vertices) if which is not None
+               else moving_tip(u[int(np.argmax(size.max(axis=1)))]))
+        tip_u = np.linalg.norm(u[:, tip].mean(axis=1), axis=1).max()
+        tip_error = max(tip_error, float(np.linalg.norm(d[:, tip].mean(axis=1),
+                                                        axis=1).max() / tip_u))
+        field_error = max(field_error, float(np.linalg.norm(d, axis=2).max() / size.max()))
+    return Validation(tip_error if used else math.nan, field_error if used else math.nan,
+                      seconds, bool(converged), used, inverted)
 
 
 def full_rollout(scene, phases, dt):

@@ -1,0 +1,516 @@
+"""FramedModel: a reduced model for bodies that bend and swing far. The body is cut into
+domains (anisofem.reduced.domains), and each domain moves in its own rotating frame:
+
+    x_i = R_d (y_i + U_i q_d) + c_d      for each node i of domain d,
+
+R_d a rotation, c_d its centre, y_i the node's rest position about the domain's centre of mass
+and U_d (k, 3, r_d) the domain's local basis, mass-orthonormal and free of rigid motion. The
+local bases are the principal directions of the full FEM's static equilibria under the declared
+loads (anisofem.reduced.snapshots), each pulled back into the domain's best-fitting frame, and
+of the rest vibration modes: what a linear basis must hold for every orientation, a frame holds
+by turning (after Barbic and Zhao 2011, with the domains joined through their shared elements
+instead of springs). The held nodes keep their place.
+
+Backward Euler minimizes over the frames and coordinates
+
+    1/(2 dt^2) |x - x_hat|_M^2 + sum_d V_d(q_d) + V_joints(x) - f . x,
+
+exactly for these kinematics:
+- V_d, the elastic energy of the elements inside domain d, does not change when the domain
+  turns: it is the quartic polynomial of anisofem.reduced.polynomial in q_d.
+- The inertia and the loads are quadratic in x, so their sums over a domain's nodes reduce to
+  3 x 3 moments of its basis, precomputed (tr(R^T T(q)) below): no mesh data per step.
+- The joints, the elements whose nodes lie in more than one domain (or on held nodes), are
+  evaluated element by element: a layer one element thick at each cut.
+Each Newton step turns R_d by exp([theta_d]) and takes the exact gradient and Hessian in
+(c_d, theta_d, q_d) at theta_d = 0, so the step is Newton's on the model's own energy.
+"""
+import math
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse.linalg as spla
+
+from .. import kernels
+from .._validate import as_float_array
+from ..assembly import DenseLayout
+from ..densities import STVK
+from ..potential import Potential
+from ..scene import check_scene
+from . import basis as _basis
+from .domains import split
+from .loads import Loads, default_loads, unseen_cases
+from .model import (REDRAWS, VALIDATION_CASES, NewtonReport, _count, validate_rollouts)
+from .polynomial import polynomial
+from .snapshots import principal_directions, static_states
+
+#: Default number of bands the body is cut into from its held nodes (each band's connected
+#: pieces are domains: a T cut in 4 bands has a domain per arm). With COORDINATES, the best
+#: of the sizes measured on the T, the Y and the 0.2 m beam (docs/experiments.md).
+BANDS = 4
+#: Default local coordinates per domain.
+COORDINATES = 12
+#: Rest vibration modes whose restrictions join each domain's snapshots.
+MODES = 6
+
+#: A Newton iteration is the last when no node moves more than this share of the body's size.
+STEP_TOLERANCE = 1e-9
+
+# [e_j]_x, the generators of rotations about the axes, and their symmetrized products
+_GEN = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
+                 [[0, 0, 1], [0, 0, 0], [-1, 0, 0]],
+                 [[0, -1, 0], [1, 0, 0], [0, 0, 0]]], dtype=float)
+_GEN2 = 0.5 * (np.einsum("jab,kbc->jkac", _GEN, _GEN) + np.einsum("kab,jbc->jkac", _GEN, _GEN))
+
+
+@dataclass
+class FramedState:
+    """A framed model's state: c (D, 3) the domains' centres, m; R (D, 3, 3) their rotations;
+    q (Q,) every domain's local coordinates, one after another (FramedModel.domains[d].q)."""
+    c: np.ndarray
+    R: np.ndarray
+    q: np.ndarray
+
+    def copy(self):
+        return FramedState(self.c.copy(), self.R.copy(), self.q.copy())
+
+
+@dataclass
+class Domain:
+    """One domain: nodes (k,); y (k, 3) their rest positions about its centre of mass, m; U
+    (k, 3, r) its local basis; mass, kg; the moments of its basis (a (r,) = sum m U_b . y,
+    J (3, 3) = sum m y y^T, A (r, 3, 3) = sum m U_a y^T, B (r, r, 3, 3) = sum m U_a U_b^T);
+    polynomial, the energy of its inner elements; radius, the largest |y|, m; reach, the
+    largest row norm of U; z and q, its slices of the Newton unknowns and of FramedState.q."""
+    nodes: np.ndarray
+    y: np.ndarray
+    U: np.ndarray
+    mass: float
+    a: np.ndarray
+    J: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    polynomial: object
+    radius: float
+    reach: float
+    z: slice
+    q: slice
+
+    @property
+    def r(self):
+        return self.U.shape[2]
+
+
+class FramedModel:
+    """The framed reduced model of a scene with the StVK base, with or without fibers.
+
+    Parameters
+    ----------
+    scene : the Scene. Whole nodes must be held (no rollers); pressures are refused.
+    bands : cut the body into this many bands of distance from the held nodes
+        (anisofem.reduced.domains.split; each band's pieces are domains).
+    coordinates : local coordinates per domain (fewer where a domain's snapshots span fewer).
+    modes : rest vibration modes added to every domain's snapshots.
+    loads : a Loads, what the model must handle beyond the scene's own loads (default:
+        default_loads, a drag of up to half the body's weight at each free end). Its static
+        equilibria shape the local bases, and unseen cases drawn from it validate the model.
+    validate : run the validation (VALIDATION_CASES rollouts against the full FEM).
+
+    Attributes: domains (list of Domain); labels (n,) each node's domain, -1 held; r, the
+    Newton unknowns (6 per domain and its coordinates); x0 (n, 3) rest positions; loads;
+    snapshots (a SnapshotReport); build_seconds; validation (a Validation, or None).
+    A NewtonReport's residual here is the last Newton step's largest node move bound, m.
+    """
+
+    def __init__(self, scene, bands=BANDS, coordinates=COORDINATES, modes=MODES, loads=None,
+                 validate=True):
+        check_scene(scene)
+        if (scene.elements.model != STVK).any():
+            raise ValueError("scene: the framed model needs the StVK base material (a domain's "
+                             "energy is a polynomial in its coordinates); this scene has "
+                             "Neo-Hookean elements")
+        if scene.pressures:
+            raise ValueError("scene: the framed model does not take pressures; use ReducedModel")
+        partial = scene.fixed_mask.any(axis=1) & ~scene.fixed_mask.all(axis=1)
+        if partial.any():
+            raise ValueError(f"fixed: the framed model holds whole nodes; {int(partial.sum())} "
+                             f"nodes are held along some axes only (rollers)")
+        scene.check_static()
+        bands = _count(bands, "bands", 1)
+        coordinates = _count(coordinates, "coordinates", 1)
+        modes = _count(modes, "modes", 0)
+        if modes >= scene.n_free:
+            raise ValueError(f"modes: {modes} modes need more than the scene's {scene.n_free} "
+                             f"unknowns")
+        loads = default_loads(scene) if loads is None else loads
+        if not isinstance(loads, Loads):
+            raise TypeError(f"loads: expected an anisofem.reduced.Loads, got "
+                            f"{type(loads).__name__}")
+        loads.check(scene)
+        t0 = time.perf_counter()
+        self.scene, self.loads = scene, loads
+        self.x0 = scene.initial_positions()
+        self.labels, count = split(scene, bands)
+        states, self.snapshots = static_states(scene, loads)
+        fields = np.concatenate([states - self.x0, _rest_modes(scene, self.x0, modes)])
+        inner = self._cut()
+        self.domains, z, q = [], 0, 0
+        for d in range(count):
+            nodes = np.flatnonzero(self.labels == d)
+            domain = _domain(scene, self.x0, nodes, states, fields[len(states):], coordinates,
+                             inner[d], z, q)
+            self.domains.append(domain)
+            z, q = z + 6 + domain.r, q + domain.r
+        self.r, self._q_size = z, q
+        self.size = float(np.ptp(self.x0, axis=0).max())
+        self._own = self._project(scene.external_force)
+        credit = max(self.snapshots.seconds - (time.perf_counter() - t0), 0.0)
+        self.build_seconds = time.perf_counter() - t0 + credit
+        self.validation = self.validate() if validate else None
+
+    def _cut(self):
+        """Each domain's inner elements (lists of element indices), and the joints: the
+        elements across domains (and held nodes), kept with a compact numbering of their
+        nodes for element-by-element evaluation."""
+        elements = self.scene.elements
+        owner = self.labels[elements.tets]
+        inner_mask = (owner == owner[:, :1]).all(axis=1) & (owner[:, 0] >= 0)
+        inner = [np.flatnonzero(inner_mask & (owner[:, 0] == d))
+                 for d in range(self.labels.max() + 1)]
+        joints = np.flatnonzero(~inner_mask & (owner >= 0).any(axis=1))
+        nodes, local = np.unique(elements.tets[joints], return_inverse=True)
+        self._joint_nodes = nodes
+        self._joint_elements = _subset(elements, joints, local.reshape(len(joints), -1))
+        dof = np.full((nodes.size, 3), -1, np.int64)
+        free = self.labels[nodes] >= 0
+        dof[free] = np.arange(3 * free.sum()).reshape(-1, 3)
+        self._joint_layout = DenseLayout(self._joint_elements.tets, dof)
+        self._joint_free = np.flatnonzero(free)
+        return inner
+
+    # -- states and positions ------------------------------------------------------------
+
+    def rest(self):
+        """The rest state: every frame at its domain's rest centre, unturned, q = 0."""
+        c = np.array([self.x0[d.nodes].T @ self.scene.masses[d.nodes] / d.mass
+                      for d in self.domains])
+        return FramedState(c, np.tile(np.eye(3), (len(self.domains), 1, 1)),
+                           np.zeros(self._q_size))
+
+    def positions(self, state):
+        """Full positions (n, 3), m, of a FramedState."""
+        x = self.x0.copy()
+        for k, d in enumerate(self.domains):
+            x[d.nodes] = (d.y + d.U @ state.q[d.q]) @ state.R[k].T + state.c[k]
+        return x
+
+    def project(self, force):
+        """The moments of nodal forces f (n, 3), N, on each domain: (sum f y^T (3, 3), sum f
+        U_b^T (r, 3, 3), sum f (3,)) per domain (the load term -f . x = -tr(R^T (F0 + q . F))
+        - c . sum f)."""
+        return self._project(as_float_array(force, "force",
+                                            shape=(self.scene.mesh.n_vertices, 3)))
+
+    def _project(self, f):
+        return [(f[d.nodes].T @ d.y, np.einsum("ka,kbr->rab", f[d.nodes], d.U),
+                 f[d.nodes].sum(axis=0)) for d in self.domains]
+
+    # -- stepping --------------------------------------------------------------------------
+
+    def step(self, now, before, dt, force=None, max_iter=50):
+        """One backward-Euler step of dt s from `now` (a FramedState), `before` being the
+        state a step earlier (equal to now from rest): x_hat = 2 x(now) - x(before). Under the
+        scene's loads plus nodal forces `force` (n, 3), N. Returns (next state,
+        NewtonReport)."""
+        if not dt > 0:
+            raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
+        inertia = 1.0 / dt ** 2
+        targets = self._targets(self._load(force), inertia, ((now, 2.0), (before, -1.0)))
+        return self._newton(now.copy(), targets, inertia, max_iter)
+
+    def solve(self, force=None, start=None, max_iter=50):
+        """The static equilibrium under the scene's loads plus nodal forces `force` (n, 3), N,
+        from `start` (default: rest). Returns (FramedState, NewtonReport)."""
+        start = self.rest() if start is None else start.copy()
+        return self._newton(start, self._targets(self._load(force), 0.0, ()), 0.0, max_iter)
+
+    def rollout(self, phases, dt):
+        """Positions (k + 1, n, 3) from rest through phases ((extra nodal force (n, 3) N or
+        None, steps), ...) of dt s, and whether every step converged."""
+        now = before = self.rest()
+        xs, ok = [self.positions(now)], True
+        for force, steps in phases:
+            for _ in range(steps):
+                after, report = self.step(now, before, dt, force=force)
+                ok &= report.converged
+                now, before = after, now
+                xs.append(self.positions(now))
+        return np.array(xs), ok
+
+    def validate(self, cases=None, seed=0):
+        """The model against the full FEM on `cases` (default VALIDATION_CASES) short rollouts
+        under unseen loads drawn from the declaration with `seed` (a Validation)."""
+        cases = VALIDATION_CASES if cases is None else _count(cases, "cases", 1)
+        return validate_rollouts(self, unseen_cases(self.scene, self.loads, REDRAWS * cases,
+                                                    seed), cases)
+
+    def _load(self, force):
+        if force is None:
+            return self._own
+        extra = self.project(force)
+        return [tuple(a + b for a, b in zip(own, more)) for own, more in zip(self._own, extra)]
+
+    def _targets(self, load, inertia, history):
+        """Per domain (T0 (3, 3), T (r, 3, 3), t (3,)): the inertia's pull towards x_hat =
+        sum alpha x(state) over history ((state, alpha), ...) and the loads, so that the step's
+        energy is inertia/2 (2 a.q + |q|^2 + mass |c|^2) - tr(R^T (T0 + q . T)) - t . c plus
+        the elastic energy."""
+        out = []
+        for k, d in enumerate(self.domains):
+            T0, T, t = (v.copy() for v in load[k])
+            for state, alpha in history:
+                w = inertia * alpha
+                Rk, qk = state.R[k], state.q[d.q]
+                T0 += w * Rk @ (d.J + np.einsum("a,aij->ij", qk, d.A))
+                T += w * np.einsum("ij,bjl->bil", Rk, d.A.transpose(0, 2, 1)
+                                   + np.einsum("a,abij->bij", qk, d.B))
+                t += w * d.mass * state.c[k]
+            out.append((T0, T, t))
+        return out
+
+    def energy(self, state, targets, inertia):
+        """The step's energy (module docstring), J."""
+        total = 0.0
+        for k, d in enumerate(self.domains):
+            T0, T, t = targets[k]
+            q, c, R = state.q[d.q], state.c[k], state.R[k]
+            total += (0.5 * inertia * (2 * d.a @ q + q @ q + d.mass * c @ c)
+                      - np.sum(R * (T0 + np.einsum("b,bij->ij", q, T))) - t @ c
+                      + d.polynomial.energy(q))
+        e_iso, e_fib, _ = kernels.assemble(self._joint_positions(state), self._joint_elements)
+        return total + float(e_iso.sum() + e_fib.sum())
+
+    def derivatives(self, state, targets, inertia):
+        """(energy J, gradient (r,), Hessian (r, r)) in the Newton unknowns (c_d (m), theta_d
+        (rad), q_d per domain), at theta = 0."""
+        E = self.energy(state, targets, inertia)
+        g = np.zeros(self.r)
+        H = np.zeros((self.r, self.r))
+        for k, d in enumerate(self.domains):
+            T0, T, t = targets[k]
+            q, c, R = state.q[d.q], state.c[k], state.R[k]
+            Tq = T0 + np.einsum("b,bij->ij", q, T)
+            GR = np.einsum("jab,bc->jac", _GEN, R)
+            o, r = d.z.start, d.r
+            g[o:o + 3] = inertia * d.mass * c - t
+            g[o + 3:o + 6] = -np.einsum("jac,ac->j", GR, Tq)
+            gq, Hq = d.polynomial.gradient(q, hessian=True)
+            g[o + 6:o + 6 + r] = inertia * (d.a + q) - np.einsum("ac,bac->b", R, T) + gq
+            H[o:o + 3, o:o + 3] = inertia * d.mass * np.eye(3)
+            H[o + 3:o + 6, o + 3:o + 6] = -np.einsum("jkab,bc,ac->jk", _GEN2, R, Tq)
+            Htq = -np.einsum("jac,bac->jb", GR, T)
+            H[o + 3:o + 6, o + 6:o + 6 + r] = Htq
+            H[o + 6:o + 6 + r, o + 3:o + 6] = Htq.T
+            H[o + 6:o + 6 + r, o + 6:o + 6 + r] = Hq + inertia * np.eye(r)
+        self._add_joints(state, g, H)
+        return E, g, H
+
+    def _joint_positions(self, state):
+        x = self.x0[self._joint_nodes].copy()
+        labels = self.labels[self._joint_nodes]
+        for k, d in enumerate(self.domains):
+            mine = labels == k
+            if mine.any():
+                local = np.searchsorted(d.nodes, self._joint_nodes[mine])
+                x[mine] = (d.y[local] + d.U[local] @ state.q[d.q]) @ state.R[k].T + state.c[k]
+        return x
+
+    def _add_joints(self, state, g, H):
+        """Add the joints' gradient and Hessian, chained through each node's frame."""
+        x = self._joint_positions(state)
+        layout = self._joint_layout
+        data = layout.zeros()
+        _, _, grad = kernels.assemble(x, self._joint_elements, want_grad=True, want_hess=True,
+                                      hess_map=layout.map, hess_data=data)
+        free = self._joint_free
+        nodes = self._joint_nodes[free]
+        labels = self.labels[nodes]
+        Jx = np.zeros((3 * free.size, self.r))
+        for k, d in enumerate(self.domains):
+            mine = np.flatnonzero(labels == k)
+            if not mine.size:
+                continue
+            local = np.searchsorted(d.nodes, nodes[mine])
+            R, c = state.R[k], state.c[k]
+            w = x[free[mine]] - c                                  # (m, 3) turned offsets
+            RU = np.einsum("ij,mjr->mir", R, d.U[local])            # (m, 3, r)
+            gi = grad[free[mine]]
+            o, r = d.z.start, d.r
+            g[o:o + 3] += gi.sum(axis=0)
+            g[o + 3:o + 6] += np.cross(w, gi).sum(axis=0)
+            g[o + 6:o + 6 + r] += np.einsum("mir,mi->r", RU, gi)
+            gw = float(np.sum(gi * w))
+            H[o + 3:o + 6, o + 3:o + 6] += 0.5 * (gi.T @ w + w.T @ gi) - gw * np.eye(3)
+            Htq = np.cross(RU.transpose(0, 2, 1), gi[:, None, :]).sum(axis=0).T
+            H[o + 3:o + 6, o + 6:o + 6 + r] += Htq
+            H[o + 6:o + 6 + r, o + 3:o + 6] += Htq.T
+            rows = (3 * mine[:, None] + np.arange(3)).ravel()
+            Jx[rows, o:o + 3] = np.tile(np.eye(3), (mine.size, 1))
+            Jx[rows, o + 3:o + 6] = -_cross_matrices(w).reshape(-1, 3)
+            Jx[rows, o + 6:o + 6 + r] = RU.reshape(-1, r)
+        H += Jx.T @ layout.matrix(data) @ Jx
+
+    def retract(self, state, dz, alpha=1.0):
+        """The state moved by alpha dz in the Newton unknowns: c + alpha dc, exp(alpha [dtheta])
+        R, q + alpha dq."""
+        new = state.copy()
+        for k, d in enumerate(self.domains):
+            o = d.z.start
+            new.c[k] += alpha * dz[o:o + 3]
+            new.R[k] = _rotation(alpha * dz[o + 3:o + 6]) @ state.R[k]
+            new.q[d.q] += alpha * dz[o + 6:o + 6 + d.r]
+        return new
+
+    def _bound(self, dz):
+        """The largest node move of the step dz, bounded per domain, m."""
+        return max(np.linalg.norm(dz[d.z.start:d.z.start + 3])
+                   + np.linalg.norm(dz[d.z.start + 3:d.z.start + 6]) * d.radius
+                   + np.linalg.norm(dz[d.z.start + 6:d.z.stop]) * d.reach
+                   for d in self.domains)
+
+    def _newton(self, state, targets, inertia, max_iter):
+        """Minimize the step's energy from `state` by Newton with a backtracking line search
+        (the Hessian's eigenvalues mirrored and floored where it is not positive definite);
+        converged when a step moves no node more than STEP_TOLERANCE times the body's size."""
+        tolerance = STEP_TOLERANCE * self.size
+        bound = math.inf
+        for it in range(1, max_iter + 1):
+            E, g, H = self.derivatives(state, targets, inertia)
+            if not (np.isfinite(E) and np.isfinite(g).all() and np.isfinite(H).all()):
+                return state, NewtonReport(False, it, bound, "non-finite energy")
+            dz = _descent(H, g)
+            bound = self._bound(dz)
+            if bound <= tolerance:
+                return _orthonormal(self.retract(state, dz)), NewtonReport(True, it, bound,
+                                                                           "converged")
+            alpha, slope = 1.0, float(g @ dz)
+            while True:
+                trial = self.retract(state, dz, alpha)
+                if self.energy(trial, targets, inertia) <= E + 1e-4 * alpha * slope:
+                    break
+                alpha *= 0.5
+                if alpha * bound <= tolerance:
+                    converged = bound <= 1e3 * tolerance  # round-off: no decrease resolved
+                    return state, NewtonReport(converged, it, bound, "converged" if converged
+                                               else "line search found no decrease")
+            state = trial
+        return _orthonormal(state), NewtonReport(False, max_iter, bound,
+                                                 f"{max_iter} iterations spent")
+
+
+def _descent(H, g):
+    """-H^-1 g, by Cholesky, or where H is not positive definite with its eigenvalues
+    mirrored and floored at 1e-10 of the largest."""
+    try:
+        return -sla.cho_solve(sla.cho_factor(H), g)
+    except np.linalg.LinAlgError:
+        lam, V = np.linalg.eigh(H)
+        lam = np.maximum(np.abs(lam), 1e-10 * np.abs(lam).max())
+        return -V @ ((V.T @ g) / lam)
+
+
+def _rotation(theta):
+    """exp([theta]_x) (3, 3) by Rodrigues' formula (1 - cos a written 2 sin^2(a/2), which
+    keeps its digits at small angles)."""
+    angle = float(np.linalg.norm(theta))
+    K = np.einsum("j,jab->ab", theta, _GEN)
+    if angle == 0.0:
+        return np.eye(3)
+    half = math.sin(0.5 * angle) / (0.5 * angle)
+    return np.eye(3) + math.sin(angle) / angle * K + 0.5 * half * half * K @ K
+
+
+def _orthonormal(state):
+    """state with each R its nearest rotation (against round-off over many steps)."""
+    u, _, vt = np.linalg.svd(state.R)
+    state.R = u @ vt
+    return state
+
+
+def _cross_matrices(w):
+    """(m, 3, 3) [w]_x of each row of w (m, 3)."""
+    return np.einsum("mj,jab->mab", w, _GEN)
+
+
+def _subset(elements, rows, tets):
+    """An ElementData of some elements (rows), their node numbers replaced by tets."""
+    return replace(elements, tets=np.ascontiguousarray(tets, dtype=np.int64),
+                   grads=elements.grads[rows], weights=elements.weights[rows],
+                   model=elements.model[rows], mu=elements.mu[rows], lam=elements.lam[rows],
+                   kappa=elements.kappa[rows], fiber=elements.fiber[rows])
+
+
+def _rest_modes(scene, x0, count):
+    """The `count` lowest vibration modes at rest as node fields (count, n, 3), m."""
+    n = scene.mesh.n_vertices
+    if count == 0:
+        return np.zeros((0, n, 3))
+    free = scene.free_dofs
+    mass = np.repeat(scene.masses, 3)[free]
+    K = _basis.free_hessian(Potential(scene), x0, scene.layout("csr"))
+    _, phi = _basis.vibration_modes(K, spla.splu(K), mass, count)
+    out = np.zeros((count, 3 * n))
+    out[:, free] = phi.T
+    return out.reshape(count, n, 3)
+
+
+def best_frame(x, y, m):
+    """The rotation R (3, 3) and centre c (3,) that best carry rest offsets y (k, 3) (about
+    their centre of mass) onto positions x (k, 3), weighted by masses m (k,)."""
+    c = m @ x / m.sum()
+    u, _, vt = np.linalg.svd((m[:, None] * y).T @ (x - c))
+    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+    return vt.T @ flip @ u.T, c
+
+
+def _domain(scene, x0, nodes, states, modes, count, inner, z, q):
+    """The Domain of `nodes`: its local basis from the states (s, n, 3) pulled back into their
+    best frames and the mode fields (k, n, 3), rigid motion removed; its moments; the
+    polynomial of its inner elements."""
+    m = scene.masses[nodes]
+    mass = float(m.sum())
+    y = x0[nodes] - m @ x0[nodes] / mass
+    local = []
+    for x in states:
+        R, c = best_frame(x[nodes], y, m)
+        local.append(((x[nodes] - c) @ R - y).ravel())
+    local.extend(field[nodes].ravel() for field in modes)
+    S = np.array(local).T
+    weights = np.repeat(m, 3)
+    norms = np.sqrt(weights @ S ** 2)
+    S = S[:, norms > 1e-12 * max(norms.max(), 1e-300)]
+    rigid = _basis.mass_orthonormal(_rigid_motions(y), weights)
+    U = principal_directions(S, weights, min(count, 3 * nodes.size - 6), against=rigid)
+    U = U.reshape(nodes.size, 3, -1)
+    r = U.shape[2]
+    full = np.zeros((3 * scene.mesh.n_vertices, r))
+    full[(3 * nodes[:, None] + np.arange(3)).ravel()] = U.reshape(-1, r)
+    return Domain(
+        nodes=nodes, y=y, U=U, mass=mass, a=np.einsum("k,kir,ki->r", m, U, y),
+        J=(m[:, None] * y).T @ y, A=np.einsum("k,kia,kj->aij", m, U, y),
+        B=np.einsum("k,kia,kjb->abij", m, U, U),
+        polynomial=polynomial(_subset(scene.elements, inner, scene.elements.tets[inner]),
+                              x0, full),
+        radius=float(np.linalg.norm(y, axis=1).max()),
+        reach=float(np.linalg.norm(U.reshape(-1, 3, r), axis=(1, 2)).max()),
+        z=slice(z, z + 6 + r), q=slice(q, q + r))
+
+
+def _rigid_motions(y):
+    """(3k, 6) the translations and small rotations about the origin of offsets y (k, 3)."""
+    V = np.zeros((y.shape[0], 3, 6))
+    V[:, :, :3] = np.eye(3)
+    V[:, :, 3:] = -_cross_matrices(y)
+    return V.reshape(-1, 6)
