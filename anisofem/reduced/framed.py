@@ -40,6 +40,8 @@ from ..densities import STVK
 from ..potential import Potential
 from ..scene import check_scene
 from . import basis as _basis
+from . import framed_kernels as fk
+from .framed_kernels import GEN
 from .domains import split
 from .loads import Loads, default_loads, unseen_cases
 from .model import (REDRAWS, VALIDATION_CASES, NewtonReport, _count, validate_rollouts)
@@ -57,13 +59,6 @@ MODES = 6
 
 #: A Newton iteration is the last when no node moves more than this share of the body's size.
 STEP_TOLERANCE = 1e-9
-
-# [e_j]_x, the generators of rotations about the axes, and their symmetrized products
-_GEN = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
-                 [[0, 0, 1], [0, 0, 0], [-1, 0, 0]],
-                 [[0, -1, 0], [1, 0, 0], [0, 0, 0]]], dtype=float)
-_GEN2 = 0.5 * (np.einsum("jab,kbc->jkac", _GEN, _GEN) + np.einsum("kab,jbc->jkac", _GEN, _GEN))
-
 
 @dataclass
 class FramedState:
@@ -164,6 +159,7 @@ class FramedModel:
             self.domains.append(domain)
             z, q = z + 6 + domain.r, q + domain.r
         self.r, self._q_size = z, q
+        self._pack()
         self.size = float(np.ptp(self.x0, axis=0).max())
         self._own = self._project(scene.external_force)
         credit = max(self.snapshots.seconds - (time.perf_counter() - t0), 0.0)
@@ -171,9 +167,8 @@ class FramedModel:
         self.validation = self.validate() if validate else None
 
     def _cut(self):
-        """Each domain's inner elements (lists of element indices), and the joints: the
-        elements across domains (and held nodes), kept with a compact numbering of their
-        nodes for element-by-element evaluation."""
+        """Each domain's inner elements (lists of element indices); the joints, the elements
+        across domains (and held nodes), with a compact numbering of their nodes."""
         elements = self.scene.elements
         owner = self.labels[elements.tets]
         inner_mask = (owner == owner[:, :1]).all(axis=1) & (owner[:, 0] >= 0)
@@ -181,14 +176,56 @@ class FramedModel:
                  for d in range(self.labels.max() + 1)]
         joints = np.flatnonzero(~inner_mask & (owner >= 0).any(axis=1))
         nodes, local = np.unique(elements.tets[joints], return_inverse=True)
+        tets = local.reshape(len(joints), -1)
         self._joint_nodes = nodes
-        self._joint_elements = _subset(elements, joints, local.reshape(len(joints), -1))
-        dof = np.full((nodes.size, 3), -1, np.int64)
+        self._joint_elements = _subset(elements, joints, tets)
         free = self.labels[nodes] >= 0
-        dof[free] = np.arange(3 * free.sum()).reshape(-1, 3)
-        self._joint_layout = DenseLayout(self._joint_elements.tets, dof)
-        self._joint_free = np.flatnonzero(free)
+        self._slot = np.full(nodes.size, -1, np.int64)
+        self._slot[free] = np.arange(free.sum())
+        dof = np.where(free[:, None], 3 * self._slot[:, None] + np.arange(3), -1)
+        self._joint_layout = DenseLayout(tets, dof)
+        k = tets.shape[1]
+        pairs = np.unique(np.concatenate([tets[:, [a, b]] for a in range(k) for b in range(k)]),
+                          axis=0)
+        self._pairs = np.ascontiguousarray(pairs, dtype=np.int64)
+        self._pair_ptr = np.searchsorted(pairs[:, 0], np.arange(nodes.size + 1)).astype(np.int64)
         return inner
+
+    def _pack(self):
+        """The domains' moments and the joint nodes' rows in the packed arrays of
+        anisofem.reduced.framed_kernels."""
+        D = self.domains
+        self._r = np.array([d.r for d in D], np.int64)
+        self._q0 = np.array([d.q.start for d in D], np.int64)
+        self._z0 = np.array([d.z.start for d in D], np.int64)
+        self._b0 = np.concatenate([[0], np.cumsum(self._r ** 2)[:-1]]).astype(np.int64)
+        self._mass = np.array([d.mass for d in D])
+        self._a = np.concatenate([d.a for d in D])
+        self._J = np.array([d.J for d in D])
+        self._A = np.concatenate([d.A for d in D])
+        self._B = np.concatenate([d.B.reshape(-1, 3, 3) for d in D])
+        nodes = self._joint_nodes
+        self._dom = self.labels[nodes].astype(np.int64)
+        self._Y = np.zeros((nodes.size, 3))
+        self._U = np.zeros((nodes.size, 3, max(self._r.max(), 1)))
+        for k, d in enumerate(D):
+            mine = np.flatnonzero(self._dom == k)
+            local = np.searchsorted(d.nodes, nodes[mine])
+            self._Y[mine] = d.y[local]
+            self._U[mine, :, :d.r] = d.U[local]
+        self._x0j = self.x0[nodes].copy()
+        P = [d.polynomial for d in D]
+        sizes = np.array([[p.C2.size, p.S3.size, p.W4.size] for p in P])
+        self._coefficients = (
+            np.array([p.c0 for p in P]), np.concatenate([p.c1 for p in P]),
+            np.concatenate([p.C2.ravel() for p in P]), np.concatenate([p.S3.ravel() for p in P]),
+            np.concatenate([p.W4.ravel() for p in P]),
+            np.vstack([np.zeros((1, 3), np.int64), np.cumsum(sizes, axis=0)[:-1]]).astype(np.int64))
+        self._zc = self._z0[:, None] + np.arange(3)
+        self._zt = self._zc + 3
+        self._zq = np.concatenate([np.arange(d.z.start + 6, d.z.stop) for d in D]).astype(int)
+        self._radius = np.array([d.radius for d in D])
+        self._reach = np.array([d.reach for d in D])
 
     # -- states and positions ------------------------------------------------------------
 
@@ -207,15 +244,17 @@ class FramedModel:
         return x
 
     def project(self, force):
-        """The moments of nodal forces f (n, 3), N, on each domain: (sum f y^T (3, 3), sum f
-        U_b^T (r, 3, 3), sum f (3,)) per domain (the load term -f . x = -tr(R^T (F0 + q . F))
-        - c . sum f)."""
+        """The moments of nodal forces f (n, 3), N, on the domains: F0 (D, 3, 3) = sum f y^T,
+        F (Q, 3, 3) = sum f U_b^T, Fsum (D, 3) = sum f, over each domain's nodes (the load
+        term -f . x = -tr(R^T (F0 + q . F)) - c . Fsum)."""
         return self._project(as_float_array(force, "force",
                                             shape=(self.scene.mesh.n_vertices, 3)))
 
     def _project(self, f):
-        return [(f[d.nodes].T @ d.y, np.einsum("ka,kbr->rab", f[d.nodes], d.U),
-                 f[d.nodes].sum(axis=0)) for d in self.domains]
+        return (np.array([f[d.nodes].T @ d.y for d in self.domains]),
+                np.concatenate([np.einsum("ka,kbr->rab", f[d.nodes], d.U)
+                                for d in self.domains]),
+                np.array([f[d.nodes].sum(axis=0) for d in self.domains]))
 
     # -- stepping --------------------------------------------------------------------------
 
@@ -259,126 +298,75 @@ class FramedModel:
     def _load(self, force):
         if force is None:
             return self._own
-        extra = self.project(force)
-        return [tuple(a + b for a, b in zip(own, more)) for own, more in zip(self._own, extra)]
+        return tuple(a + b for a, b in zip(self._own, self.project(force)))
 
     def _targets(self, load, inertia, history):
-        """Per domain (T0 (3, 3), T (r, 3, 3), t (3,)): the inertia's pull towards x_hat =
-        sum alpha x(state) over history ((state, alpha), ...) and the loads, so that the step's
-        energy is inertia/2 (2 a.q + |q|^2 + mass |c|^2) - tr(R^T (T0 + q . T)) - t . c plus
-        the elastic energy."""
-        out = []
-        for k, d in enumerate(self.domains):
-            T0, T, t = (v.copy() for v in load[k])
-            for state, alpha in history:
-                w = inertia * alpha
-                Rk, qk = state.R[k], state.q[d.q]
-                T0 += w * Rk @ (d.J + np.einsum("a,aij->ij", qk, d.A))
-                T += w * np.einsum("ij,bjl->bil", Rk, d.A.transpose(0, 2, 1)
-                                   + np.einsum("a,abij->bij", qk, d.B))
-                t += w * d.mass * state.c[k]
-            out.append((T0, T, t))
-        return out
+        """(T0 (D, 3, 3), T (Q, 3, 3), t (D, 3)): the loads' moments plus the inertia's pull
+        towards x_hat = sum alpha x(state) over history ((state, alpha), ...), so that the
+        step's energy is sum_d inertia/2 (2 a.q + |q|^2 + mass |c|^2) - tr(R^T (T0 + q . T))
+        - t . c, plus the elastic energy."""
+        T0, T, t = (v.copy() for v in load)
+        if history:
+            fk.targets(inertia, np.array([h.c for h, _ in history]),
+                       np.array([h.R for h, _ in history]),
+                       np.array([h.q for h, _ in history]),
+                       np.array([alpha for _, alpha in history]), self._J, self._A, self._B,
+                       self._mass, self._q0, self._r, self._b0, T0, T, t)
+        return T0, T, t
 
     def energy(self, state, targets, inertia):
         """The step's energy (module docstring), J."""
-        total = 0.0
-        for k, d in enumerate(self.domains):
-            T0, T, t = targets[k]
-            q, c, R = state.q[d.q], state.c[k], state.R[k]
-            total += (0.5 * inertia * (2 * d.a @ q + q @ q + d.mass * c @ c)
-                      - np.sum(R * (T0 + np.einsum("b,bij->ij", q, T))) - t @ c
-                      + d.polynomial.energy(q))
+        T0, T, t = targets
+        total = fk.domain_energy(inertia, state.c, state.R, state.q, self._a, self._mass, T0,
+                                 T, t, self._q0, self._r)
+        total += self._polynomials(state.q, np.zeros(0), np.zeros((0, 0)))
         e_iso, e_fib, _ = kernels.assemble(self._joint_positions(state), self._joint_elements)
         return total + float(e_iso.sum() + e_fib.sum())
 
     def derivatives(self, state, targets, inertia):
         """(energy J, gradient (r,), Hessian (r, r)) in the Newton unknowns (c_d (m), theta_d
         (rad), q_d per domain), at theta = 0."""
-        E = self.energy(state, targets, inertia)
+        T0, T, t = targets
         g = np.zeros(self.r)
         H = np.zeros((self.r, self.r))
-        for k, d in enumerate(self.domains):
-            T0, T, t = targets[k]
-            q, c, R = state.q[d.q], state.c[k], state.R[k]
-            Tq = T0 + np.einsum("b,bij->ij", q, T)
-            GR = np.einsum("jab,bc->jac", _GEN, R)
-            o, r = d.z.start, d.r
-            g[o:o + 3] = inertia * d.mass * c - t
-            g[o + 3:o + 6] = -np.einsum("jac,ac->j", GR, Tq)
-            gq, Hq = d.polynomial.gradient(q, hessian=True)
-            g[o + 6:o + 6 + r] = inertia * (d.a + q) - np.einsum("ac,bac->b", R, T) + gq
-            H[o:o + 3, o:o + 3] = inertia * d.mass * np.eye(3)
-            H[o + 3:o + 6, o + 3:o + 6] = -np.einsum("jkab,bc,ac->jk", _GEN2, R, Tq)
-            Htq = -np.einsum("jac,bac->jb", GR, T)
-            H[o + 3:o + 6, o + 6:o + 6 + r] = Htq
-            H[o + 6:o + 6 + r, o + 3:o + 6] = Htq.T
-            H[o + 6:o + 6 + r, o + 6:o + 6 + r] = Hq + inertia * np.eye(r)
-        self._add_joints(state, g, H)
-        return E, g, H
-
-    def _joint_positions(self, state):
-        x = self.x0[self._joint_nodes].copy()
-        labels = self.labels[self._joint_nodes]
-        for k, d in enumerate(self.domains):
-            mine = labels == k
-            if mine.any():
-                local = np.searchsorted(d.nodes, self._joint_nodes[mine])
-                x[mine] = (d.y[local] + d.U[local] @ state.q[d.q]) @ state.R[k].T + state.c[k]
-        return x
-
-    def _add_joints(self, state, g, H):
-        """Add the joints' gradient and Hessian, chained through each node's frame."""
+        E = fk.domain_energy(inertia, state.c, state.R, state.q, self._a, self._mass, T0, T, t,
+                             self._q0, self._r)
+        fk.domain_derivatives(inertia, state.c, state.R, state.q, self._a, self._mass, T0, T,
+                              t, self._q0, self._r, self._z0, g, H)
+        E += self._polynomials(state.q, g, H)
         x = self._joint_positions(state)
         layout = self._joint_layout
         data = layout.zeros()
-        _, _, grad = kernels.assemble(x, self._joint_elements, want_grad=True, want_hess=True,
-                                      hess_map=layout.map, hess_data=data)
-        free = self._joint_free
-        nodes = self._joint_nodes[free]
-        labels = self.labels[nodes]
-        Jx = np.zeros((3 * free.size, self.r))
-        for k, d in enumerate(self.domains):
-            mine = np.flatnonzero(labels == k)
-            if not mine.size:
-                continue
-            local = np.searchsorted(d.nodes, nodes[mine])
-            R, c = state.R[k], state.c[k]
-            w = x[free[mine]] - c                                  # (m, 3) turned offsets
-            RU = np.einsum("ij,mjr->mir", R, d.U[local])            # (m, 3, r)
-            gi = grad[free[mine]]
-            o, r = d.z.start, d.r
-            g[o:o + 3] += gi.sum(axis=0)
-            g[o + 3:o + 6] += np.cross(w, gi).sum(axis=0)
-            g[o + 6:o + 6 + r] += np.einsum("mir,mi->r", RU, gi)
-            gw = float(np.sum(gi * w))
-            H[o + 3:o + 6, o + 3:o + 6] += 0.5 * (gi.T @ w + w.T @ gi) - gw * np.eye(3)
-            Htq = np.cross(RU.transpose(0, 2, 1), gi[:, None, :]).sum(axis=0).T
-            H[o + 3:o + 6, o + 6:o + 6 + r] += Htq
-            H[o + 6:o + 6 + r, o + 3:o + 6] += Htq.T
-            rows = (3 * mine[:, None] + np.arange(3)).ravel()
-            Jx[rows, o:o + 3] = np.tile(np.eye(3), (mine.size, 1))
-            Jx[rows, o + 3:o + 6] = -_cross_matrices(w).reshape(-1, 3)
-            Jx[rows, o + 6:o + 6 + r] = RU.reshape(-1, r)
-        H += Jx.T @ layout.matrix(data) @ Jx
+        e_iso, e_fib, grad = kernels.assemble(x, self._joint_elements, want_grad=True,
+                                              want_hess=True, hess_map=layout.map,
+                                              hess_data=data)
+        fk.joint_derivatives(x, grad, layout.matrix(data), self._slot, self._pairs,
+                             self._pair_ptr, state.c, state.R, self._dom, self._U, self._r,
+                             self._z0, g, H)
+        return E + float(e_iso.sum() + e_fib.sum()), g, H
+
+    def _polynomials(self, q, g, H):
+        return fk.polynomials(q, self._q0, self._r, *self._coefficients, self._z0, g, H)
+
+    def _joint_positions(self, state):
+        x = np.empty_like(self._x0j)
+        fk.joint_positions(state.c, state.R, state.q, self._dom, self._Y, self._U, self._x0j,
+                           self._q0, self._r, x)
+        return x
 
     def retract(self, state, dz, alpha=1.0):
         """The state moved by alpha dz in the Newton unknowns: c + alpha dc, exp(alpha [dtheta])
         R, q + alpha dq."""
-        new = state.copy()
-        for k, d in enumerate(self.domains):
-            o = d.z.start
-            new.c[k] += alpha * dz[o:o + 3]
-            new.R[k] = _rotation(alpha * dz[o + 3:o + 6]) @ state.R[k]
-            new.q[d.q] += alpha * dz[o + 6:o + 6 + d.r]
-        return new
+        return FramedState(state.c + alpha * dz[self._zc],
+                           rotations(alpha * dz[self._zt]) @ state.R,
+                           state.q + alpha * dz[self._zq])
 
     def _bound(self, dz):
         """The largest node move of the step dz, bounded per domain, m."""
-        return max(np.linalg.norm(dz[d.z.start:d.z.start + 3])
-                   + np.linalg.norm(dz[d.z.start + 3:d.z.start + 6]) * d.radius
-                   + np.linalg.norm(dz[d.z.start + 6:d.z.stop]) * d.reach
-                   for d in self.domains)
+        q = np.sqrt(np.add.reduceat(dz[self._zq] ** 2, self._q0)) if dz[self._zq].size else 0.0
+        return float(np.max(np.linalg.norm(dz[self._zc], axis=1)
+                            + np.linalg.norm(dz[self._zt], axis=1) * self._radius
+                            + q * self._reach))
 
     def _newton(self, state, targets, inertia, max_iter):
         """Minimize the step's energy from `state` by Newton with a backtracking line search
@@ -421,15 +409,15 @@ def _descent(H, g):
         return -V @ ((V.T @ g) / lam)
 
 
-def _rotation(theta):
-    """exp([theta]_x) (3, 3) by Rodrigues' formula (1 - cos a written 2 sin^2(a/2), which
-    keeps its digits at small angles)."""
-    angle = float(np.linalg.norm(theta))
-    K = np.einsum("j,jab->ab", theta, _GEN)
-    if angle == 0.0:
-        return np.eye(3)
-    half = math.sin(0.5 * angle) / (0.5 * angle)
-    return np.eye(3) + math.sin(angle) / angle * K + 0.5 * half * half * K @ K
+def rotations(theta):
+    """exp([theta_d]_x) (D, 3, 3) of rotation vectors theta (D, 3), by Rodrigues' formula
+    (1 - cos a written 2 sin^2(a/2), which keeps its digits at small angles)."""
+    angle = np.linalg.norm(theta, axis=1)
+    K = np.einsum("dj,jab->dab", theta, GEN)
+    safe = np.where(angle > 0, angle, 1.0)
+    first = np.where(angle > 0, np.sin(angle) / safe, 1.0)
+    half = np.where(angle > 0, np.sin(0.5 * angle) / (0.5 * safe), 1.0)
+    return np.eye(3) + first[:, None, None] * K + (0.5 * half ** 2)[:, None, None] * (K @ K)
 
 
 def _orthonormal(state):
@@ -441,7 +429,7 @@ def _orthonormal(state):
 
 def _cross_matrices(w):
     """(m, 3, 3) [w]_x of each row of w (m, 3)."""
-    return np.einsum("mj,jab->mab", w, _GEN)
+    return np.einsum("mj,jab->mab", w, GEN)
 
 
 def _subset(elements, rows, tets):
