@@ -14,9 +14,20 @@ up to half the body's weight at each free end) follows bending through large rot
     model = ReducedModel(scene, modes=4, snapshots=16)   # r = 20
     model.validation.tip_error                           # on unseen loads, against the FEM
 
+Bodies whose parts swing far (a T's or a Y's arms, a tail) move better in FramedModel: the
+body cut into domains at bands of distance from its held nodes, each domain in its own
+rotating frame with a local basis (anisofem.reduced.framed):
+
+    model = FramedModel(scene)                           # 4 bands, 12 coordinates per domain
+    now = before = model.rest()
+    after, report = model.step(now, before, dt=0.02)
+    x = model.positions(after)
+
 The Neo-Hookean base is not polynomial in q and is refused.
 """
+from .framed import FramedModel, FramedState
 from .loads import Drag, Loads, default_loads
 from .model import MODES, NewtonReport, ReducedModel
 
-__all__ = ["MODES", "Drag", "Loads", "NewtonReport", "ReducedModel", "default_loads"]
+__all__ = ["MODES", "Drag", "FramedModel", "FramedState", "Loads", "NewtonReport",
+           "ReducedModel", "default_loads"]

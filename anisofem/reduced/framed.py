@@ -35,7 +35,6 @@ import scipy.sparse.linalg as spla
 
 from .. import kernels
 from .._validate import as_float_array
-from ..assembly import DenseLayout
 from ..densities import STVK
 from ..potential import Potential
 from ..scene import check_scene
@@ -58,7 +57,7 @@ COORDINATES = 12
 MODES = 6
 
 #: A Newton iteration is the last when no node moves more than this share of the body's size.
-STEP_TOLERANCE = 1e-9
+STEP_TOLERANCE = 1e-8
 
 @dataclass
 class FramedState:
@@ -126,12 +125,9 @@ class FramedModel:
             raise ValueError("scene: the framed model needs the StVK base material (a domain's "
                              "energy is a polynomial in its coordinates); this scene has "
                              "Neo-Hookean elements")
-        if scene.pressures:
-            raise ValueError("scene: the framed model does not take pressures; use ReducedModel")
-        partial = scene.fixed_mask.any(axis=1) & ~scene.fixed_mask.all(axis=1)
-        if partial.any():
-            raise ValueError(f"fixed: the framed model holds whole nodes; {int(partial.sum())} "
-                             f"nodes are held along some axes only (rollers)")
+        why = refusal(scene)
+        if why:
+            raise ValueError(why)
         scene.check_static()
         bands = _count(bands, "bands", 1)
         coordinates = _count(coordinates, "coordinates", 1)
@@ -179,16 +175,12 @@ class FramedModel:
         tets = local.reshape(len(joints), -1)
         self._joint_nodes = nodes
         self._joint_elements = _subset(elements, joints, tets)
-        free = self.labels[nodes] >= 0
-        self._slot = np.full(nodes.size, -1, np.int64)
-        self._slot[free] = np.arange(free.sum())
-        dof = np.where(free[:, None], 3 * self._slot[:, None] + np.arange(3), -1)
-        self._joint_layout = DenseLayout(tets, dof)
         k = tets.shape[1]
         pairs = np.unique(np.concatenate([tets[:, [a, b]] for a in range(k) for b in range(k)]),
                           axis=0)
         self._pairs = np.ascontiguousarray(pairs, dtype=np.int64)
         self._pair_ptr = np.searchsorted(pairs[:, 0], np.arange(nodes.size + 1)).astype(np.int64)
+        self._joint_map = _block_map(tets, pairs, self.labels[nodes] >= 0)
         return inner
 
     def _pack(self):
@@ -335,14 +327,12 @@ class FramedModel:
                               t, self._q0, self._r, self._z0, g, H)
         E += self._polynomials(state.q, g, H)
         x = self._joint_positions(state)
-        layout = self._joint_layout
-        data = layout.zeros()
+        blocks = np.zeros((self._pairs.shape[0], 3, 3))
         e_iso, e_fib, grad = kernels.assemble(x, self._joint_elements, want_grad=True,
-                                              want_hess=True, hess_map=layout.map,
-                                              hess_data=data)
-        fk.joint_derivatives(x, grad, layout.matrix(data), self._slot, self._pairs,
-                             self._pair_ptr, state.c, state.R, self._dom, self._U, self._r,
-                             self._z0, g, H)
+                                              want_hess=True, hess_map=self._joint_map,
+                                              hess_data=blocks.reshape(-1))
+        fk.joint_derivatives(x, grad, blocks, self._pairs, self._pair_ptr, state.c, state.R,
+                             self._dom, self._U, self._r, self._z0, g, H)
         return E + float(e_iso.sum() + e_fib.sum()), g, H
 
     def _polynomials(self, q, g, H):
@@ -398,6 +388,18 @@ class FramedModel:
                                                  f"{max_iter} iterations spent")
 
 
+def refusal(scene):
+    """Why the framed model cannot take a StVK scene (a message naming the field), or None:
+    pressures (a cavity's volume spans domains), and nodes held along some axes only."""
+    if scene.pressures:
+        return "scene: the framed model does not take pressures; use ReducedModel"
+    partial = scene.fixed_mask.any(axis=1) & ~scene.fixed_mask.all(axis=1)
+    if partial.any():
+        return (f"fixed: the framed model holds whole nodes; {int(partial.sum())} nodes are "
+                f"held along some axes only (rollers)")
+    return None
+
+
 def _descent(H, g):
     """-H^-1 g, by Cholesky, or where H is not positive definite with its eigenvalues
     mirrored and floored at 1e-10 of the largest."""
@@ -430,6 +432,23 @@ def _orthonormal(state):
 def _cross_matrices(w):
     """(m, 3, 3) [w]_x of each row of w (m, 3)."""
     return np.einsum("mj,jab->mab", w, GEN)
+
+
+def _block_map(tets, pairs, free):
+    """(m, (3k)^2) where each element-matrix entry (3 a + i, 3 b + j) of elements tets (m, k)
+    lands among 3 x 3 blocks, one per row of pairs (p, 2) (sorted node pairs): 9 p + 3 i + j,
+    or -1 where a node is not free."""
+    m, k = tets.shape
+    a = np.repeat(np.arange(k), 3)[:, None].repeat(3 * k, axis=1)
+    b = a.T
+    i = np.tile(np.arange(3), k)[:, None].repeat(3 * k, axis=1)
+    j = i.T
+    first, second = tets[:, a], tets[:, b]                     # (m, 3k, 3k)
+    keys = pairs[:, 0] * (pairs.max() + 1) + pairs[:, 1]
+    p = np.searchsorted(keys, first * (pairs.max() + 1) + second)
+    position = 9 * p + 3 * i + j
+    position[~(free[first] & free[second])] = -1
+    return position.reshape(m, -1).astype(np.int32 if 9 * len(pairs) < 2 ** 31 else np.int64)
 
 
 def _subset(elements, rows, tets):

@@ -191,11 +191,11 @@ def _node_jacobians(x, c, R, dom, U, r, Jn):
 
 
 @njit(cache=True, fastmath=_SUMS)
-def joint_derivatives(x, grad, hess, slot, pairs, pair_ptr, c, R, dom, U, r, z0, g, H):
+def joint_derivatives(x, grad, blocks, pairs, pair_ptr, c, R, dom, U, r, z0, g, H):
     """Add the joints' gradient and Hessian, chained through each node's frame: grad (k, 3) and
-    hess (the dense Hessian of the free joint nodes, node i's rows at 3 slot[i]) in the
-    positions; pairs (p, 2) the joint nodes that share an element (both orders, and (i, i)),
-    sorted, node i's from pair_ptr[i] to pair_ptr[i + 1]."""
+    the Hessian's 3 x 3 blocks (p, 3, 3) in the positions of the node pairs (p, 2) that share
+    an element (both orders, and (i, i)), sorted, node i's from pair_ptr[i] to
+    pair_ptr[i + 1]."""
     k = dom.size
     nz = g.size
     Jn = np.zeros((k, 3, 6 + r.max()))
@@ -230,7 +230,6 @@ def joint_derivatives(x, grad, hess, slot, pairs, pair_ptr, c, R, dom, U, r, z0,
                 H[o + 6 + b, o + 3 + a] += cr[a]
         # Gauss-Newton part: K = sum_j hess_ij Jn_j over node i's neighbours, then Jn_i^T K
         touched[:] = False
-        si = 3 * slot[i]
         for p in range(pair_ptr[i], pair_ptr[i + 1]):
             j = pairs[p, 1]
             dj = dom[j]
@@ -239,11 +238,10 @@ def joint_derivatives(x, grad, hess, slot, pairs, pair_ptr, c, R, dom, U, r, z0,
             if not touched[dj]:
                 touched[dj] = True
                 K[:, z0[dj]:z0[dj] + 6 + r[dj]] = 0.0
-            sj = 3 * slot[j]
             oj, nj = z0[dj], 6 + r[dj]
             for a in range(3):
                 for b in range(3):
-                    h = hess[si + a, sj + b]
+                    h = blocks[p, a, b]
                     for v in range(nj):
                         K[a, oj + v] += h * Jn[j, b, v]
         for e in range(r.size):
