@@ -194,3 +194,26 @@ def test_step_refuses_bad_forces(t_model):
         t_model.step(rest, rest, 0.02, force=np.full(t_model.x0.shape, np.nan))
     with pytest.raises(ValueError, match="dt"):
         t_model.step(rest, rest, 0.0)
+
+
+def test_trade_rung_and_where_it_is_left_out():
+    """The trade's framed rung on the T follows the exact rollout; a scene with rollers leaves
+    it out with a note, the other reduced rungs kept."""
+    scene = t_scene()
+    result = af.trade(scene, steps=10, progress=False,
+                      rungs=af.ladder.fem_rungs()[:1] + [af.ladder.framed_rung(4, 12)])
+    row = result["rungs"][1]
+    assert row["name"] == "reduced framed b4 c12" and row["kind"] == "reduced"
+    assert row["stable"] and row["max_error"] < 0.01
+    mesh = scene.mesh
+    roller = np.zeros((mesh.n_vertices, 3), bool)
+    roller[mesh.vertices[:, 2] < 1e-9] = True
+    roller[mesh.vertices[:, 2] > 0.08 - 1e-9, 0] = True
+    notes = []
+    rungs = [af.ladder.framed_rung(4, 12), af.ladder.reduced_rung(4, 16)]
+    kept = af.ladder._representable(rungs, af.Scene(mesh, scene.material, fixed=roller), notes)
+    assert [r.name for r in kept] == ["reduced m4 s16"]
+    partial = int((roller.any(axis=1) & ~roller.all(axis=1)).sum())
+    assert partial == 33 and notes == [
+        f"framed rungs not run: fixed: the framed model holds whole nodes; {partial} nodes are "
+        f"held along some axes only (rollers)"]
