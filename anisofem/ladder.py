@@ -106,6 +106,21 @@ def fem_rung(name, method="auto", dt_factor=1, **options):
     return Rung(name, "fem", make, dt_factor)
 
 
+def _stepping(build_seconds, dt, step):
+    """advance(x, v) of a reduced rung: step() -> (the next positions (n, 3), NewtonReport);
+    the first step's info carries the model's build time as "setup_seconds"."""
+    setup = {"setup_seconds": build_seconds}
+
+    def advance(x, v):
+        nonlocal setup
+        x_next, report = step()
+        info = {"failed": not report.converged, "message": report.message,
+                "iterations": report.iterations, **setup}
+        setup = {}
+        return x_next, (x_next - x) / dt, info
+    return advance
+
+
 def reduced_rung(modes, snapshots=0):
     """A Rung stepping the scene's ReducedModel (anisofem.reduced) with `modes` vibration
     modes and their modal derivatives, or with `snapshots` > 0 the modes and that many
@@ -115,17 +130,12 @@ def reduced_rung(modes, snapshots=0):
     def make(scene, dt):
         model = ReducedModel(scene, modes=modes, snapshots=snapshots, validate=False)
         q, w = np.zeros(model.r), np.zeros(model.r)
-        setup = {"setup_seconds": model.build_seconds}
 
-        def advance(x, v):
-            nonlocal q, w, setup
+        def step():
+            nonlocal q, w
             q, w, report = model.step(q, w, dt)
-            x_next = model.positions(q)
-            info = {"failed": not report.converged, "message": report.message,
-                    "iterations": report.iterations, **setup}
-            setup = {}
-            return x_next, (x_next - x) / dt, info
-        return advance
+            return model.positions(q), report
+        return _stepping(model.build_seconds, dt, step)
     return Rung(f"reduced m{modes}" + (f" s{snapshots}" if snapshots else ""), "reduced",
                 make)
 
@@ -138,18 +148,13 @@ def framed_rung(bands, coordinates):
     def make(scene, dt):
         model = FramedModel(scene, bands=bands, coordinates=coordinates, validate=False)
         now = before = model.rest()
-        setup = {"setup_seconds": model.build_seconds}
 
-        def advance(x, v):
-            nonlocal now, before, setup
+        def step():
+            nonlocal now, before
             after, report = model.step(now, before, dt)
             now, before = after, now
-            x_next = model.positions(now)
-            info = {"failed": not report.converged, "message": report.message,
-                    "iterations": report.iterations, **setup}
-            setup = {}
-            return x_next, (x_next - x) / dt, info
-        return advance
+            return model.positions(now), report
+        return _stepping(model.build_seconds, dt, step)
     return Rung(f"{FRAMED_PREFIX} b{bands} c{coordinates}", "reduced", make)
 
 
@@ -170,18 +175,13 @@ def body_rung(body, modes, snapshots):
         rest, basis = model.x0[:n], model.basis[:3 * n]
         q, w = np.zeros(model.r), np.zeros(model.r)
         steps[:] = [(q, w)]
-        setup = {"setup_seconds": model.build_seconds}
 
-        def advance(x, v):
-            nonlocal q, w, setup
+        def step():
+            nonlocal q, w
             q, w, report = model.step(q, w, dt)
             steps.append((q, w))
-            x_next = rest + (basis @ q).reshape(n, 3)
-            info = {"failed": not report.converged, "message": report.message,
-                    "iterations": report.iterations, **setup}
-            setup = {}
-            return x_next, (x_next - x) / dt, info
-        return advance
+            return rest + (basis @ q).reshape(n, 3), report
+        return _stepping(model.build_seconds, dt, step)
 
     def on_body():
         return {k: (model.positions(q), (model.basis @ w).reshape(-1, 3))

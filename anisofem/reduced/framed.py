@@ -8,8 +8,8 @@ and U_d (k, 3, r_d) the domain's local basis, mass-orthonormal and free of rigid
 local bases are the principal directions of the full FEM's static equilibria under the declared
 loads (anisofem.reduced.snapshots), each pulled back into the domain's best-fitting frame, and
 of the rest vibration modes: what a linear basis must hold for every orientation, a frame holds
-by turning (after Barbic and Zhao 2011, with the domains joined through their shared elements
-instead of springs). The held nodes keep their place.
+by turning (after Barbic and Zhao 2011; here the domains are joined through the elements they
+share). The held nodes keep their place.
 
 Backward Euler minimizes over the frames and coordinates
 
@@ -19,7 +19,7 @@ exactly for these kinematics:
 - V_d, the elastic energy of the elements inside domain d, does not change when the domain
   turns: it is the quartic polynomial of anisofem.reduced.polynomial in q_d.
 - The inertia and the loads are quadratic in x, so their sums over a domain's nodes reduce to
-  3 x 3 moments of its basis, precomputed (tr(R^T T(q)) below): no mesh data per step.
+  3 x 3 moments of its basis, precomputed (FramedModel._targets): no mesh data per step.
 - The joints, the elements whose nodes lie in more than one domain (or on held nodes), are
   evaluated element by element: a layer one element thick at each cut.
 Each Newton step turns R_d by exp([theta_d]) and takes the exact gradient and Hessian in
@@ -35,15 +35,14 @@ import scipy.sparse.linalg as spla
 
 from .. import kernels
 from .._validate import as_float_array
-from ..densities import STVK
 from ..potential import Potential
-from ..scene import check_scene
 from . import basis as _basis
 from . import framed_kernels as fk
 from .framed_kernels import GEN
 from .domains import split
 from .loads import Loads, default_loads, unseen_cases
-from .model import (REDRAWS, VALIDATION_CASES, NewtonReport, _count, validate_rollouts)
+from .model import (REDRAWS, VALIDATION_CASES, NewtonReport, _count, check_polynomial_scene,
+                    validate_rollouts)
 from .polynomial import polynomial
 from .snapshots import principal_directions, static_states
 
@@ -120,11 +119,7 @@ class FramedModel:
 
     def __init__(self, scene, bands=BANDS, coordinates=COORDINATES, modes=MODES, loads=None,
                  validate=True):
-        check_scene(scene)
-        if (scene.elements.model != STVK).any():
-            raise ValueError("scene: the framed model needs the StVK base material (a domain's "
-                             "energy is a polynomial in its coordinates); this scene has "
-                             "Neo-Hookean elements")
+        check_polynomial_scene(scene, "framed model")
         why = refusal(scene)
         if why:
             raise ValueError(why)

@@ -115,11 +115,7 @@ class ReducedModel:
 
     def __init__(self, scene, modes=MODES, derivatives=None, snapshots=0, loads=None,
                  validate=True):
-        check_scene(scene)
-        if (scene.elements.model != STVK).any():
-            raise ValueError("scene: the reduced model needs the StVK base material (its energy "
-                             "is a polynomial in the reduced coordinates); this scene has "
-                             "Neo-Hookean elements")
+        check_polynomial_scene(scene, "reduced model")
         scene.check_static()
         modes = _count(modes, "modes", 1)
         snapshots = _count(snapshots, "snapshots", 0)
@@ -340,6 +336,16 @@ def full_rollout(scene, phases, dt):
             x, v = result.x, result.v
             xs.append(x)
     return np.array(xs), True
+
+
+def check_polynomial_scene(scene, model):
+    """TypeError unless scene is a Scene; ValueError unless every element has the StVK base,
+    whose energy is a polynomial in a reduced model's coordinates (`model` names the model)."""
+    check_scene(scene)
+    if (scene.elements.model != STVK).any():
+        raise ValueError(f"scene: the {model} needs the StVK base material (its energy is a "
+                         f"polynomial in the reduced coordinates); this scene has Neo-Hookean "
+                         f"elements")
 
 
 def _count(value, name, smallest):
