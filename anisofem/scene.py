@@ -1,7 +1,7 @@
 """A scene: mesh + material + boundary conditions + dead loads, with the per-element data the
 kernels need, precomputed once."""
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -12,7 +12,7 @@ from .inversion import volume_change
 from .kernels import MAX_NODES
 from .densities import STVK
 from .material import Material
-from .mesh import TetMesh
+from .mesh import TetMesh, block_coloring
 from .curves import Timed
 from .pressure import CavityLoad, Pressure
 
@@ -35,6 +35,22 @@ class ElementData:
     has_fiber: bool           # False: the fiber term is skipped entirely
     block_starts: np.ndarray  # (blocks,) int64 first tet of each assembly block, by color
     color_ptr: np.ndarray     # (colors + 1,) int64 color c: block_starts[ptr[c]:ptr[c+1]]
+
+    def subset(self, rows, tets=None):
+        """The ElementData of the elements `rows` (indices), their node numbers replaced by
+        `tets` (len(rows), k) where given (a compact numbering), with an assembly coloring of
+        their own (the whole mesh's would let two threads scatter into one node)."""
+        rows = np.asarray(rows, dtype=np.int64)
+        tets = np.ascontiguousarray(self.tets[rows] if tets is None else tets, dtype=np.int64)
+        if rows.size:
+            starts, ptr = block_coloring(tets[:, :4], int(tets.max()) + 1)
+        else:
+            starts, ptr = np.zeros(0, np.int64), np.zeros(1, np.int64)
+        return replace(self, tets=tets, grads=self.grads[rows], weights=self.weights[rows],
+                       model=self.model[rows], mu=self.mu[rows], lam=self.lam[rows],
+                       kappa=self.kappa[rows], fiber=self.fiber[rows],
+                       has_fiber=bool((self.kappa[rows] > 0).any()), block_starts=starts,
+                       color_ptr=ptr)
 
 
 class Scene:

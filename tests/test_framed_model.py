@@ -48,9 +48,11 @@ def test_split_cuts_the_t_at_its_junction():
 
 
 def test_split_labels_midside_nodes():
-    labels, count = split(t_scene(order=2), 4)
-    assert count == 5 and (labels >= -1).all()
-    assert (labels[t_scene(order=2).fixed_mask.any(axis=1)] == -1).all()
+    """On 10-node tets every free node, midside ones included, falls into a domain."""
+    scene = t_scene(order=2)
+    labels, count = split(scene, 4)
+    held = scene.fixed_mask.any(axis=1)
+    assert count == 5 and (labels[held] == -1).all() and (labels[~held] >= 0).all()
 
 
 def random_state(model, seed, size):
@@ -155,7 +157,7 @@ def test_backward_euler_gains_no_energy(t_model):
     energy = [potential.energy(xs[k]) + 0.5 * np.sum(m * ((xs[k] - xs[k - 1]) / 0.02) ** 2)
               for k in range(16, len(xs))]
     assert np.all(np.diff(energy) <= 1e-9 * np.abs(energy).max())
-    assert energy[-1] < 0.9 * energy[0] + 0.1 * min(energy)
+    assert energy[-1] < energy[0]
 
 
 def test_t_validation_on_unseen_one_arm_drags(t_model):

@@ -27,7 +27,7 @@ Each Newton step turns R_d by exp([theta_d]) and takes the exact gradient and He
 """
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
@@ -72,12 +72,14 @@ class FramedState:
 
 @dataclass
 class Domain:
-    """One domain: nodes (k,); y (k, 3) their rest positions about its centre of mass, m; U
+    """One domain: nodes (k,); centre (3,), its rest centre of mass, m; y (k, 3) the nodes'
+    rest positions about it, m; U
     (k, 3, r) its local basis; mass, kg; the moments of its basis (a (r,) = sum m U_b . y,
     J (3, 3) = sum m y y^T, A (r, 3, 3) = sum m U_a y^T, B (r, r, 3, 3) = sum m U_a U_b^T);
     polynomial, the energy of its inner elements; radius, the largest |y|, m; reach, the
     largest row norm of U; z and q, its slices of the Newton unknowns and of FramedState.q."""
     nodes: np.ndarray
+    centre: np.ndarray
     y: np.ndarray
     U: np.ndarray
     mass: float
@@ -140,13 +142,13 @@ class FramedModel:
         self.x0 = scene.initial_positions()
         self.labels, count = split(scene, bands)
         states, self.snapshots = static_states(scene, loads)
-        fields = np.concatenate([states - self.x0, _rest_modes(scene, self.x0, modes)])
+        modes = _rest_modes(scene, self.x0, modes)
         inner = self._cut()
         self.domains, z, q = [], 0, 0
         for d in range(count):
             nodes = np.flatnonzero(self.labels == d)
-            domain = _domain(scene, self.x0, nodes, states, fields[len(states):], coordinates,
-                             inner[d], z, q)
+            domain = _domain(scene, self.x0, nodes, states, modes, coordinates, inner[d], z,
+                             q)
             self.domains.append(domain)
             z, q = z + 6 + domain.r, q + domain.r
         self.r, self._q_size = z, q
@@ -169,7 +171,7 @@ class FramedModel:
         nodes, local = np.unique(elements.tets[joints], return_inverse=True)
         tets = local.reshape(len(joints), -1)
         self._joint_nodes = nodes
-        self._joint_elements = _subset(elements, joints, tets)
+        self._joint_elements = elements.subset(joints, tets)
         k = tets.shape[1]
         pairs = np.unique(np.concatenate([tets[:, [a, b]] for a in range(k) for b in range(k)]),
                           axis=0)
@@ -191,16 +193,16 @@ class FramedModel:
         self._J = np.array([d.J for d in D])
         self._A = np.concatenate([d.A for d in D])
         self._B = np.concatenate([d.B.reshape(-1, 3, 3) for d in D])
+        n = self.x0.shape[0]
+        self._Y = np.zeros((n, 3))          # every node's rest offset and basis rows in its
+        self._U = np.zeros((n, 3, max(self._r.max(), 1)))     # domain (zero for held nodes)
+        for d in D:
+            self._Y[d.nodes] = d.y
+            self._U[d.nodes, :, :d.r] = d.U
+        self._labels = self.labels.astype(np.int64)
         nodes = self._joint_nodes
-        self._dom = self.labels[nodes].astype(np.int64)
-        self._Y = np.zeros((nodes.size, 3))
-        self._U = np.zeros((nodes.size, 3, max(self._r.max(), 1)))
-        for k, d in enumerate(D):
-            mine = np.flatnonzero(self._dom == k)
-            local = np.searchsorted(d.nodes, nodes[mine])
-            self._Y[mine] = d.y[local]
-            self._U[mine, :, :d.r] = d.U[local]
-        self._x0j = self.x0[nodes].copy()
+        self._joint_rows = (self._labels[nodes], self._Y[nodes], self._U[nodes],
+                            self.x0[nodes].copy())
         P = [d.polynomial for d in D]
         sizes = np.array([[p.C2.size, p.S3.size, p.W4.size] for p in P])
         self._coefficients = (
@@ -218,16 +220,14 @@ class FramedModel:
 
     def rest(self):
         """The rest state: every frame at its domain's rest centre, unturned, q = 0."""
-        c = np.array([self.x0[d.nodes].T @ self.scene.masses[d.nodes] / d.mass
-                      for d in self.domains])
-        return FramedState(c, np.tile(np.eye(3), (len(self.domains), 1, 1)),
+        return FramedState(np.array([d.centre for d in self.domains]), np.tile(np.eye(3), (len(self.domains), 1, 1)),
                            np.zeros(self._q_size))
 
     def positions(self, state):
         """Full positions (n, 3), m, of a FramedState."""
-        x = self.x0.copy()
-        for k, d in enumerate(self.domains):
-            x[d.nodes] = (d.y + d.U @ state.q[d.q]) @ state.R[k].T + state.c[k]
+        x = np.empty_like(self.x0)
+        fk.node_positions(state.c, state.R, state.q, self._labels, self._Y, self._U, self.x0,
+                          self._q0, self._r, x)
         return x
 
     def project(self, force):
@@ -327,16 +327,16 @@ class FramedModel:
                                               want_hess=True, hess_map=self._joint_map,
                                               hess_data=blocks.reshape(-1))
         fk.joint_derivatives(x, grad, blocks, self._pairs, self._pair_ptr, state.c, state.R,
-                             self._dom, self._U, self._r, self._z0, g, H)
+                             self._joint_rows[0], self._joint_rows[2], self._r, self._z0, g, H)
         return E + float(e_iso.sum() + e_fib.sum()), g, H
 
     def _polynomials(self, q, g, H):
         return fk.polynomials(q, self._q0, self._r, *self._coefficients, self._z0, g, H)
 
     def _joint_positions(self, state):
-        x = np.empty_like(self._x0j)
-        fk.joint_positions(state.c, state.R, state.q, self._dom, self._Y, self._U, self._x0j,
-                           self._q0, self._r, x)
+        labels, Y, U, x0 = self._joint_rows
+        x = np.empty_like(x0)
+        fk.node_positions(state.c, state.R, state.q, labels, Y, U, x0, self._q0, self._r, x)
         return x
 
     def retract(self, state, dz, alpha=1.0):
@@ -446,14 +446,6 @@ def _block_map(tets, pairs, free):
     return position.reshape(m, -1).astype(np.int32 if 9 * len(pairs) < 2 ** 31 else np.int64)
 
 
-def _subset(elements, rows, tets):
-    """An ElementData of some elements (rows), their node numbers replaced by tets."""
-    return replace(elements, tets=np.ascontiguousarray(tets, dtype=np.int64),
-                   grads=elements.grads[rows], weights=elements.weights[rows],
-                   model=elements.model[rows], mu=elements.mu[rows], lam=elements.lam[rows],
-                   kappa=elements.kappa[rows], fiber=elements.fiber[rows])
-
-
 def _rest_modes(scene, x0, count):
     """The `count` lowest vibration modes at rest as node fields (count, n, 3), m."""
     n = scene.mesh.n_vertices
@@ -483,7 +475,8 @@ def _domain(scene, x0, nodes, states, modes, count, inner, z, q):
     polynomial of its inner elements."""
     m = scene.masses[nodes]
     mass = float(m.sum())
-    y = x0[nodes] - m @ x0[nodes] / mass
+    centre = m @ x0[nodes] / mass
+    y = x0[nodes] - centre
     local = []
     for x in states:
         R, c = best_frame(x[nodes], y, m)
@@ -500,11 +493,10 @@ def _domain(scene, x0, nodes, states, modes, count, inner, z, q):
     full = np.zeros((3 * scene.mesh.n_vertices, r))
     full[(3 * nodes[:, None] + np.arange(3)).ravel()] = U.reshape(-1, r)
     return Domain(
-        nodes=nodes, y=y, U=U, mass=mass, a=np.einsum("k,kir,ki->r", m, U, y),
+        nodes=nodes, centre=centre, y=y, U=U, mass=mass, a=np.einsum("k,kir,ki->r", m, U, y),
         J=(m[:, None] * y).T @ y, A=np.einsum("k,kia,kj->aij", m, U, y),
         B=np.einsum("k,kia,kjb->abij", m, U, U),
-        polynomial=polynomial(_subset(scene.elements, inner, scene.elements.tets[inner]),
-                              x0, full),
+        polynomial=polynomial(scene.elements.subset(inner), x0, full),
         radius=float(np.linalg.norm(y, axis=1).max()),
         reach=float(np.linalg.norm(U.reshape(-1, 3, r), axis=(1, 2)).max()),
         z=slice(z, z + 6 + r), q=slice(q, q + r))

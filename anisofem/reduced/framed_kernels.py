@@ -5,12 +5,13 @@ chained through each node's frame.
 Packed arrays: domain d's unknowns start at z0[d] (c, theta, then its r[d] coordinates), its
 coordinates at q0[d] in q and in the packed a (Q,), A (Q, 3, 3) and T (Q, 3, 3); B (sum r^2,
 3, 3) holds B[a, b] of domain d at b0[d] + a r[d] + b. A joint node i belongs to domain
-dom[i] (-1: held) with rest offset Y[i] (3,) and basis rows U[i] (3, rmax).
+dom[i] (-1: held) with rest offset Y[i] (3,) and basis rows U[i] (3, rmax), zero past its
+domain's r.
 """
 import numpy as np
 from numba import njit
 
-from .kernels import _SUMS, cubic_quartic, derivatives, matvec
+from .kernels import _SUMS, derivatives, energy, matvec
 
 #: [e_j]_x, the generators of rotations about the axes: GEN[j, a, b]
 GEN = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
@@ -74,16 +75,7 @@ def polynomials(q, q0, r, c0, c1, C2, S3, W4, offsets, z0, g, H):
         triples = rd * (rd + 1) * (rd + 2) // 6
         W4d = W4[offsets[d, 2]:offsets[d, 2] + triples * rd].reshape(triples, rd)
         Aq = matvec(W4d, qd)
-        Y, X = cubic_quartic(S3d, Aq, qd)
-        e = c0[d]
-        for i in range(rd):
-            s = 0.5 * C2d[i, i] * qd[i]
-            for j in range(rd):
-                if j != i:
-                    s += 0.5 * C2d[i, j] * qd[j]
-                s += (Y[i, j] + X[i, j]) * qd[j]
-            e += (c1d[i] + s) * qd[i]
-        total += e
+        total += energy(c0[d], c1d, C2d, S3d, Aq, qd)
         if g.size:
             gd, Hd = derivatives(c1d, C2d, S3d, Aq, qd, 0.0)
             o = z0[d] + 6
@@ -153,8 +145,9 @@ def domain_derivatives(inertia, c, R, q, a, mass, T0, T, t, q0, r, z0, g, H):
 
 
 @njit(cache=True, fastmath=_SUMS)
-def joint_positions(c, R, q, dom, Y, U, x0, q0, r, out):
-    """Positions (k, 3) of the joint nodes: R (y + U q) + c in their domain, x0 if held."""
+def node_positions(c, R, q, dom, Y, U, x0, q0, r, out):
+    """Positions (k, 3) of nodes in domains dom (k,): R (y + U q) + c in their domain (rest
+    offsets Y (k, 3), basis rows U (k, 3, rmax)), x0 where held (dom -1)."""
     y = np.empty(3)
     for i in range(dom.size):
         d = dom[i]

@@ -104,6 +104,20 @@ def cubic_quartic(S3, A, q):
 
 
 @njit(cache=True)
+def energy(c0, c1, C2, S3, A, q):
+    """V(q) = c0 + c1 . q + q^T (C2 / 2 + Y + X) q, J, with Y = S3[q] and X = S4[q, q];
+    S3 (r * r, r), A = W4 q (T,)."""
+    Y, X = cubic_quartic(S3, A, q)
+    e = c0
+    for i in range(q.size):
+        s = 0.0
+        for j in range(q.size):
+            s += (0.5 * C2[i, j] + Y[i, j] + X[i, j]) * q[j]
+        e += (c1[i] + s) * q[i]
+    return e
+
+
+@njit(cache=True)
 def derivatives(c1, C2, S3, A, q, inertia):
     """(g, H): dV/dq = c1 + (C2 + 3 Y + 4 X) q and d2V/dq2 + inertia I = C2 + 6 Y + 12 X +
     inertia I, with Y = S3[q] and X = S4[q, q] (r, r); S3 (r * r, r), A = W4 q (T,)."""

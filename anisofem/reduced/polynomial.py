@@ -63,8 +63,7 @@ class Polynomial:
 
     def energy(self, q):
         """V(q), J."""
-        Y, X = kernels.cubic_quartic(*self._arguments(q))
-        return self.c0 + self.c1 @ q + q @ ((0.5 * self.C2 + Y + X) @ q)
+        return kernels.energy(self.c0, self.c1, self.C2, *self._arguments(q))
 
     def gradient(self, q, hessian=False):
         """dV/dq (r,), N; with hessian=True also d2V/dq2 (r, r), N/m."""
