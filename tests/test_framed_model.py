@@ -222,3 +222,25 @@ def test_trade_rung_and_where_it_is_left_out():
     assert partial == 33 and notes == [
         f"framed rungs not run: fixed: the framed model holds whole nodes; {partial} nodes are "
         f"held along some axes only (rollers)"]
+
+
+def test_element_subset_colors_its_own_blocks():
+    """A subset of elements has an assembly coloring of its own: its blocks cover each element
+    once and no two blocks of one color share a node. The subset here takes a 6,400-tet beam's
+    assembly blocks 0, 5 and 1 in that order, so its first and third blocks touch, where the
+    whole mesh's coloring gives blocks 0 and 2 one color (and two threads would scatter into
+    the same nodes)."""
+    from anisofem.mesh import ASSEMBLY_BLOCK as B
+    elements = af.Scene(af.box_beam((0.2, 0.02, 0.02), (20, 8, 8)),
+                        af.Material(1e5, 0.48, 1000.0), fixed=[0]).elements
+    rows = np.concatenate([np.arange(k * B, (k + 1) * B) for k in (0, 5, 1)])
+    nodes, local = np.unique(elements.tets[rows], return_inverse=True)
+    sub = elements.subset(rows, local.reshape(rows.size, -1))
+    m = sub.tets.shape[0]
+    assert m == rows.size and np.array_equal(nodes[sub.tets], elements.tets[rows])
+    covered = np.concatenate([np.arange(s, min(s + B, m)) for s in sub.block_starts])
+    assert np.array_equal(np.sort(covered), np.arange(m))
+    for c in range(sub.color_ptr.size - 1):
+        starts = sub.block_starts[sub.color_ptr[c]:sub.color_ptr[c + 1]]
+        seen = [set(sub.tets[s:s + B, :4].ravel()) for s in starts]
+        assert sum(len(v) for v in seen) == len(set().union(*seen))
