@@ -77,3 +77,38 @@ def _merge_small(labels, graph):
     renumber = np.full(labels.max() + 2, -1)
     renumber[kept] = np.arange(kept.size)
     return renumber[labels], int(kept.size)
+
+
+def tree(scene, labels):
+    """The domains' kinematic tree: parent (count,) int, each domain's neighbour nearer the held
+    nodes through the mesh (-1: the held nodes), and pivot (count, 3), m, the rest centroid of
+    the nodes on either side of the interface with the parent (where a turn of the domain
+    leaves the joint in place). The parent is the neighbour (domain or held) with the least
+    mean held_distance below the domain's own; parents come before their children in
+    `order` (count,), returned third."""
+    graph = edge_graph(scene.mesh)
+    distance = held_distance(scene, graph)
+    count = int(labels.max()) + 1
+    mean = np.array([distance[labels == d].mean() for d in range(count)])
+    coo = graph.tocoo()
+    a, b = labels[coo.row], labels[coo.col]
+    x = scene.mesh.vertices
+    parent = np.full(count, -1)
+    pivot = np.empty((count, 3))
+    for d in range(count):
+        across = (a == d) & (b != d)
+        near = {int(e) for e in np.unique(b[across]) if e < 0 or mean[e] < mean[d]}
+        if near - {-1}:
+            parent[d] = min(near - {-1}, key=lambda e: mean[e])
+        elif -1 not in near:  # no neighbour nearer the held nodes: the domain's own centroid
+            pivot[d] = x[labels == d].mean(axis=0)
+            continue
+        side = across & (b == parent[d])
+        pivot[d] = x[np.union1d(coo.row[side], coo.col[side])].mean(axis=0)
+    order, placed = [], np.zeros(count, bool)
+    while len(order) < count:
+        for d in range(count):
+            if not placed[d] and (parent[d] < 0 or placed[parent[d]]):
+                order.append(d)
+                placed[d] = True
+    return parent, pivot, np.array(order, np.int64)

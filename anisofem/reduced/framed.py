@@ -39,7 +39,7 @@ from ..potential import Potential
 from . import basis as _basis
 from . import framed_kernels as fk
 from .framed_kernels import GEN
-from .domains import split
+from .domains import split, tree
 from .loads import Loads, default_loads, unseen_cases
 from .model import (REDRAWS, VALIDATION_CASES, NewtonReport, _count, check_polynomial_scene,
                     validate_rollouts)
@@ -141,9 +141,10 @@ class FramedModel:
         self.scene, self.loads = scene, loads
         self.x0 = scene.initial_positions()
         self.labels, count = split(scene, bands)
+        self.parent, pivots, self._order = tree(scene, self.labels)
         states, self.snapshots = static_states(scene, loads)
         modes = _rest_modes(scene, self.x0, modes)
-        inner = self._cut()
+        inner, joints = self._cut()
         self.domains, z, q = [], 0, 0
         for d in range(count):
             nodes = np.flatnonzero(self.labels == d)
@@ -153,32 +154,38 @@ class FramedModel:
             z, q = z + 6 + domain.r, q + domain.r
         self.r, self._q_size = z, q
         self._pack()
+        self._plant(pivots)
         self.size = float(np.ptp(self.x0, axis=0).max())
+        self._set_joints(joints)
         self._own = self._project(scene.external_force)
         credit = max(self.snapshots.seconds - (time.perf_counter() - t0), 0.0)
         self.build_seconds = time.perf_counter() - t0 + credit
         self.validation = self.validate() if validate else None
 
     def _cut(self):
-        """Each domain's inner elements (lists of element indices); the joints, the elements
-        across domains (and held nodes), with a compact numbering of their nodes."""
-        elements = self.scene.elements
-        owner = self.labels[elements.tets]
+        """Each domain's inner elements (lists of element indices), and the joints (element
+        indices), the elements across domains (and held nodes)."""
+        owner = self.labels[self.scene.elements.tets]
         inner_mask = (owner == owner[:, :1]).all(axis=1) & (owner[:, 0] >= 0)
         inner = [np.flatnonzero(inner_mask & (owner[:, 0] == d))
                  for d in range(self.labels.max() + 1)]
-        joints = np.flatnonzero(~inner_mask & (owner >= 0).any(axis=1))
-        nodes, local = np.unique(elements.tets[joints], return_inverse=True)
-        tets = local.reshape(len(joints), -1)
-        self._joint_nodes = nodes
-        self._joint_elements = elements.subset(joints, tets)
+        return inner, np.flatnonzero(~inner_mask & (owner >= 0).any(axis=1))
+
+    def _set_joints(self, rows):
+        """The joints, elements `rows`, over a compact numbering of their nodes: their
+        ElementData, the nodes' packed rows (labels, Y, U, x0) and the Hessian's node pairs."""
+        elements = self.scene.elements
+        nodes, local = np.unique(elements.tets[rows], return_inverse=True)
+        tets = local.reshape(len(rows), -1)
+        self._joint_elements = elements.subset(rows, tets)
+        self._joint_rows = (self._labels[nodes], self._Y[nodes], self._U[nodes],
+                            self.x0[nodes].copy())
         k = tets.shape[1]
         pairs = np.unique(np.concatenate([tets[:, [a, b]] for a in range(k) for b in range(k)]),
                           axis=0)
         self._pairs = np.ascontiguousarray(pairs, dtype=np.int64)
         self._pair_ptr = np.searchsorted(pairs[:, 0], np.arange(nodes.size + 1)).astype(np.int64)
         self._joint_map = _block_map(tets, pairs, self.labels[nodes] >= 0)
-        return inner
 
     def _pack(self):
         """The domains' moments and the joint nodes' rows in the packed arrays of
@@ -200,9 +207,6 @@ class FramedModel:
             self._Y[d.nodes] = d.y
             self._U[d.nodes, :, :d.r] = d.U
         self._labels = self.labels.astype(np.int64)
-        nodes = self._joint_nodes
-        self._joint_rows = (self._labels[nodes], self._Y[nodes], self._U[nodes],
-                            self.x0[nodes].copy())
         P = [d.polynomial for d in D]
         sizes = np.array([[p.C2.size, p.S3.size, p.W4.size] for p in P])
         self._coefficients = (
@@ -254,7 +258,7 @@ class FramedModel:
             raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
         inertia = 1.0 / dt ** 2
         targets = self._targets(self._load(force), inertia, ((now, 2.0), (before, -1.0)))
-        return self._newton(now.copy(), targets, inertia, max_iter)
+        return self._newton(self._extrapolated(now, before), targets, inertia, max_iter)
 
     def solve(self, force=None, start=None, max_iter=50):
         """The static equilibrium under the scene's loads plus nodal forces `force` (n, 3), N,
@@ -311,8 +315,29 @@ class FramedModel:
         return total + float(e_iso.sum() + e_fib.sum())
 
     def derivatives(self, state, targets, inertia):
-        """(energy J, gradient (r,), Hessian (r, r)) in the Newton unknowns (c_d (m), theta_d
-        (rad), q_d per domain), at theta = 0."""
+        """(energy J, gradient (r,), Hessian (r, r)) in the Newton unknowns (per domain: the
+        move t_d of its centre beyond what its parent's and its own turns carry, m; its turn
+        theta_d, rad; its coordinates q_d), at t = theta = 0."""
+        E, g, H, _ = self._derivatives(state, targets, inertia)
+        return E, g, H
+
+    def _derivatives(self, state, targets, inertia):
+        """derivatives(), and the Jacobian (r, r) of the free-centre unknowns (each domain's
+        centre, its turn about it, q) in the tree's."""
+        E, g, H = self._free_derivatives(state, targets, inertia)
+        N = np.zeros((self._centre_rows.size, self.r))
+        fk.tree_chain(state.R, self._chain, self._arms, self._zc, self._zt, g, H, N)
+        C = self._centre_rows
+        HN = H[:, C] @ N
+        H += HN + HN.T + N.T @ (H[np.ix_(C, C)] @ N)
+        g += N.T @ g[C]
+        T = np.eye(self.r)
+        T[C] += N
+        return E, g, H, T
+
+    def _free_derivatives(self, state, targets, inertia):
+        """(energy J, gradient (r,), Hessian (r, r)) in each domain's centre c_d (m), its turn
+        theta_d (rad) about it and its coordinates q_d, at theta = 0."""
         T0, T, t = targets
         g = np.zeros(self.r)
         H = np.zeros((self.r, self.r))
@@ -340,11 +365,57 @@ class FramedModel:
         return x
 
     def retract(self, state, dz, alpha=1.0):
-        """The state moved by alpha dz in the Newton unknowns: c + alpha dc, exp(alpha [dtheta])
-        R, q + alpha dq."""
-        return FramedState(state.c + alpha * dz[self._zc],
-                           rotations(alpha * dz[self._zt]) @ state.R,
+        """The state moved by alpha dz in the Newton unknowns: each R turned by
+        exp(alpha [dtheta]), each centre's own move t by alpha dt, the centres carried by the
+        turns (FramedModel._plant), q + alpha dq."""
+        R = rotations(alpha * dz[self._zt]) @ state.R
+        return FramedState(self._centres(self._moves(state) + alpha * dz[self._zc], R), R,
                            state.q + alpha * dz[self._zq])
+
+    def _extrapolated(self, now, before):
+        """Newton's start for the step after `now`: each frame turned on by its last turn
+        (R_now R_before^T R_now), its own move and q carried on as far."""
+        R = _orthonormal(FramedState(now.c, now.R @ before.R.transpose(0, 2, 1) @ now.R,
+                                     now.q)).R
+        return FramedState(self._centres(2 * self._moves(now) - self._moves(before), R), R,
+                           2 * now.q - before.q)
+
+    def _plant(self, pivots):
+        """The kinematic tree (anisofem.reduced.domains.tree): domain e's centre is
+        c_e = c_p + R_p a_e + R_e b_e + t_e, p its parent (c = 0, R = I for the held nodes),
+        a_e its pivot's rest offset from the parent's centre, b_e its centre's from its pivot,
+        so that a turn of a domain carries the domains beyond it; t_e, its own move, is a
+        Newton unknown. _chain lists (f, d, v) for each domain f on the path from the root to
+        d: R_f v is the arm by which f's turn moves d's centre."""
+        centres = np.array([d.centre for d in self.domains])
+        self._arm_parent = pivots - np.where(self.parent[:, None] >= 0,
+                                             centres[self.parent], 0.0)
+        self._arm_own = centres - pivots
+        chain, arms = [], []
+        for d in range(len(self.domains)):
+            f, below = d, None
+            while f >= 0:
+                chain.append((f, d))
+                arms.append(self._arm_own[f] + (0.0 if below is None
+                                                else self._arm_parent[below]))
+                f, below = self.parent[f], f
+        self._chain = np.array(chain, np.int64)
+        self._arms = np.array(arms)
+        self._centre_rows = self._zc.ravel()
+
+    def _moves(self, state):
+        """(D, 3) each domain's own move t_e (FramedModel._plant) in state, m."""
+        t = np.empty_like(state.c)
+        fk.tree_centres(self._order, self.parent, self._arm_parent, self._arm_own, state.R, t,
+                        state.c, True)
+        return t
+
+    def _centres(self, t, R):
+        """(D, 3) the centres of own moves t (D, 3) and rotations R (D, 3, 3), m."""
+        c = np.empty_like(t)
+        fk.tree_centres(self._order, self.parent, self._arm_parent, self._arm_own, R, t, c,
+                        False)
+        return c
 
     def _bound(self, dz):
         """The largest node move of the step dz, bounded per domain, m."""
@@ -360,12 +431,13 @@ class FramedModel:
         tolerance = STEP_TOLERANCE * self.size
         bound = math.inf
         for it in range(1, max_iter + 1):
-            E, g, H = self.derivatives(state, targets, inertia)
+            E, g, H, T = self._derivatives(state, targets, inertia)
             if not (np.isfinite(E) and np.isfinite(g).all() and np.isfinite(H).all()):
                 return state, NewtonReport(False, it, bound, "non-finite energy")
             dz = _descent(H, g)
-            bound = self._bound(dz)
-            if bound <= tolerance:
+            last, bound = bound, self._bound(T @ dz)
+            # the step after this one, at the rate of this one's decrease
+            if bound <= tolerance or (bound < last < math.inf and bound * bound / last <= tolerance):
                 return _orthonormal(self.retract(state, dz)), NewtonReport(True, it, bound,
                                                                            "converged")
             alpha, slope = 1.0, float(g @ dz)

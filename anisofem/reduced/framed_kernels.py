@@ -247,3 +247,50 @@ def joint_derivatives(x, grad, blocks, pairs, pair_ptr, c, R, dom, U, r, z0, g, 
                     continue
                 for v in range(ne):
                     H[o + u, oe + v] += j0 * K[0, oe + v] + j1 * K[1, oe + v] + j2 * K[2, oe + v]
+
+
+@njit(cache=True, fastmath=_SUMS)
+def tree_chain(R, chain, arms, zc, zt, g, H, N):
+    """The kinematic tree's chain rule (anisofem.reduced.framed): N (3 D, r), zeroed by the
+    caller, gets the moves of the centres (rows 3 d .. 3 d + 2 for domain d) per unit move of
+    the tree's unknowns, less the identity; each entry (f, d) of chain (P, 2) with its rest arm
+    arms (P, 3) adds I at f's own move (f != d) and -[R_f arm]_x at f's turn. The second
+    derivatives of the centres times the centre gradients g[zc] are added to H's turn blocks."""
+    for p in range(chain.shape[0]):
+        f, d = chain[p, 0], chain[p, 1]
+        w = R[f] @ arms[p]
+        if f != d:
+            for a in range(3):
+                N[3 * d + a, zc[f, a]] += 1.0
+        N[3 * d + 0, zt[f, 1]] += w[2]
+        N[3 * d + 0, zt[f, 2]] -= w[1]
+        N[3 * d + 1, zt[f, 0]] -= w[2]
+        N[3 * d + 1, zt[f, 2]] += w[0]
+        N[3 * d + 2, zt[f, 0]] += w[1]
+        N[3 * d + 2, zt[f, 1]] -= w[0]
+        gc = g[zc[d]]
+        gw = gc @ w
+        for a in range(3):
+            for b in range(3):
+                H[zt[f, a], zt[f, b]] += 0.5 * (gc[a] * w[b] + gc[b] * w[a])
+            H[zt[f, a], zt[f, a]] -= gw
+
+
+@njit(cache=True, fastmath=_SUMS)
+def tree_centres(order, parent, arm_parent, arm_own, R, moves, c, to_moves):
+    """The kinematic tree's centres (anisofem.reduced.framed): c_e = c_p + R_p a_e + R_e b_e
+    + t_e (a_e absolute where the parent is the held nodes, p < 0), parents first in order.
+    to_moves False: c (D, 3) from the own moves t (D, 3); True: moves from the centres c."""
+    for e in order:
+        p = parent[e]
+        for i in range(3):
+            s = R[e, i, 0] * arm_own[e, 0] + R[e, i, 1] * arm_own[e, 1] + R[e, i, 2] * arm_own[e, 2]
+            if p < 0:
+                s += arm_parent[e, i]
+            else:
+                s += c[p, i] + (R[p, i, 0] * arm_parent[e, 0] + R[p, i, 1] * arm_parent[e, 1]
+                                + R[p, i, 2] * arm_parent[e, 2])
+            if to_moves:
+                moves[e, i] = c[e, i] - s
+            else:
+                c[e, i] = s + moves[e, i]
