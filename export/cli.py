@@ -117,6 +117,10 @@ def _reduced(argv):
     parser.add_argument("--display", metavar="MESH",
                         help="a coarser mesh file of the same body: the file moves its vertices "
                              "(the basis interpolated there) instead of the model's")
+    parser.add_argument("--framed", action="store_true",
+                        help="the framed model instead (anisofem.reduced.FramedModel: domains "
+                             "in their own rotating frames, for bodies that bend and swing "
+                             "far), for framed_runtime.FramedSimulator")
     parser.add_argument("-o", "--output", required=True, help="PATH (without extension)")
     args = parser.parse_args(argv)
     try:
@@ -124,6 +128,8 @@ def _reduced(argv):
         if args.body and args.display:
             raise ValueError("--body, --display: give one (--body draws on the scene's mesh)")
         scene = scene_of(args)
+        if args.framed:
+            return _framed(parser, args, scene)
         display = (scene.mesh if args.body else
                    None if args.display is None else read_mesh(args.display))
         built = body_of(args, scene, args.body, "--body") if args.body else scene
@@ -135,6 +141,22 @@ def _reduced(argv):
     fitted = f" + {model.fitted} fitted" if model.fitted else ""
     print(f"wrote {args.output}.json and .bin: {header['n']} vertices, {header['m']} tets, "
           f"r = {header['r']} ({header['modes']} modes{fitted}), built in "
+          f"{model.build_seconds:.2g} s{_checked(model.validation)}")
+
+
+def _framed(parser, args, scene):
+    """python -m export reduced --framed: the FramedModel of the scene, written."""
+    from anisofem.reduced import FramedModel
+
+    from . import reduced
+    if args.body or args.display or args.snapshots:
+        raise ValueError("--framed: builds on the scene's own mesh from its default declared "
+                         "loads; --body, --display and --snapshots are the linear model's")
+    model = FramedModel(scene, modes=args.modes)
+    header = reduced.write_framed(model, args.output, title=args.scene, gravity=scene.gravity)
+    print(f"wrote {args.output}.json and .bin: {header['n']} vertices, {header['m']} tets, "
+          f"{header['domains']} domains, {header['unknowns']} unknowns, "
+          f"{header['joint_elements']} joint elements, built in "
           f"{model.build_seconds:.2g} s{_checked(model.validation)}")
 
 

@@ -114,3 +114,45 @@ def bake(name, out, modes, angles, snapshots=0):
               "gravity": list(GRAVITY)}
     write_arrays(out, arrays, header)
     return header
+
+
+def write_framed(model, path, title="", gravity=None):
+    """Write the FramedModel `model` as path.json and path.bin for
+    framed_runtime.FramedSimulator; returns the header. gravity (3,) m/s^2: the scene's,
+    recorded for a viewer (the runtime takes every force per step)."""
+    from .framed_runtime import FRAMED_FORMAT
+    scene, D = model.scene, model.domains
+    mesh, joints = scene.mesh, model._joint_elements
+    P = [d.polynomial for d in D]
+    sizes = np.array([[p.C2.size, p.S3.size, p.W4.size] for p in P])
+    arrays = {"rest_positions": model.x0, "masses": np.asarray(scene.masses, np.float64),
+              "held": scene.fixed_mask.astype(np.uint8), "tets": mesh.tets.astype(np.int32),
+              "surface": runtime.surface_triangles(mesh.vertices, mesh.tets).astype(np.int32),
+              "labels": model.labels.astype(np.int32), "Y": model._Y, "U": model._U,
+              "r": np.array([d.r for d in D], np.int32),
+              "centre": np.array([d.centre for d in D]), "mass": model._mass, "a": model._a,
+              "J": model._J, "A": model._A, "B": model._B, "radius": model._radius,
+              "reach": model._reach,
+              "c0": np.array([p.c0 for p in P]), "c1": np.concatenate([p.c1 for p in P]),
+              "C2": np.concatenate([p.C2.ravel() for p in P]),
+              "S3": np.concatenate([p.S3.ravel() for p in P]),
+              "W4": np.concatenate([p.W4.ravel() for p in P]),
+              "poly_offsets": np.vstack([np.zeros((1, 3), np.int64),
+                                         np.cumsum(sizes, axis=0)[:-1]]).astype(np.int64),
+              "parent": model.parent.astype(np.int32), "order": model._order.astype(np.int32),
+              "arm_parent": model._arm_parent, "arm_own": model._arm_own,
+              "chain": model._chain.astype(np.int32), "arms": model._arms,
+              "joint_tets": model.joint_nodes[joints.tets].astype(np.int32),
+              "joint_grads": joints.grads, "joint_weights": joints.weights,
+              "mu": joints.mu, "lam": joints.lam, "kappa": joints.kappa, "fiber": joints.fiber}
+    header = {"model_format": FRAMED_FORMAT, "title": title, "n": mesh.n_vertices,
+              "m": mesh.n_tets, "domains": len(D), "r": [d.r for d in D],
+              "unknowns": model.r, "joint_elements": int(joints.tets.shape[0]),
+              "size": model.size, "build_seconds": model.build_seconds,
+              "validation": (None if model.validation is None
+                             else dataclasses.asdict(model.validation)),
+              "gravity": None if gravity is None else [float(g) for g in gravity],
+              "material": {key: np.asarray(getattr(scene.material, key)).tolist()
+                           for key in ("young", "poisson", "density")}}
+    write_arrays(path, arrays, header)
+    return header

@@ -67,8 +67,11 @@ def test_both_shipped_models_had_the_same_budget():
 
 @pytest.mark.parametrize("name", shipped.NAMES)
 def test_thousand_step_rollouts_stay_finite_and_bounded(name):
+    """One case of each group (the heaviest imbalance); `python -m anisognn evaluate` runs
+    them all."""
     run = evaluate.model_rollout(anisognn.pretrained(name))
-    for case in evaluate.cases():
+    cases = evaluate.cases()
+    for case in (cases[0], cases[-2], cases[-1]):
         positions = run(case.scene, evaluate.STEPS)
         assert np.isfinite(positions).all(), case.label
         moved = np.linalg.norm(positions - case.scene.mesh.vertices, axis=2).max()

@@ -113,7 +113,9 @@ class FramedModel:
         equilibria shape the local bases, and unseen cases drawn from it validate the model.
     validate : run the validation (VALIDATION_CASES rollouts against the full FEM).
 
-    Attributes: domains (list of Domain); labels (n,) each node's domain, -1 held; r, the
+    Attributes: domains (list of Domain); labels (n,) each node's domain, -1 held; parent
+    (D,) each domain's parent in the kinematic tree (-1: the held nodes); joint_nodes, the
+    nodes of the joint elements; r, the
     Newton unknowns (6 per domain and its coordinates); x0 (n, 3) rest positions; loads;
     snapshots (a SnapshotReport); build_seconds; validation (a Validation, or None).
     A NewtonReport's residual here is the last Newton step's largest node move bound, m.
@@ -177,6 +179,7 @@ class FramedModel:
         elements = self.scene.elements
         nodes, local = np.unique(elements.tets[rows], return_inverse=True)
         tets = local.reshape(len(rows), -1)
+        self.joint_nodes = nodes
         self._joint_elements = elements.subset(rows, tets)
         self._joint_rows = (self._labels[nodes], self._Y[nodes], self._U[nodes],
                             self.x0[nodes].copy())

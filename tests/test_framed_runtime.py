@@ -1,0 +1,125 @@
+"""The framed model written by export.reduced.write_framed and stepped by
+framed_runtime.FramedSimulator (numpy only) moves like the library's FramedModel, refuses
+another file and another mesh, and `python -m export reduced --framed` writes it."""
+import json
+
+import numpy as np
+import pytest
+
+import anisofem as af
+from anisofem.reduced import Drag, FramedModel, Loads
+from export import reduced as writer
+from export.cli import main
+from export.framed_runtime import FRAMED_FORMAT, FramedSimulator
+from export.runtime import ReducedSimulator
+from test_framed_model import beam_scene, t_scene
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    scene = t_scene()
+    model = FramedModel(scene, validate=False)
+    path = str(tmp_path_factory.mktemp("framed") / "t")
+    writer.write_framed(model, path, "t", gravity=scene.gravity)
+    return scene, model, path
+
+
+def rollouts(scene, model, sim, steps, drag):
+    """Largest position difference between the library's and the runtime's rollouts (the drag
+    for the first half, then released) over the largest displacement; the Newton iterations
+    of each, per step."""
+    now = before = model.rest()
+    a = b = sim.rest_state()
+    worst = size = 0.0
+    iterations = []
+    for k in range(steps):
+        extra = drag if k < steps // 2 else np.zeros_like(drag)
+        after, report = model.step(now, before, 0.02, force=extra)
+        assert report.converged
+        now, before = after, now
+        a, b = sim.step(a, b, scene.external_force + extra, 0.02), a
+        iterations.append((report.iterations, sim.iterations))
+        x = model.positions(now)
+        worst = max(worst, np.abs(x - sim.positions(a)).max())
+        size = max(size, np.abs(x - scene.mesh.vertices).max())
+    return worst / size, iterations
+
+
+def arm_drag(scene, share=0.5):
+    """A sideways drag of `share` of the body's weight at the tip of the T's +x arm."""
+    force = np.zeros((scene.mesh.n_vertices, 3))
+    force[int(np.argmax(scene.mesh.vertices[:, 0])), 1] = share * scene.masses.sum() * 9.81
+    return force
+
+
+def test_runtime_steps_like_the_library(written):
+    """100 steps (a drag of half the weight at an arm's tip, then released): the same
+    iterations, positions within 1e-9 of the largest displacement."""
+    scene, model, path = written
+    error, iterations = rollouts(scene, model, FramedSimulator(path), 100, arm_drag(scene))
+    assert error < 1e-9
+    assert all(a == b for a, b in iterations)
+
+
+def test_runtime_steps_quadratic_tets_with_fibers_like_the_library(tmp_path):
+    """10-node tets (4 quadrature points) and stiff fibers in the joints."""
+    scene = beam_scene(order=2, kappa=1e6, cells=(3, 1, 1))
+    tip = tuple(int(i) for i in af.metrics.end_vertices(scene.mesh, 0, "max"))
+    model = FramedModel(scene, bands=2, coordinates=6, validate=False,
+                        loads=Loads(drags=(Drag(tip, 0.05, directions=((0.0, 1.0, 0.0),)),)))
+    writer.write_framed(model, str(tmp_path / "beam"))
+    drag = np.zeros((scene.mesh.n_vertices, 3))
+    drag[list(tip), 1] = 0.05 / len(tip)
+    error, _ = rollouts(scene, model, FramedSimulator(str(tmp_path / "beam")), 20, drag)
+    assert error < 1e-9
+
+
+def test_header_holds_the_model_and_its_validation(tmp_path):
+    scene = t_scene()
+    model = FramedModel(scene)
+    header = writer.write_framed(model, str(tmp_path / "t"), "t")
+    saved = json.load(open(tmp_path / "t.json"))
+    assert saved["model_format"] == header["model_format"] == FRAMED_FORMAT
+    assert saved["domains"] == len(model.domains) == 5 and saved["unknowns"] == model.r
+    assert saved["validation"]["tip_error"] == pytest.approx(model.validation.tip_error)
+
+
+def test_runtimes_refuse_each_others_files_and_another_mesh(written, tmp_path):
+    scene, _, path = written
+    with pytest.raises(ValueError, match=r"holds no framed model .*rebuild it with "
+                                         r"`python -m export reduced SCENE --framed"):
+        FramedSimulator(_linear_file(tmp_path))
+    with pytest.raises(ValueError, match="holds no reduced model"):
+        ReducedSimulator(path)
+    other = scene.mesh.vertices.copy()
+    other[0] += 1e-3
+    with pytest.raises(ValueError, match="vertices"):
+        FramedSimulator(path, vertices=other, tets=scene.mesh.tets)
+    sim = FramedSimulator(path)
+    now = sim.rest_state()
+    with pytest.raises(ValueError, match="force"):
+        sim.step(now, now, np.full((scene.mesh.n_vertices, 3), np.nan), 0.02)
+    with pytest.raises(ValueError, match="dt"):
+        sim.step(now, now, scene.external_force, 0.0)
+
+
+def _linear_file(tmp_path):
+    from anisofem.reduced import ReducedModel
+    path = str(tmp_path / "linear")
+    writer.write(ReducedModel(t_scene(), modes=2, validate=False), path)
+    return path
+
+
+def test_command_writes_a_framed_model_and_refuses_the_linear_models_flags(tmp_path, capsys):
+    out = str(tmp_path / "t")
+    main(["reduced", "t", "--fixed", "z-min", "--framed", "-o", out])
+    said = capsys.readouterr().out
+    assert "5 domains" in said and "off the full FEM on 3 unseen loads" in said
+    sim = FramedSimulator(out)
+    now = sim.rest_state()
+    x = sim.positions(sim.step(now, now, sim.masses[:, None] * (0.0, 0.0, -9.81), 0.02))
+    assert np.isfinite(x).all() and (x[:, 2] < sim.rest_positions[:, 2] - 1e-9).any()
+    with pytest.raises(SystemExit) as stop:
+        main(["reduced", "t", "--framed", "--snapshots", "4", "-o", out])
+    assert stop.value.code == 2
+    assert "--framed" in capsys.readouterr().err
