@@ -77,9 +77,13 @@ web/scenes/%.json: export/models/directional.onnx export/bake.py export/runtime.
 	mkdir -p web/scenes
 	$(PY) -m export bake $* -o web/scenes/$*
 
-web/scenes/%-reduced.json: export/reduced.py export/runtime.py anisofem/reduced/*.py $(VENV)/.installed
+# the T and the Y bend far at their arms: their reduced models are framed
+WEB_FRAMED := t y
+web/scenes/%-reduced.json: export/reduced.py export/runtime.py export/framed_runtime.py \
+                           anisofem/reduced/*.py $(VENV)/.installed
 	mkdir -p web/scenes
-	$(PY) -m export bake-reduced $* -o web/scenes/$*-reduced --modes 4 --snapshots 16
+	$(PY) -m export bake-reduced $* -o web/scenes/$*-reduced \
+	  $(if $(filter $*,$(WEB_FRAMED)),--framed,--modes 4 --snapshots 16)
 
 web-assets: web/node_modules/.package-lock.json web/models/directional.onnx \
             web/models/meshgraphnets.onnx $(WEB_SCENES:%=web/scenes/%.json) \

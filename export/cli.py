@@ -205,15 +205,26 @@ def _bake_reduced(argv):
                              "modes and modal derivatives)")
     parser.add_argument("--angles", type=float, nargs="+", default=list(bake.ANGLES),
                         help="fiber angles in degrees from x towards z")
+    parser.add_argument("--framed", action="store_true",
+                        help="the framed models instead (anisofem.reduced.FramedModel), for "
+                             "bodies that bend and swing far")
     args = parser.parse_args(argv)
     try:
         check_folder(args.output, "--output")
-        header = reduced.bake(args.scene, args.output, args.modes, args.angles, args.snapshots)
+        if args.framed:
+            if args.snapshots:
+                raise ValueError("--framed: builds from the scene's default declared loads; "
+                                 "--snapshots is the linear model's")
+            header = reduced.bake_framed(args.scene, args.output, args.angles)
+        else:
+            header = reduced.bake(args.scene, args.output, args.modes, args.angles,
+                                  args.snapshots)
     except BAD_INPUT as err:
         fail(parser, err)
     worst = max(v["tip_error"] for v in header["validation"])
-    where = (f"on {header['validation'][0]['cases']} unseen loads" if args.snapshots
-             else "in the static answer")
-    print(f"wrote {args.output}.json and .bin: {header['title']}, r = {header['r'][0]}, fiber "
+    where = (f"on {header['validation'][0]['cases']} unseen loads"
+             if args.snapshots or args.framed else "in the static answer")
+    kind = f"{header['domains']} framed domains, " if args.framed else ""
+    print(f"wrote {args.output}.json and .bin: {header['title']}, {kind}r = {header['r'][0]}, fiber "
           f"angles {header['fiber_angles']}; tip within {100 * worst:.2g}% of the full FEM "
           f"{where} at every angle")

@@ -30,7 +30,7 @@ A state is a tuple (c (D, 3) m, R (D, 3, 3), q (Q,)).
 """
 import numpy as np
 
-from .runtime import _real, _same_mesh, _triple_rows, read_arrays
+from .runtime import _angle_tag, _real, _same_mesh, _triple_rows, read_arrays
 
 FRAMED_FORMAT = "anisofem-framed-1"
 #: Newton's last step moves no node more than this share of the body's size (the library's).
@@ -44,9 +44,10 @@ GEN = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
 class FramedSimulator:
     """A framed reduced model read from path.json + path.bin (module docstring). vertices
     (n, 3), tets (m, k): when given, the mesh the caller steps, refused unless it is the one
-    the model was built for."""
+    the model was built for. angle: for a file of models at several fiber angles (`python -m
+    export bake-reduced --framed`), the one to step, degrees."""
 
-    def __init__(self, path, vertices=None, tets=None):
+    def __init__(self, path, vertices=None, tets=None, angle=None):
         header, arrays = read_arrays(path)
         if header.get("model_format") != FRAMED_FORMAT:
             raise ValueError(f"path: {path}.json holds no framed model (model_format "
@@ -55,7 +56,9 @@ class FramedSimulator:
                              f"PATH`")
         _same_mesh(arrays, vertices, tets)
         self.header = header
-        a = {k: np.array(v) for k, v in arrays.items()}
+        tag = _angle_tag(header, angle)
+        a = {k[:len(k) - len(tag)] if tag and k.endswith(tag) else k: np.array(v)
+             for k, v in arrays.items() if not tag or k.endswith(tag) or "@" not in k}
         self.rest_positions, self.masses = a["rest_positions"], a["masses"]
         self.held, self.surface = a["held"].astype(bool), a["surface"]
         self.labels, self.Y, self.U = a["labels"].astype(np.int64), a["Y"], a["U"]

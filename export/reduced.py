@@ -22,10 +22,11 @@ import dataclasses
 import numpy as np
 
 from anisofem import Material, Scene, TetMesh
-from anisofem.reduced import ReducedModel
+from anisofem.reduced import FramedModel, ReducedModel
 from anisofem.scene import GRAVITY
 
 from . import runtime
+from .framed_runtime import FRAMED_FORMAT
 from .bake import SCENES, fiber_direction, scene_mesh, write_arrays
 
 #: The time step the page steps a baked reduced model with, s (the shipped networks' dt).
@@ -120,39 +121,80 @@ def write_framed(model, path, title="", gravity=None):
     """Write the FramedModel `model` as path.json and path.bin for
     framed_runtime.FramedSimulator; returns the header. gravity (3,) m/s^2: the scene's,
     recorded for a viewer (the runtime takes every force per step)."""
-    from .framed_runtime import FRAMED_FORMAT
-    scene, D = model.scene, model.domains
-    mesh, joints = scene.mesh, model._joint_elements
-    P = [d.polynomial for d in D]
-    sizes = np.array([[p.C2.size, p.S3.size, p.W4.size] for p in P])
-    arrays = {"rest_positions": model.x0, "masses": np.asarray(scene.masses, np.float64),
-              "held": scene.fixed_mask.astype(np.uint8), "tets": mesh.tets.astype(np.int32),
-              "surface": runtime.surface_triangles(mesh.vertices, mesh.tets).astype(np.int32),
-              "labels": model.labels.astype(np.int32), "Y": model._Y, "U": model._U,
-              "r": np.array([d.r for d in D], np.int32),
-              "centre": np.array([d.centre for d in D]), "mass": model._mass, "a": model._a,
-              "J": model._J, "A": model._A, "B": model._B, "radius": model._radius,
-              "reach": model._reach,
-              "c0": np.array([p.c0 for p in P]), "c1": np.concatenate([p.c1 for p in P]),
-              "C2": np.concatenate([p.C2.ravel() for p in P]),
-              "S3": np.concatenate([p.S3.ravel() for p in P]),
-              "W4": np.concatenate([p.W4.ravel() for p in P]),
-              "poly_offsets": np.vstack([np.zeros((1, 3), np.int64),
-                                         np.cumsum(sizes, axis=0)[:-1]]).astype(np.int64),
-              "parent": model.parent.astype(np.int32), "order": model._order.astype(np.int32),
-              "arm_parent": model._arm_parent, "arm_own": model._arm_own,
-              "chain": model._chain.astype(np.int32), "arms": model._arms,
-              "joint_tets": model.joint_nodes[joints.tets].astype(np.int32),
-              "joint_grads": joints.grads, "joint_weights": joints.weights,
-              "mu": joints.mu, "lam": joints.lam, "kappa": joints.kappa, "fiber": joints.fiber}
-    header = {"model_format": FRAMED_FORMAT, "title": title, "n": mesh.n_vertices,
-              "m": mesh.n_tets, "domains": len(D), "r": [d.r for d in D],
-              "unknowns": model.r, "joint_elements": int(joints.tets.shape[0]),
-              "size": model.size, "build_seconds": model.build_seconds,
+    scene = model.scene
+    arrays = {**_mesh_arrays(scene), **framed_arrays(model)}
+    joints = model._joint_elements
+    header = {"model_format": FRAMED_FORMAT, "title": title, "n": scene.mesh.n_vertices,
+              "m": scene.mesh.n_tets, "domains": len(model.domains),
+              "r": [d.r for d in model.domains], "unknowns": model.r,
+              "joint_elements": int(joints.tets.shape[0]), "size": model.size,
+              "build_seconds": model.build_seconds,
               "validation": (None if model.validation is None
                              else dataclasses.asdict(model.validation)),
               "gravity": None if gravity is None else [float(g) for g in gravity],
               "material": {key: np.asarray(getattr(scene.material, key)).tolist()
                            for key in ("young", "poisson", "density")}}
     write_arrays(path, arrays, header)
+    return header
+
+
+def _mesh_arrays(scene):
+    mesh = scene.mesh
+    return {"rest_positions": mesh.vertices, "masses": np.asarray(scene.masses, np.float64),
+            "held": scene.fixed_mask.astype(np.uint8), "tets": mesh.tets.astype(np.int32),
+            "surface": runtime.surface_triangles(mesh.vertices, mesh.tets).astype(np.int32)}
+
+
+def framed_arrays(model, tag=""):
+    """The arrays of a FramedModel that framed_runtime.FramedSimulator steps (names + tag):
+    its domains' labels, rest offsets Y, bases U, moments and polynomials, its kinematic tree
+    and its joint elements (module framed_runtime)."""
+    D, joints = model.domains, model._joint_elements
+    P = [d.polynomial for d in D]
+    sizes = np.array([[p.C2.size, p.S3.size, p.W4.size] for p in P])
+    arrays = {
+        "labels": model.labels.astype(np.int32), "Y": model._Y, "U": model._U,
+        "r": np.array([d.r for d in D], np.int32), "centre": np.array([d.centre for d in D]),
+        "mass": model._mass, "a": model._a, "J": model._J, "A": model._A, "B": model._B,
+        "radius": model._radius, "reach": model._reach,
+        "c0": np.array([p.c0 for p in P]), "c1": np.concatenate([p.c1 for p in P]),
+        "C2": np.concatenate([p.C2.ravel() for p in P]),
+        "S3": np.concatenate([p.S3.ravel() for p in P]),
+        "W4": np.concatenate([p.W4.ravel() for p in P]),
+        "poly_offsets": np.vstack([np.zeros((1, 3), np.int64),
+                                   np.cumsum(sizes, axis=0)[:-1]]).astype(np.int32),
+        "parent": model.parent.astype(np.int32), "order": model._order.astype(np.int32),
+        "arm_parent": model._arm_parent, "arm_own": model._arm_own,
+        "chain": model._chain.astype(np.int32), "arms": model._arms,
+        "joint_tets": model.joint_nodes[joints.tets].astype(np.int32),
+        "joint_grads": joints.grads, "joint_weights": joints.weights,
+        "mu": joints.mu, "lam": joints.lam, "kappa": joints.kappa, "fiber": joints.fiber}
+    return {name + tag: value for name, value in arrays.items()}
+
+
+def bake_framed(name, out, angles):
+    """Write the framed models (anisofem.reduced.FramedModel) of the baked scene `name` at each
+    fiber angle (degrees from x towards z) as out.json and out.bin, for the browser page: the
+    mesh arrays once, framed_arrays once per angle as NAME@A. Returns the header."""
+    if name not in SCENES:
+        raise ValueError(f"scene: expected one of {sorted(SCENES)}, got {name!r}")
+    angles = [float(a) for a in angles]
+    if not angles:
+        raise ValueError("angles: give at least one fiber angle")
+    vertices, tets, held = scene_mesh(name)
+    mesh = TetMesh(vertices, tets)
+    arrays, checks, unknowns, sizes = {}, [], [], []
+    for angle in angles:
+        material = Material.paper(fiber_direction(angle), Material.paper().young)
+        model = FramedModel(Scene(mesh, material, fixed=held, gravity=GRAVITY))
+        arrays.update(framed_arrays(model, f"@{angle:g}"))
+        checks.append(dataclasses.asdict(model.validation))
+        unknowns.append(model.r)
+        sizes.append(model.size)
+    arrays.update(_mesh_arrays(model.scene))
+    header = {"model_format": FRAMED_FORMAT, "scene": name, "title": SCENES[name][0],
+              "n": int(vertices.shape[0]), "m": int(tets.shape[0]),
+              "domains": len(model.domains), "fiber_angles": angles, "r": unknowns,
+              "size": sizes[0], "validation": checks, "dt": DT, "gravity": list(GRAVITY)}
+    write_arrays(out, arrays, header)
     return header

@@ -5,6 +5,7 @@
 // end-to-end test steps it through window.anisognn).
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
+import { FramedSimulation } from "./framed.js";
 import { loadReduced, ReducedSimulation } from "./reduced.js";
 import { loadModel, loadScene, Simulation } from "./stepper.js";
 
@@ -65,7 +66,9 @@ async function openScene(name, angle) {
   const index = Math.max(0, angles.findIndex((a) => a === wanted));
   ui.angle.value = String(index);
   ui.angleValue.textContent = String(angles[index]);
-  state.sim = reduced ? new ReducedSimulation(state.sceneData, angles[index])
+  const framed = reduced && state.sceneData.header.model_format === "anisofem-framed-1";
+  const Reduced = framed ? FramedSimulation : ReducedSimulation;
+  state.sim = reduced ? new Reduced(state.sceneData, angles[index])
                       : new Simulation(state.session, state.sceneData, angles[index]);
   state.times = [];
   buildMeshes();
@@ -176,7 +179,9 @@ async function frame(now) {
     const pace = speed >= 1 ? "real time" : `${speed.toFixed(2)}x real time`;
     const v = state.sim.validation;
     const checked = v && v.cases ? `on ${v.cases} unseen drags` : "in the static answer";
-    const model = v ? `reduced model, r = ${state.sim.r}; its tip within ` +
+    const kind = state.sim instanceof FramedSimulation
+      ? `framed reduced model, ${state.sim.m.D} domains,` : "reduced model,";
+    const model = v ? `${kind} r = ${state.sim.r}; its tip within ` +
       `${(100 * v.tip_error).toPrecision(2)}% of the FEM's ${checked}. ` : "";
     ui.stats.textContent = `${model}${state.sim.steps} steps of ${state.sim.dt} s, ` +
       `${ms.toFixed(2)} ms per step (${pace})`;
@@ -311,7 +316,11 @@ window.anisognn = {
     return best;
   },
   scene() { return state.sceneData ? state.sceneData.header.scene : null; },
-  stepper() { return state.sim instanceof ReducedSimulation ? "reduced" : "network"; },
+  stepper() {
+    const reduced = state.sim instanceof ReducedSimulation || state.sim instanceof FramedSimulation;
+    return reduced ? "reduced" : "network";
+  },
+  stats() { return ui.stats.textContent; },
   resume() { state.paused = false; state.lastFrame = null; },
   pause() { state.paused = true; },
 };

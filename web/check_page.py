@@ -11,13 +11,15 @@ Chromium), and checks that
 - a file that is not a model and a scene the model cannot step each show a readable message;
 - with the reduced models (the stepper menu): the cantilever's positions at CHECKPOINTS within
   REDUCED_BOUND of runtime.ReducedSimulator's (the same float64 algorithm in JavaScript), the
-  drag raises its tip, and every scene steps without a message.
+  drag raises its tip, and every scene steps without a message; the T's framed model within
+  REDUCED_BOUND of framed_runtime.FramedSimulator's, the page stating its validation error.
 Prints the in-browser and the onnxruntime (CPU) ms per step.
 """
 import functools
 import http.server
 import json
 import os
+import re
 import subprocess
 import sys
 import threading
@@ -28,7 +30,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from export import bake, runtime  # noqa: E402
+from export import bake, framed_runtime, runtime  # noqa: E402
 
 #: steps at which the page's positions are compared with runtime.py's, and the largest distance
 #: allowed at each, over the largest displacement of the rollout. One step agrees to float32
@@ -40,6 +42,8 @@ ANGLE = 45.0
 #: the reduced model in the page against runtime.py's, over the largest displacement: the same
 #: float64 arithmetic in another order
 REDUCED_BOUND = 1e-6
+#: steps at which the T's framed model in the page is compared with framed_runtime.py's
+FRAMED_CHECKPOINTS = (1, 10, 50)
 
 
 class _Quiet(http.server.SimpleHTTPRequestHandler):
@@ -92,6 +96,26 @@ def reduced_reference():
     return positions, float(np.linalg.norm(positions - sim.rest_positions, axis=2).max()), ms
 
 
+def framed_reference():
+    """(positions at FRAMED_CHECKPOINTS (k, n, 3), largest displacement (m), ms per step, the
+    model's largest validation tip error) of framed_runtime.FramedSimulator's rollout of the
+    T's framed model at fiber angle ANGLE."""
+    sim = framed_runtime.FramedSimulator(os.path.join(HERE, "scenes", "t-reduced"),
+                                         angle=ANGLE)
+    force = sim.masses[:, None] * np.asarray(sim.header["gravity"])
+    now = before = sim.rest_state()
+    positions, start = [], time.perf_counter()
+    for step in range(1, FRAMED_CHECKPOINTS[-1] + 1):
+        now, before = sim.step(now, before, force, sim.header["dt"]), now
+        if step in FRAMED_CHECKPOINTS:
+            positions.append(sim.positions(now))
+    ms = 1e3 * (time.perf_counter() - start) / FRAMED_CHECKPOINTS[-1]
+    positions = np.asarray(positions)
+    tip = sim.header["validation"][sim.header["fiber_angles"].index(ANGLE)]["tip_error"]
+    return (positions, float(np.linalg.norm(positions - sim.rest_positions, axis=2).max()), ms,
+            tip)
+
+
 def drew(png):
     """True when the screenshot png shows a drawing: more than 1% of its pixels differ from
     the background color by more than 0.1."""
@@ -138,6 +162,18 @@ def main():
     for name, scene in page["reducedScenes"].items():
         if scene["message"] or not scene["finite"]:
             failures.append(f"reduced scene {name}: {scene['message'] or 'a non-finite state'}")
+    expected, largest_f, framed_ms, framed_tip = framed_reference()
+    got = np.asarray(page["framed"]["positions"]).reshape(expected.shape)
+    framed_gap = float(np.abs(got - expected).max() / largest_f)
+    if not framed_gap <= REDUCED_BOUND:
+        failures.append(f"the T's framed model in the page against framed_runtime.py: "
+                        f"{framed_gap:.2e} of the largest displacement, more than "
+                        f"{REDUCED_BOUND}")
+    stated = re.search(r"within ([0-9.]+)% of the FEM's on \d+ unseen drags",
+                       page["framed"]["stats"])
+    if not stated or abs(float(stated.group(1)) - 100 * framed_tip) > 0.05 * 100 * framed_tip:
+        failures.append(f"the T's framed model: the page says {page['framed']['stats']!r}, "
+                        f"its file {100 * framed_tip:.2g}%")
     if "cannot load" not in page["bad_model_message"]:
         failures.append(f"bad model message: {page['bad_model_message']!r}")
     if "cannot step" not in page["cut_scene_message"]:
@@ -157,6 +193,10 @@ def main():
           f"the tip {reduced_rise * 1e3:.1f} mm; scenes "
           + ", ".join(f"{k} {'failed' if v['message'] or not v['finite'] else 'ok'}"
                       for k, v in page["reducedScenes"].items()))
+    print(f"the T's framed model: the page against framed_runtime.py {framed_gap:.1e} of the "
+          f"largest displacement ({largest_f * 1e3:.1f} mm) over {FRAMED_CHECKPOINTS[-1]} "
+          f"steps; ms per step: browser {page['framed']['msPerStep']:.2f}, numpy "
+          f"{framed_ms:.2f}; the page says: {page['framed']['stats']}")
     print(f"bad model: {page['bad_model_message']}")
     print(f"cut scene: {page['cut_scene_message']}")
     if failures:

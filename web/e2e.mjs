@@ -5,13 +5,15 @@
 // checkpoint step (comma-separated, default 1,10,50,100,200), the in-browser ms per step, the
 // messages the page shows for a file that is not a model and for a scene the model cannot
 // step, the tip height before and during a drag upwards, and whether the other scenes (chosen
-// from the menu) step; then the same with the reduced models (OUT_DIR/reduced.png).
+// from the menu) step; then the same with the reduced models (OUT_DIR/reduced.png), and the
+// T's framed model at steps 1, 10 and 50 with the validation the page states.
 import fs from "node:fs";
 import path from "node:path";
 import { chromium } from "playwright-core";
 
 const [base, out, checkpointsArg] = process.argv.slice(2);
 const checkpoints = (checkpointsArg || "1,10,50,100,200").split(",").map(Number);
+const FRAMED_CHECKPOINTS = [1, 10, 50];
 const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
 fs.mkdirSync(out, { recursive: true });
 
@@ -65,6 +67,11 @@ try {
     const run = await page.evaluate(() => window.anisognn.run([5]));
     result.reducedScenes[name] = { n: run.n, message: await page.textContent("#message"),
                                    finite: run.positions[0].every(Number.isFinite) };
+    if (name === "t") {
+      // the T's framed model from rest (compared with runtime.py's FramedSimulator)
+      result.framed = await page.evaluate((k) => window.anisognn.run(k), FRAMED_CHECKPOINTS);
+      result.framed.stats = await page.evaluate(() => window.anisognn.stats());
+    }
   }
   result.reduced = await page.evaluate((k) => window.anisognn.run(k), checkpoints);
   await page.screenshot({ path: path.join(out, "reduced.png") });

@@ -9,10 +9,11 @@ const RTOL = 1e-8;
 const MAX_ITER = 50;
 const ARMIJO = 1e-4;
 
-// {header, arrays} of the reduced models at url (without extension).
+// {header, arrays} of the reduced models at url (without extension): linear, or framed
+// (framed.js).
 export async function loadReduced(url) {
   const scene = await loadScene(url);
-  if (scene.header.model_format !== "anisofem-reduced-1") {
+  if (!["anisofem-reduced-1", "anisofem-framed-1"].includes(scene.header.model_format)) {
     throw new Error(`reduced model: ${url}.json holds no reduced model ` +
                     `(model_format ${scene.header.model_format})`);
   }
@@ -146,6 +147,30 @@ function matvec(M, x, r) {
   return out;
 }
 
+// The quartic c0 + c1.q + q C2 q / 2 + S3[q, q, q] + S4[q, q, q, q] of P {c0, c1, C2, S3, W4,
+// r}: {energy}, with derivatives also {gradient (r), hessian (r, r)}
+export function quartic(P, q, derivatives) {
+  const { r, c0, c1, C2, S3, W4 } = P;
+  const X = quarticMatrix(matvec(W4, q, r), q, r);
+  const Y = matvec(S3, q, r);
+  const gradient = derivatives ? new Float64Array(r) : null;
+  const hessian = derivatives ? new Float64Array(r * r) : null;
+  let energy = c0;
+  for (let a = 0; a < r; a++) {
+    let Cq = 0, Yq = 0, Xq = 0;
+    for (let b = 0; b < r; b++) {
+      const k = a * r + b;
+      Cq += C2[k] * q[b];
+      Yq += Y[k] * q[b];
+      Xq += X[k] * q[b];
+      if (derivatives) hessian[k] = C2[k] + 6 * Y[k] + 12 * X[k];
+    }
+    energy += q[a] * (c1[a] + 0.5 * Cq + Yq + Xq);
+    if (derivatives) gradient[a] = c1[a] + Cq + 3 * Yq + 4 * Xq;
+  }
+  return { energy, gradient, hessian };
+}
+
 // X = S4[x, x] (r, r) from A = W4 x: each sorted triple adds to (a, b) with x_c, to (a, c)
 // with x_b where b != c, to (b, c) with x_a where a != b; then the lower triangle is mirrored
 function quarticMatrix(A, x, r) {
@@ -205,7 +230,7 @@ function positiveSolve(H, g, r) {
   }
 }
 
-function cholesky(H, r, shift) {
+export function cholesky(H, r, shift) {
   const L = new Float64Array(r * r);
   for (let j = 0; j < r; j++) {
     let s = H[j * r + j] + shift;
@@ -222,7 +247,7 @@ function cholesky(H, r, shift) {
   return L;
 }
 
-function choleskySolve(L, g, r) {
+export function choleskySolve(L, g, r) {
   const y = new Float64Array(r);
   for (let i = 0; i < r; i++) {
     let s = g[i];
@@ -238,7 +263,7 @@ function choleskySolve(L, g, r) {
   return x;
 }
 
-function dot(a, b) {
+export function dot(a, b) {
   let s = 0;
   for (let i = 0; i < a.length; i++) s += a[i] * b[i];
   return s;
