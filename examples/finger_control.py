@@ -12,11 +12,13 @@ over wall time), and draws the tip against the target in out/finger_control.png.
 
     python examples/finger_control.py [MODEL.onnx]   (default export/models/directional.onnx)
     python examples/finger_control.py reduced        (the finger's reduced model)
+    python examples/finger_control.py framed         (its framed model, export/framed_runtime.py)
 
 The reduced model is built once with anisofem into out/finger_reduced.json and .bin, for the
 load the finger declares: its actuator, a force on the tip face along +z or -z up to twice the
 finger's weight (4 modes and 8 directions fitted to the full FEM's equilibria under it, r =
-12); the loop steps it with numpy alone.
+12); the loop steps it with numpy alone. The framed model (domains in their own rotating
+frames, for fingers that bend far) is built the same way into out/finger_framed.
 """
 import os
 import sys
@@ -30,6 +32,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "export"))  # as if runtime.py were copied here
+from framed_runtime import FramedSimulator  # noqa: E402
 from runtime import OnnxSimulator, ReducedSimulator  # noqa: E402
 from onnx_cantilever import DEFAULT_MODEL, box_tets, save  # noqa: E402
 
@@ -98,24 +101,47 @@ class Reduced:
         return x, v
 
 
-def build_reduced(path, vertices, tets):
-    """The finger's reduced model written to path (.json, .bin): the one step that needs the
-    library (anisofem) rather than the runtime."""
+class Framed:
+    """The finger stepped by its framed model (built on first use): the same interface."""
+
+    def __init__(self, vertices, tets):
+        path = os.path.join("out", "finger_framed")
+        if not os.path.exists(path + ".json"):
+            build_reduced(path, vertices, tets, framed=True)
+        self.sim = FramedSimulator(path, vertices, tets)
+        self.masses, self.dt, self.label = self.sim.masses, DT, "framed model"
+        self.now = self.before = self.sim.rest_state()
+        self.x = self.sim.positions(self.now)
+
+    def step(self, external):
+        self.now, self.before = self.sim.step(self.now, self.before, external, self.dt), self.now
+        x = self.sim.positions(self.now)
+        v, self.x = (x - self.x) / self.dt, x
+        return x, v
+
+
+def build_reduced(path, vertices, tets, framed=False):
+    """The finger's reduced model (framed: its FramedModel) written to path (.json, .bin): the
+    one step that needs the library (anisofem) rather than the runtime."""
     import anisofem as af
-    from anisofem.reduced import Drag, Loads, ReducedModel
-    from export.reduced import write
+    from anisofem.reduced import Drag, FramedModel, Loads, ReducedModel
+    from export.reduced import write, write_framed
     material = af.Material(1e5, 0.48, DENSITY, np.array(FIBER) / np.linalg.norm(FIBER), KAPPA)
     scene = af.Scene(af.TetMesh(vertices, tets), material,
                      fixed=np.flatnonzero(vertices[:, 0] < 1e-9), gravity=(0.0, 0.0, -9.81))
     tip = np.flatnonzero(vertices[:, 0] > 0.1 - 1e-9)
     actuator = Drag(tip, 2 * scene.masses.sum() * 9.81, directions=[(0, 0, 1), (0, 0, -1)])
     os.makedirs(os.path.dirname(path), exist_ok=True)
-    write(ReducedModel(scene, modes=4, snapshots=8, loads=Loads((actuator,))), path)
+    if framed:
+        write_framed(FramedModel(scene, loads=Loads((actuator,))), path)
+    else:
+        write(ReducedModel(scene, modes=4, snapshots=8, loads=Loads((actuator,))), path)
 
 
 def main(which):
     vertices, tets = box_tets((0.1, 0.02, 0.02), (10, 2, 2))
-    sim = Reduced(vertices, tets) if which == "reduced" else Network(which, vertices, tets)
+    stepper = {"reduced": Reduced, "framed": Framed}.get(which)
+    sim = stepper(vertices, tets) if stepper else Network(which, vertices, tets)
     gravity = sim.masses[:, None] * np.array([0.0, 0.0, -9.81])  # N per vertex
     tip = vertices[:, 0] > 0.1 - 1e-9
     share = np.where(tip, sim.masses, 0.0) / sim.masses[tip].sum()  # the tip force's split

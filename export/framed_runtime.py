@@ -26,11 +26,15 @@ the same order: the two agree to round-off.
         now, before = sim.step(now, before, force, dt=0.02), now
     x = sim.positions(now)                           # (n, 3), m
 
-A state is a tuple (c (D, 3) m, R (D, 3, 3), q (Q,)).
+A state is a tuple (c (D, 3) m, R (D, 3, 3), q (Q,)). It needs numpy and runtime.py (copy
+both files together).
 """
 import numpy as np
 
-from .runtime import _angle_tag, _real, _same_mesh, _triple_rows, read_arrays
+try:
+    from .runtime import _angle_tag, _real, _same_mesh, _triple_rows, read_arrays
+except ImportError:  # copied next to runtime.py, outside the export package
+    from runtime import _angle_tag, _real, _same_mesh, _triple_rows, read_arrays
 
 FRAMED_FORMAT = "anisofem-framed-1"
 #: Newton's last step moves no node more than this share of the body's size (the library's).

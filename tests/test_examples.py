@@ -15,6 +15,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ("squeeze.py", "squeeze.png", "monotone under Neo-Hookean: True"),
     ("finger_control.py", "finger_control.png", "wrote out/finger_control.png"),
     ("finger_control.py reduced", "finger_control.png", "wrote out/finger_control.png"),
+    ("finger_control.py framed", "finger_control.png", "wrote out/finger_control.png"),
     ("actuator.py", "actuator.png", "bending grows with pressure: True"),
     ("actuator.py twist", "actuator_twist.png", "bending grows with pressure: True"),
     ("two_region_part.py", "two_region_part.png", "converged: True"),

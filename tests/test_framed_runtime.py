@@ -123,3 +123,17 @@ def test_command_writes_a_framed_model_and_refuses_the_linear_models_flags(tmp_p
         main(["reduced", "t", "--framed", "--snapshots", "4", "-o", out])
     assert stop.value.code == 2
     assert "--framed" in capsys.readouterr().err
+
+
+def test_bake_command_writes_the_framed_models_per_fiber_angle(tmp_path, capsys):
+    out = str(tmp_path / "t-reduced")
+    main(["bake-reduced", "t", "--framed", "--angles", "45", "-o", out])
+    assert "5 framed domains" in capsys.readouterr().out
+    with pytest.raises(ValueError, match="fiber angles"):
+        FramedSimulator(out)
+    sim = FramedSimulator(out, angle=45)
+    assert sim.header["validation"][0]["tip_error"] < 0.02
+    now = sim.rest_state()
+    after = sim.step(now, now, sim.masses[:, None] * np.asarray(sim.header["gravity"]),
+                     sim.header["dt"])
+    assert np.isfinite(sim.positions(after)).all()
