@@ -1,6 +1,7 @@
-"""The C runtime of the reduced model (export/c/anisofem_reduced.c), built with the system C
-compiler and called through ctypes: how the tests check it against runtime.ReducedSimulator
-and how `python -m export bench-reduced` times it. An engine links the C file pair itself
+"""The C runtime of the reduced models (export/c/anisofem_reduced.c: the linear model and the
+framed one), built with the system C compiler and called through ctypes: how the tests check
+it against runtime.ReducedSimulator and framed_runtime.FramedSimulator and how `python -m
+export bench-reduced` times it. An engine links the C file pair itself
 (export/README.md).
 
     lib = build("build/c")                  # compiles once; returns the shared library's path
@@ -39,7 +40,8 @@ def build(folder):
         raise RuntimeError("no C compiler (cc, gcc or clang) on the PATH")
     os.makedirs(folder, exist_ok=True)
     lib = os.path.join(folder, "libanisofem_reduced.so")
-    if os.path.exists(lib) and os.path.getmtime(lib) >= os.path.getmtime(SOURCE):
+    newest = max(os.path.getmtime(SOURCE), os.path.getmtime(SOURCE[:-1] + "h"))
+    if os.path.exists(lib) and os.path.getmtime(lib) >= newest:
         return lib
     tmp = lib + f".{os.getpid()}.tmp"
     done = subprocess.run([cc, "-std=c99", "-O2", "-shared", "-fPIC", "-o", tmp, SOURCE, "-lm"],
@@ -105,9 +107,7 @@ class CReducedSimulator:
         None."""
         if force is None:
             return None
-        self._force_buffer = np.ascontiguousarray(force, dtype=np.float64)
-        if self._force_buffer.shape != (self.n, 3):
-            raise ValueError(f"force: expected shape ({self.n}, 3), got {self._force_buffer.shape}")
+        self._force_buffer = _force_array(force, self.n)
         return _pointer(self._force_buffer)
 
     @property
@@ -122,7 +122,76 @@ class CReducedSimulator:
         return x
 
 
+def _force_array(force, n):
+    """force as a contiguous float64 (n, 3) array; ValueError naming its shape otherwise."""
+    force = np.ascontiguousarray(force, dtype=np.float64)
+    if force.shape != (n, 3):
+        raise ValueError(f"force: expected shape ({n}, 3), got {force.shape}")
+    return force
+
+
 def _pointer(a):
     if a.dtype != np.float64 or not a.flags.c_contiguous:
         raise TypeError("expected a contiguous float64 array")
     return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+
+class CFramedSimulator:
+    """A framed model's arrays files (path without extension) stepped by the C runtime at
+    `lib`: framed_runtime.FramedSimulator's interface, a state a tuple (c (D, 3), R (D, 3, 3),
+    q (Q,))."""
+
+    def __init__(self, path, lib, angle=None):
+        c = ctypes.CDLL(lib)
+        double_p = ctypes.POINTER(ctypes.c_double)
+        c.af_framed_load.restype = ctypes.c_void_p
+        c.af_framed_load.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p,
+                                     ctypes.c_size_t]
+        c.af_framed_free.argtypes = [ctypes.c_void_p]
+        for name in ("af_framed_vertices", "af_framed_state_size", "af_framed_iterations"):
+            getattr(c, name).argtypes = [ctypes.c_void_p]
+        c.af_framed_rest_state.argtypes = [ctypes.c_void_p, double_p]
+        c.af_framed_step.argtypes = [ctypes.c_void_p, double_p, double_p, double_p, double_p,
+                                     ctypes.c_double, ctypes.c_int]
+        c.af_framed_positions.argtypes = [ctypes.c_void_p, double_p, double_p]
+        error = ctypes.create_string_buffer(512)
+        handle = c.af_framed_load(str(path).encode(), None if angle is None
+                                  else str(angle).encode(), error, len(error))
+        if not handle:
+            raise ValueError(error.value.decode())
+        self._c, self._handle = c, handle
+        self.n = c.af_framed_vertices(handle)
+        self.size = c.af_framed_state_size(handle)
+        self._rest = np.empty(self.size)
+        c.af_framed_rest_state(handle, _pointer(self._rest))
+
+    def __del__(self):
+        if getattr(self, "_handle", None):
+            self._c.af_framed_free(self._handle)
+            self._handle = None
+
+    def rest_state(self):
+        """The rest state, flat (af_framed_state_size,)."""
+        return self._rest.copy()
+
+    def step(self, now, before, force, dt, max_iter=50):
+        """The state after now (flat states; before a step earlier) under nodal forces (n, 3),
+        N; RuntimeError naming the C runtime's code where it fails."""
+        after = np.empty(self.size)
+        force = _force_array(force, self.n)
+        code = self._c.af_framed_step(self._handle, _pointer(now), _pointer(before),
+                                      _pointer(after), _pointer(force), dt, max_iter)
+        if code != 0:
+            raise RuntimeError(f"af_framed_step: {CODES.get(code, code)}")
+        return after
+
+    @property
+    def iterations(self):
+        """Newton iterations of the last step."""
+        return self._c.af_framed_iterations(self._handle)
+
+    def positions(self, state):
+        """Positions (n, 3), m."""
+        x = np.empty((self.n, 3))
+        self._c.af_framed_positions(self._handle, _pointer(state), _pointer(x))
+        return x

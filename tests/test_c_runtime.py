@@ -126,3 +126,53 @@ def test_c_runtime_refuses_other_files_and_bad_input(built, tmp_path):
     with pytest.raises(RuntimeError, match="bad input"):
         c.step(q, w, scene.external_force, 0.0)
     assert not q.any() and not w.any()
+
+
+@pytest.fixture(scope="module")
+def framed(tmp_path_factory, built):
+    from anisofem.reduced import FramedModel
+    from test_framed_model import t_scene
+    scene = t_scene()
+    path = str(tmp_path_factory.mktemp("framed") / "t")
+    writer.write_framed(FramedModel(scene, validate=False), path, "t")
+    return scene, path, built[2]
+
+
+def test_c_steps_the_framed_model_like_the_numpy_runtime_over_200_steps(framed):
+    """A drag of half the T's weight at an arm's tip for 100 steps, then released: the same
+    Newton iterations, positions within 1e-9 of the deflection."""
+    from export.framed_runtime import FramedSimulator
+    scene, path, lib = framed
+    py, c = FramedSimulator(path), native.CFramedSimulator(path, lib)
+    drag = scene.external_force.copy()
+    drag[np.argmax(scene.mesh.vertices[:, 0]), 1] += 0.5 * scene.masses.sum() * 9.81
+    a = b = py.rest_state()
+    ca = cb = c.rest_state()
+    worst = size = 0.0
+    for k in range(200):
+        f = drag if k < 100 else scene.external_force
+        a, b = py.step(a, b, f, 0.02), a
+        ca, cb = c.step(ca, cb, f, 0.02), ca
+        assert c.iterations == py.iterations
+        x = py.positions(a)
+        worst = max(worst, np.abs(c.positions(ca) - x).max())
+        size = max(size, np.abs(x - scene.mesh.vertices).max())
+    assert size > 0.03  # the arm swung by more than a third of its length
+    assert worst < 1e-9 * size
+
+
+def test_c_runtime_refuses_a_framed_file_for_the_linear_step_and_back(framed, built):
+    _, framed_path, lib = framed
+    _, linear_path, _ = built
+    with pytest.raises(ValueError, match="anisofem-framed-1.*rebuild.*python -m export reduced$"):
+        native.CReducedSimulator(framed_path, lib)
+    with pytest.raises(ValueError, match="anisofem-reduced-1.*rebuild.*reduced --framed"):
+        native.CFramedSimulator(linear_path, lib)
+    c = native.CFramedSimulator(framed_path, lib)
+    now = c.rest_state()
+    bad = np.zeros((c.n, 3))
+    bad[2, 0] = np.nan
+    with pytest.raises(RuntimeError, match="bad input"):
+        c.step(now, now, bad, 0.02)
+    with pytest.raises(RuntimeError, match="bad input"):
+        c.step(now, now, np.zeros((c.n, 3)), -0.02)

@@ -84,16 +84,16 @@ static int string_value(const char *v, char *out, size_t size) {
     return *v == '"';
 }
 
-typedef struct { long shape[3]; int dims; long offset; } spec;
+typedef struct { long shape[4]; int dims; long offset; } spec;
 
 /* The spec of array `name` in the header's arrays table (from `table`); 0 if missing or not
- * float64. */
-static int array_spec(const char *table, const char *name, spec *s) {
+ * of dtype `type`. */
+static int array_spec(const char *table, const char *name, const char *type, spec *s) {
     const char *obj = value_of(table, name), *end, *v;
     char dtype[16];
     if (!obj || *obj != '{' || !(end = strchr(obj, '}'))) return 0;
     v = value_of(obj, "dtype");
-    if (!v || v > end || !string_value(v, dtype, sizeof dtype) || strcmp(dtype, "float64"))
+    if (!v || v > end || !string_value(v, dtype, sizeof dtype) || strcmp(dtype, type))
         return 0;
     v = value_of(obj, "offset");
     if (!v || v > end) return 0;
@@ -102,7 +102,7 @@ static int array_spec(const char *table, const char *name, spec *s) {
     if (!v || v > end || *v != '[') return 0;
     s->dims = 0;
     v++;
-    while (*v && *v != ']' && s->dims < 3) {
+    while (*v && *v != ']' && s->dims < 4) {
         char *next;
         s->shape[s->dims++] = strtol(v, &next, 10);
         v = next;
@@ -118,24 +118,31 @@ static long count(const spec *s) {
     return c;
 }
 
-/* Read array `name` (+ tag) of the expected dims into a new buffer; NULL with a message. */
-static double *load_array(const char *table, const char *bin, long bin_size, const char *name,
-                          const char *tag, int dims, spec *s, char *error, size_t size) {
+/* Read array `name` (+ tag) of dtype `type` ("float64" or "int32", `width` bytes an entry)
+ * and the expected dims into a new buffer; NULL with a message. */
+static void *load_typed(const char *table, const char *bin, long bin_size, const char *name,
+                        const char *tag, const char *type, long width, int dims, spec *s,
+                        char *error, size_t size) {
     char key[96];
-    double *out;
+    void *out;
     snprintf(key, sizeof key, "%s%s", name, tag);
-    if (!array_spec(table, key, s) || s->dims != dims) {
-        say(error, size, "the arrays file has no float64 array %s of the expected rank%s", key, "");
+    if (!array_spec(table, key, type, s) || s->dims != dims) {
+        say(error, size, "the arrays file has no %s array %s of the expected rank", type, key);
         return NULL;
     }
-    if (s->offset < 0 || s->offset + count(s) * 8 > bin_size) {
+    if (s->offset < 0 || s->offset + count(s) * width > bin_size) {
         say(error, size, "array %s runs past the end of the .bin file%s", key, "");
         return NULL;
     }
-    out = malloc((size_t)count(s) * sizeof(double));
-    if (out) memcpy(out, bin + s->offset, (size_t)count(s) * sizeof(double));
+    out = malloc((size_t)(count(s) * width) + 1);
+    if (out) memcpy(out, bin + s->offset, (size_t)(count(s) * width));
     else say(error, size, "no memory for array %s%s", key, "");
     return out;
+}
+
+static double *load_array(const char *table, const char *bin, long bin_size, const char *name,
+                          const char *tag, int dims, spec *s, char *error, size_t size) {
+    return load_typed(table, bin, bin_size, name, tag, "float64", 8, dims, s, error, size);
 }
 
 void af_reduced_free(af_reduced *m) {
@@ -145,52 +152,72 @@ void af_reduced_free(af_reduced *m) {
     free(m);
 }
 
-af_reduced *af_reduced_load(const char *path, const char *angle, char *error,
-                            size_t error_size) {
-    char name[4096], text[128], tag[64] = "";
-    char *json, *bin = NULL;
-    const char *table, *v;
-    long bin_size = 0, r;
-    spec s;
-    af_reduced *m;
+/* Read PATH.json and the .bin it names into *json and *bin (bin_size bytes), checking the
+ * arrays format and the model format `format` (`command` rebuilds a file of another); the
+ * tag "@angle" (or "") into tag; 0 with a message, nothing left allocated. */
+static int open_model(const char *path, const char *angle, const char *format,
+                      const char *command, char **json, char **bin, long *bin_size, char *tag,
+                      size_t tag_size, char *error, size_t error_size) {
+    char name[4096], text[128], hint[256];
+    const char *v;
     snprintf(name, sizeof name, "%s.json", path);
-    json = read_file(name, NULL);
-    if (!json) {
+    *bin = NULL;
+    *json = read_file(name, NULL);
+    if (!*json) {
         say(error, error_size, "path: cannot read %s (%s)", name, strerror(errno));
-        return NULL;
+        return 0;
     }
-    if (!string_value(value_of(json, "format"), text, sizeof text)
+    if (!string_value(value_of(*json, "format"), text, sizeof text)
         || strcmp(text, ARRAYS_FORMAT) != 0) {
         say(error, error_size, "path: %s is not an arrays header (format %s)", name, text);
-        free(json);
-        return NULL;
+        goto fail;
     }
-    if (!string_value(value_of(json, "model_format"), text, sizeof text)
-        || strcmp(text, REDUCED_FORMAT) != 0) {
-        say(error, error_size, "path: %s holds model_format '%s', and this runtime reads "
-            "'" REDUCED_FORMAT "'; rebuild the file with this version's python -m export "
-            "reduced", name, text);
-        free(json);
-        return NULL;
+    if (!string_value(value_of(*json, "model_format"), text, sizeof text)
+        || strcmp(text, format) != 0) {
+        snprintf(hint, sizeof hint, "', and this runtime reads '%s'; rebuild the file with this "
+                 "version's %s", format, command);
+        say(error, error_size, "path: %s holds model_format '%s", name, text);
+        if (error && error_size > strlen(error))
+            strncat(error, hint, error_size - strlen(error) - 1);
+        goto fail;
     }
-    if (angle) snprintf(tag, sizeof tag, "@%s", angle);
-    table = value_of(json, "arrays");
-    v = value_of(json, "bin");
-    if (!table || !string_value(v, text, sizeof text)) {
+    tag[0] = '\0';
+    if (angle) snprintf(tag, tag_size, "@%s", angle);
+    v = value_of(*json, "bin");
+    if (!value_of(*json, "arrays") || !string_value(v, text, sizeof text)) {
         say(error, error_size, "path: %s has no arrays table or bin file name%s", name, "");
-        free(json);
-        return NULL;
+        goto fail;
     }
     {   /* the .bin next to the .json */
         const char *slash = strrchr(path, '/');
         int dir = slash ? (int)(slash - path + 1) : 0;
         snprintf(name, sizeof name, "%.*s%s", dir, path, text);
     }
-    bin = read_file(name, &bin_size);
+    *bin = read_file(name, bin_size);
+    if (*bin) return 1;
+    say(error, error_size, "path: cannot read %s (%s)", name, strerror(errno));
+fail:
+    free(*json);
+    *json = NULL;
+    return 0;
+}
+
+af_reduced *af_reduced_load(const char *path, const char *angle, char *error,
+                            size_t error_size) {
+    char tag[64];
+    char *json, *bin;
+    const char *table;
+    long bin_size = 0, r;
+    spec s;
+    af_reduced *m;
+    if (!open_model(path, angle, REDUCED_FORMAT, "python -m export reduced", &json, &bin,
+                    &bin_size, tag, sizeof tag, error, error_size))
+        return NULL;
+    table = value_of(json, "arrays");
     m = calloc(1, sizeof *m);
-    if (!bin || !m) {
-        say(error, error_size, "path: cannot read %s (%s)", name, bin ? "no memory" : strerror(errno));
-        free(json); free(bin); free(m);
+    if (!m) {
+        say(error, error_size, "no memory for a model%s%s", "", "");
+        free(json); free(bin);
         return NULL;
     }
     if (!(m->rest = load_array(table, bin, bin_size, "rest_positions", "", 2, &s, error, error_size)))
@@ -514,5 +541,833 @@ int af_reduced_step(af_reduced *m, double *q, double *w, const double *force, do
         for (k = 0; k < m->triples; k++) A[k] += step * Ap[k];
     }
     m->iterations = (int)it;
+    return AF_NOT_CONVERGED;
+}
+
+/* ---------------------------------------------------------------------------------------
+ * The framed model (`python -m export reduced --framed`): export/framed_runtime.py's
+ * FramedSimulator, the same step in the same order. Domain d's node i sits at
+ * R_d (y_i + U_i q_d) + c_d; a step is Newton over each domain's own move t, turn theta and
+ * coordinates q, the centres carried along the domains' kinematic tree.
+ */
+#define FRAMED_FORMAT "anisofem-framed-1"
+#define STEP_TOLERANCE 1e-8
+#define MIRROR_FLOOR 1e-10
+
+struct af_framed {
+    int n, D, Q, Z, rmax, joints, points, k, nodes, pairs, links;
+    double size;
+    int *labels, *r, *q0, *z0, *b0, *parent, *order, *chain, *poly;
+    int *joint_nodes, *joint_labels, *joint_tets, *pair_list, *pair_ptr, *element_pairs;
+    double *rest, *masses, *Y, *U, *centre, *mass, *a, *J, *A, *B, *radius, *reach;
+    double *c0, *c1, *C2, *S3, *W4, *arm_parent, *arm_own, *arms;
+    double *grads, *weights, *mu, *lam, *kappa, *fiber;
+    double *work;
+    int iterations;
+};
+
+void af_framed_free(af_framed *m) {
+    if (!m) return;
+    free(m->labels); free(m->r); free(m->q0); free(m->z0); free(m->b0); free(m->parent);
+    free(m->order); free(m->chain); free(m->poly); free(m->joint_nodes); free(m->joint_labels);
+    free(m->joint_tets); free(m->pair_list); free(m->pair_ptr); free(m->element_pairs);
+    free(m->rest); free(m->masses); free(m->Y); free(m->U); free(m->centre); free(m->mass);
+    free(m->a); free(m->J); free(m->A); free(m->B); free(m->radius); free(m->reach);
+    free(m->c0); free(m->c1); free(m->C2); free(m->S3); free(m->W4); free(m->arm_parent);
+    free(m->arm_own); free(m->arms); free(m->grads); free(m->weights); free(m->mu);
+    free(m->lam); free(m->kappa); free(m->fiber); free(m->work);
+    free(m);
+}
+
+static int compare_longs(const void *x, const void *y) {
+    long a = *(const long *)x, b = *(const long *)y;
+    return (a > b) - (a < b);
+}
+
+/* The joints' compact node numbering, their node pairs and each element's pairs. */
+static int plan_joints(af_framed *m, const int *tets) {
+    long e, a, b, i, total = (long)m->joints * m->k, count = 0, unique = 0;
+    long *keys = malloc((size_t)(total > 0 ? total : 1) * sizeof(long) * (size_t)m->k);
+    int *local = malloc((size_t)m->n * sizeof(int));
+    if (!keys || !local) { free(keys); free(local); return 0; }
+    for (i = 0; i < m->n; i++) local[i] = -1;
+    for (e = 0; e < total; e++) local[tets[e]] = 0;
+    m->nodes = 0;
+    for (i = 0; i < m->n; i++) if (local[i] == 0) local[i] = m->nodes++;
+    m->joint_nodes = malloc((size_t)m->nodes * sizeof(int) + 1);
+    m->joint_labels = malloc((size_t)m->nodes * sizeof(int) + 1);
+    m->joint_tets = malloc((size_t)total * sizeof(int) + 1);
+    if (!m->joint_nodes || !m->joint_labels || !m->joint_tets) { free(keys); free(local); return 0; }
+    for (i = 0; i < m->n; i++)
+        if (local[i] >= 0) { m->joint_nodes[local[i]] = (int)i; m->joint_labels[local[i]] = m->labels[i]; }
+    for (e = 0; e < total; e++) m->joint_tets[e] = local[tets[e]];
+    for (e = 0; e < m->joints; e++)
+        for (a = 0; a < m->k; a++)
+            for (b = 0; b < m->k; b++)
+                keys[count++] = (long)m->joint_tets[e * m->k + a] * m->nodes
+                                + m->joint_tets[e * m->k + b];
+    qsort(keys, (size_t)count, sizeof(long), compare_longs);
+    for (i = 0; i < count; i++) if (i == 0 || keys[i] != keys[i - 1]) keys[unique++] = keys[i];
+    m->pairs = (int)unique;
+    m->pair_list = malloc((size_t)(2 * unique) * sizeof(int) + 1);
+    m->pair_ptr = calloc((size_t)m->nodes + 1, sizeof(int));
+    m->element_pairs = malloc((size_t)(count > 0 ? count : 1) * sizeof(int));
+    if (!m->pair_list || !m->pair_ptr || !m->element_pairs) { free(keys); free(local); return 0; }
+    for (i = 0; i < unique; i++) {
+        m->pair_list[2 * i] = (int)(keys[i] / m->nodes);
+        m->pair_list[2 * i + 1] = (int)(keys[i] % m->nodes);
+        m->pair_ptr[m->pair_list[2 * i] + 1]++;
+    }
+    for (i = 0; i < m->nodes; i++) m->pair_ptr[i + 1] += m->pair_ptr[i];
+    for (e = 0; e < m->joints; e++)
+        for (a = 0; a < m->k; a++)
+            for (b = 0; b < m->k; b++) {
+                long key = (long)m->joint_tets[e * m->k + a] * m->nodes + m->joint_tets[e * m->k + b];
+                long *hit = bsearch(&key, keys, (size_t)unique, sizeof(long), compare_longs);
+                m->element_pairs[(e * m->k + a) * m->k + b] = (int)(hit - keys);
+            }
+    free(keys);
+    free(local);
+    return 1;
+}
+
+#define F64(field, name, dims) \
+    if (!(m->field = load_typed(table, bin, bin_size, name, tag, "float64", 8, dims, &s, error, \
+                                error_size))) goto fail
+#define I32(field, name, dims) \
+    if (!(m->field = load_typed(table, bin, bin_size, name, tag, "int32", 4, dims, &s, error, \
+                                error_size))) goto fail
+
+af_framed *af_framed_load(const char *path, const char *angle, char *error, size_t error_size) {
+    char tag[64];
+    char *json, *bin;
+    const char *table, *v;
+    long bin_size = 0, d, q = 0, z = 0, b = 0, P, width;
+    int *tets = NULL;
+    spec s;
+    af_framed *m;
+    if (!open_model(path, angle, FRAMED_FORMAT, "python -m export reduced --framed", &json,
+                    &bin, &bin_size, tag, sizeof tag, error, error_size))
+        return NULL;
+    table = value_of(json, "arrays");
+    m = calloc(1, sizeof *m);
+    if (!m) {
+        say(error, error_size, "no memory for a model%s%s", "", "");
+        free(json); free(bin);
+        return NULL;
+    }
+    v = value_of(json, "size");
+    m->size = v ? strtod(v, NULL) : 0.0;
+    {   /* the mesh arrays carry no tag */
+        const char *none = "";
+        if (!(m->rest = load_typed(table, bin, bin_size, "rest_positions", none, "float64", 8, 2,
+                                   &s, error, error_size))) goto fail;
+        m->n = (int)s.shape[0];
+        if (!(m->masses = load_typed(table, bin, bin_size, "masses", none, "float64", 8, 1, &s,
+                                     error, error_size))) goto fail;
+    }
+    I32(labels, "labels", 1);
+    I32(r, "r", 1);
+    m->D = (int)s.shape[0];
+    F64(Y, "Y", 2);
+    F64(U, "U", 3);
+    m->rmax = (int)s.shape[2];
+    F64(centre, "centre", 2); F64(mass, "mass", 1); F64(a, "a", 1); F64(J, "J", 3);
+    F64(A, "A", 3); F64(B, "B", 3); F64(radius, "radius", 1); F64(reach, "reach", 1);
+    F64(c0, "c0", 1); F64(c1, "c1", 1); F64(C2, "C2", 1); F64(S3, "S3", 1); F64(W4, "W4", 1);
+    I32(poly, "poly_offsets", 2);
+    I32(parent, "parent", 1); I32(order, "order", 1);
+    F64(arm_parent, "arm_parent", 2); F64(arm_own, "arm_own", 2);
+    I32(chain, "chain", 2);
+    P = s.shape[0];
+    F64(arms, "arms", 2);
+    F64(grads, "joint_grads", 4);
+    m->joints = (int)s.shape[0]; m->points = (int)s.shape[1]; m->k = (int)s.shape[2];
+    F64(weights, "joint_weights", 2); F64(mu, "mu", 1); F64(lam, "lam", 1);
+    F64(kappa, "kappa", 1); F64(fiber, "fiber", 2);
+    if (!(tets = load_typed(table, bin, bin_size, "joint_tets", tag, "int32", 4, 2, &s, error,
+                            error_size))) goto fail;
+    if (m->D > 64 || m->k > 16) {
+        say(error, error_size, "path: this runtime steps at most 64 domains and 16 nodes an "
+            "element%s%s", "", "");
+        goto fail;
+    }
+    m->links = (int)P;
+    m->q0 = malloc((size_t)m->D * sizeof(int)); m->z0 = malloc((size_t)m->D * sizeof(int));
+    m->b0 = malloc((size_t)m->D * sizeof(int));
+    if (!m->q0 || !m->z0 || !m->b0 || !plan_joints(m, tets)) {
+        say(error, error_size, "no memory for a model%s%s", "", "");
+        goto fail;
+    }
+    for (d = 0; d < m->D; d++) {
+        m->q0[d] = (int)q; m->z0[d] = (int)z; m->b0[d] = (int)b;
+        q += m->r[d]; z += 6 + m->r[d]; b += (long)m->r[d] * m->r[d];
+    }
+    m->Q = (int)q; m->Z = (int)z;
+    width = 6 + m->rmax;
+    {   /* work: the scratch of af_framed_step (framed_scratch) */
+        long Z = m->Z, D = m->D, nodes = m->nodes, rm = m->rmax;
+        size_t doubles = (size_t)(6 * Z * Z + 2 * 3 * D * Z + 8 * Z
+                                  + 3 * nodes * (2 + 3 * width) + 9 * (long)m->pairs
+                                  + 9 * D + 9 * m->Q + 3 * D + 5 * (12 * D + m->Q) + 9 * D
+                                  + (rm + 2) * (rm + 2) * (rm + 2) / 6 * 2 + 3 * rm * rm
+                                  + 4 * rm + 256);
+        m->work = malloc(doubles * sizeof(double));
+        if (!m->work) { say(error, error_size, "no memory for a model%s%s", "", ""); goto fail; }
+    }
+    free(tets); free(json); free(bin);
+    return m;
+fail:
+    free(tets); free(json); free(bin);
+    af_framed_free(m);
+    return NULL;
+}
+#undef F64
+#undef I32
+
+int af_framed_vertices(const af_framed *m) { return m->n; }
+int af_framed_state_size(const af_framed *m) { return 12 * m->D + m->Q; }
+const double *af_framed_masses(const af_framed *m) { return m->masses; }
+const double *af_framed_rest_positions(const af_framed *m) { return m->rest; }
+int af_framed_iterations(const af_framed *m) { return m->iterations; }
+
+void af_framed_rest_state(const af_framed *m, double *state) {
+    long d, i;
+    for (i = 0; i < 12L * m->D + m->Q; i++) state[i] = 0.0;
+    for (d = 0; d < m->D; d++) {
+        for (i = 0; i < 3; i++) state[3 * d + i] = m->centre[3 * d + i];
+        for (i = 0; i < 3; i++) state[3 * m->D + 9 * d + 4 * i] = 1.0;
+    }
+}
+
+/* positions (3 per node) of `nodes` (count of them; all where NULL) into out */
+static void framed_positions(const af_framed *m, const double *st, const int *nodes, long count,
+                             double *out) {
+    const double *c = st, *R = st + 3 * m->D, *q = st + 12 * m->D;
+    long k, a, b;
+    for (k = 0; k < count; k++) {
+        long i = nodes ? nodes[k] : k;
+        int d = m->labels[i];
+        double y[3];
+        if (d < 0) {
+            for (a = 0; a < 3; a++) out[3 * k + a] = m->rest[3 * i + a];
+            continue;
+        }
+        for (a = 0; a < 3; a++) {
+            const double *row = m->U + (3 * i + a) * m->rmax;
+            double v = m->Y[3 * i + a];
+            for (b = 0; b < m->r[d]; b++) v += row[b] * q[m->q0[d] + b];
+            y[a] = v;
+        }
+        for (a = 0; a < 3; a++) {
+            const double *Ra = R + 9 * d + 3 * a;
+            out[3 * k + a] = Ra[0] * y[0] + Ra[1] * y[1] + Ra[2] * y[2] + c[3 * d + a];
+        }
+    }
+}
+
+void af_framed_positions(const af_framed *m, const double *state, double *x) {
+    framed_positions(m, state, NULL, m->n, x);
+}
+
+/* out[0..9] += w R M for 3 x 3 R, M */
+static void add_product(double w, const double *R, const double *M, double *out) {
+    int i, j;
+    for (i = 0; i < 3; i++)
+        for (j = 0; j < 3; j++)
+            out[3 * i + j] += w * (R[3 * i] * M[j] + R[3 * i + 1] * M[3 + j]
+                                   + R[3 * i + 2] * M[6 + j]);
+}
+
+/* the targets T0 (9 D), T (9 Q), t (3 D): the force's moments plus the inertia's pull towards
+ * x_hat = 2 x(now) - x(before) */
+static void framed_targets(const af_framed *m, const double *now, const double *before,
+                           const double *force, double inertia, double *T0, double *T,
+                           double *t) {
+    long i, a, b, c, k, d;
+    double M[9];
+    for (i = 0; i < 9L * m->D; i++) T0[i] = 0.0;
+    for (i = 0; i < 9L * m->Q; i++) T[i] = 0.0;
+    for (i = 0; i < 3L * m->D; i++) t[i] = 0.0;
+    for (i = 0; i < m->n; i++) {
+        d = m->labels[i];
+        if (d < 0) continue;
+        for (a = 0; a < 3; a++) {
+            double f = force[3 * i + a];
+            t[3 * d + a] += f;
+            for (b = 0; b < 3; b++) {
+                const double *row = m->U + (3 * i + b) * m->rmax;
+                T0[9 * d + 3 * a + b] += f * m->Y[3 * i + b];
+                for (c = 0; c < m->r[d]; c++) T[9 * (m->q0[d] + c) + 3 * a + b] += f * row[c];
+            }
+        }
+    }
+    for (k = 0; k < 2; k++) {
+        const double *st = k == 0 ? now : before;
+        const double *R = st + 3 * m->D, *q = st + 12 * m->D;
+        double w = inertia * (k == 0 ? 2.0 : -1.0);
+        for (d = 0; d < m->D; d++) {
+            long r = m->r[d], q0 = m->q0[d];
+            for (i = 0; i < 9; i++) {
+                double v = m->J[9 * d + i];
+                for (a = 0; a < r; a++) v += q[q0 + a] * m->A[9 * (q0 + a) + i];
+                M[i] = v;
+            }
+            add_product(w, R + 9 * d, M, T0 + 9 * d);
+            for (b = 0; b < r; b++) {
+                for (i = 0; i < 3; i++)
+                    for (c = 0; c < 3; c++) {
+                        double v = m->A[9 * (q0 + b) + 3 * c + i];
+                        for (a = 0; a < r; a++)
+                            v += q[q0 + a] * m->B[9 * (m->b0[d] + a * r + b) + 3 * i + c];
+                        M[3 * i + c] = v;
+                    }
+                add_product(w, R + 9 * d, M, T + 9 * (q0 + b));
+            }
+            for (i = 0; i < 3; i++) t[3 * d + i] += w * m->mass[d] * st[3 * d + i];
+        }
+    }
+}
+
+/* G[j] = [e_j]_x R (9 each) */
+static void turned(const double *R, double G[3][9]) {
+    int b;
+    for (b = 0; b < 9; b++) G[0][b] = G[1][b] = G[2][b] = 0.0;
+    for (b = 0; b < 3; b++) {
+        double r0 = R[b], r1 = R[3 + b], r2 = R[6 + b];
+        G[0][3 + b] = -r2; G[0][6 + b] = r1;
+        G[1][b] = r2; G[1][6 + b] = -r0;
+        G[2][b] = -r1; G[2][3 + b] = r0;
+    }
+}
+
+/* out = [e_i]_x M (9) */
+static void cross_with(int i, const double *M, double *out) {
+    int b;
+    for (b = 0; b < 9; b++) out[b] = 0.0;
+    for (b = 0; b < 3; b++) {
+        if (i == 0) { out[3 + b] = -M[6 + b]; out[6 + b] = M[3 + b]; }
+        if (i == 1) { out[b] = M[6 + b]; out[6 + b] = -M[b]; }
+        if (i == 2) { out[b] = -M[3 + b]; out[3 + b] = M[b]; }
+    }
+}
+
+static double sum9(const double *A, const double *B) {
+    double s = 0.0;
+    int k;
+    for (k = 0; k < 9; k++) s += A[k] * B[k];
+    return s;
+}
+
+/* The quartic of domain d at q (r,): its energy; with g, its gradient (r,) and Hessian (r, r)
+ * into g and H (row stride r). scratch: triples + 2 r^2 doubles. */
+static double domain_quartic(const af_framed *m, int d, const double *q, double *g, double *H,
+                             double *scratch) {
+    long r = m->r[d], T = r * (r + 1) * (r + 2) / 6, a, b;
+    const int *o = m->poly + 3 * d;
+    const double *c1 = m->c1 + m->q0[d], *C2 = m->C2 + o[0], *S3 = m->S3 + o[1];
+    const double *W4 = m->W4 + o[2];
+    double *A = scratch, *X = A + T, *Y = X + r * r, E = m->c0[d];
+    for (a = 0; a < T; a++) A[a] = dot(W4 + a * r, q, r);
+    contract(A, q, X, r);
+    for (a = 0; a < r * r; a++) Y[a] = dot(S3 + a * r, q, r);
+    for (a = 0; a < r; a++) {
+        double Cq = 0.0, Yq = 0.0, Xq = 0.0;
+        for (b = 0; b < r; b++) {
+            Cq += C2[a * r + b] * q[b];
+            Yq += Y[a * r + b] * q[b];
+            Xq += X[a * r + b] * q[b];
+            if (g) H[a * r + b] = C2[a * r + b] + 6.0 * Y[a * r + b] + 12.0 * X[a * r + b];
+        }
+        E += q[a] * (c1[a] + 0.5 * Cq + Yq + Xq);
+        if (g) g[a] = c1[a] + Cq + 3.0 * Yq + 4.0 * Xq;
+    }
+    return E;
+}
+
+typedef struct {
+    double *T0, *T, *t;        /* targets */
+    double *x, *grad, *blocks, *Jn, *K, *quartic, *gq, *Hq;
+} framed_scratch;
+
+/* The joints' StVK plus fiber energy at their nodes' positions x; with g, their gradient and
+ * Hessian chained through each node's frame added to g and H (Z, Z). */
+static double joint_terms(const af_framed *m, const double *st, framed_scratch *w, double *g,
+                          double *H) {
+    long e, p, a, b, i, j, l, k = m->k, Z = m->Z, width = 6 + m->rmax;
+    const double *c = st, *R = st + 3 * m->D;
+    const double *x = w->x;
+    double F[9], S[9], Fd[3], qa[3 * 16], sd[16], E = 0.0;
+    if (g) {
+        for (i = 0; i < 3L * m->nodes; i++) w->grad[i] = 0.0;
+        for (i = 0; i < 9L * m->pairs; i++) w->blocks[i] = 0.0;
+    }
+    for (e = 0; e < m->joints; e++) {
+        double mu = m->mu[e], lam = m->lam[e], kappa = m->kappa[e];
+        const double *d = m->fiber + 3 * e;
+        for (p = 0; p < m->points; p++) {
+            const double *G = m->grads + (e * m->points + p) * k * 3;
+            double wt = m->weights[e * m->points + p], trE = 0.0, EE = 0.0, I4m1;
+            for (i = 0; i < 9; i++) F[i] = 0.0;
+            for (a = 0; a < k; a++) {
+                long node = m->joint_tets[e * k + a];
+                for (i = 0; i < 3; i++)
+                    for (j = 0; j < 3; j++) F[3 * i + j] += x[3 * node + i] * G[3 * a + j];
+            }
+            for (i = 0; i < 3; i++)
+                for (j = 0; j < 3; j++) {
+                    double v = 0.0;
+                    for (l = 0; l < 3; l++) v += F[3 * l + i] * F[3 * l + j];
+                    S[3 * i + j] = 0.5 * (v - (i == j ? 1.0 : 0.0));
+                }
+            for (i = 0; i < 3; i++) trE += S[4 * i];
+            for (i = 0; i < 9; i++) EE += S[i] * S[i];
+            for (i = 0; i < 9; i++) S[i] *= 2.0 * mu;
+            for (i = 0; i < 3; i++) S[4 * i] += lam * trE;
+            for (i = 0; i < 3; i++) Fd[i] = F[3 * i] * d[0] + F[3 * i + 1] * d[1] + F[3 * i + 2] * d[2];
+            I4m1 = Fd[0] * Fd[0] + Fd[1] * Fd[1] + Fd[2] * Fd[2] - 1.0;
+            for (i = 0; i < 3; i++)
+                for (j = 0; j < 3; j++) S[3 * i + j] += 4.0 * kappa * I4m1 * d[i] * d[j];
+            E += wt * (0.5 * lam * trE * trE + mu * EE + kappa * I4m1 * I4m1);
+            if (!g) continue;
+            for (a = 0; a < k; a++) {
+                long node = m->joint_tets[e * k + a];
+                sd[a] = 0.0;
+                for (i = 0; i < 3; i++) {
+                    double v = 0.0, q_ = 0.0;
+                    for (j = 0; j < 3; j++) q_ += F[3 * i + j] * G[3 * a + j];
+                    qa[3 * a + i] = q_;
+                    sd[a] += d[i] * G[3 * a + i];
+                    for (j = 0; j < 3; j++) {
+                        double SG = 0.0;
+                        for (l = 0; l < 3; l++) SG += S[3 * j + l] * G[3 * a + l];
+                        v += F[3 * i + j] * SG;
+                    }
+                    w->grad[3 * node + i] += wt * v;
+                }
+            }
+            for (a = 0; a < k; a++)
+                for (b = 0; b < k; b++) {
+                    double GSG = 0.0, GG = 0.0;
+                    double *block = w->blocks + 9L * m->element_pairs[(e * k + a) * k + b];
+                    for (i = 0; i < 3; i++) {
+                        GG += G[3 * a + i] * G[3 * b + i];
+                        for (j = 0; j < 3; j++) GSG += G[3 * a + i] * S[3 * i + j] * G[3 * b + j];
+                    }
+                    for (i = 0; i < 3; i++)
+                        for (l = 0; l < 3; l++) {
+                            double FF = 0.0;
+                            for (j = 0; j < 3; j++) FF += F[3 * i + j] * F[3 * l + j];
+                            block[3 * i + l] += wt * ((i == l ? GSG : 0.0)
+                                + mu * qa[3 * b + i] * qa[3 * a + l] + mu * FF * GG
+                                + lam * qa[3 * a + i] * qa[3 * b + l]
+                                + 8.0 * kappa * Fd[i] * Fd[l] * sd[a] * sd[b]);
+                        }
+                }
+        }
+    }
+    if (!g) return E;
+    /* each node's Jacobian in its domain's unknowns: [I | -[w]_x | R U_i], w = x_i - c */
+    for (i = 0; i < (long)m->nodes * 3 * width; i++) w->Jn[i] = 0.0;
+    for (i = 0; i < m->nodes; i++) {
+        int dd = m->joint_labels[i];
+        double *Ji = w->Jn + 3 * i * width, wv[3];
+        long node = m->joint_nodes[i];
+        if (dd < 0) continue;
+        for (a = 0; a < 3; a++) { wv[a] = x[3 * i + a] - c[3 * dd + a]; Ji[a * width + a] = 1.0; }
+        Ji[4] = wv[2]; Ji[5] = -wv[1];
+        Ji[width + 3] = -wv[2]; Ji[width + 5] = wv[0];
+        Ji[2 * width + 3] = wv[1]; Ji[2 * width + 4] = -wv[0];
+        for (a = 0; a < 3; a++)
+            for (b = 0; b < m->r[dd]; b++) {
+                double v = 0.0;
+                for (l = 0; l < 3; l++) v += R[9 * dd + 3 * a + l] * m->U[(3 * node + l) * m->rmax + b];
+                Ji[a * width + 6 + b] = v;
+            }
+    }
+    for (i = 0; i < m->nodes; i++) {
+        int dd = m->joint_labels[i], touched[64];
+        long o, rd, u, v, ee;
+        const double *gi = w->grad + 3 * i, *Ji = w->Jn + 3 * i * width;
+        double wv[3], gw;
+        if (dd < 0) continue;
+        o = m->z0[dd]; rd = m->r[dd];
+        for (a = 0; a < 3; a++) wv[a] = x[3 * i + a] - c[3 * dd + a];
+        for (a = 0; a < 3; a++) g[o + a] += gi[a];
+        g[o + 3] += wv[1] * gi[2] - wv[2] * gi[1];
+        g[o + 4] += wv[2] * gi[0] - wv[0] * gi[2];
+        g[o + 5] += wv[0] * gi[1] - wv[1] * gi[0];
+        gw = gi[0] * wv[0] + gi[1] * wv[1] + gi[2] * wv[2];
+        for (a = 0; a < 3; a++) {
+            for (b = 0; b < 3; b++) H[(o + 3 + a) * Z + o + 3 + b] += 0.5 * (gi[a] * wv[b] + gi[b] * wv[a]);
+            H[(o + 3 + a) * Z + o + 3 + a] -= gw;
+        }
+        for (b = 0; b < rd; b++) {
+            double v0 = Ji[6 + b], v1 = Ji[width + 6 + b], v2 = Ji[2 * width + 6 + b];
+            double cr[3] = {v1 * gi[2] - v2 * gi[1], v2 * gi[0] - v0 * gi[2], v0 * gi[1] - v1 * gi[0]};
+            g[o + 6 + b] += v0 * gi[0] + v1 * gi[1] + v2 * gi[2];
+            for (a = 0; a < 3; a++) {
+                H[(o + 3 + a) * Z + o + 6 + b] += cr[a];
+                H[(o + 6 + b) * Z + o + 3 + a] += cr[a];
+            }
+        }
+        for (ee = 0; ee < m->D; ee++) touched[ee] = 0;
+        for (p = m->pair_ptr[i]; p < m->pair_ptr[i + 1]; p++) {
+            long jj = m->pair_list[2 * p + 1], oj, nj;
+            int dj = m->joint_labels[jj];
+            if (dj < 0) continue;
+            oj = m->z0[dj]; nj = 6 + m->r[dj];
+            if (!touched[dj]) {
+                touched[dj] = 1;
+                for (a = 0; a < 3; a++) for (v = 0; v < nj; v++) w->K[a * Z + oj + v] = 0.0;
+            }
+            for (a = 0; a < 3; a++)
+                for (b = 0; b < 3; b++) {
+                    double h = w->blocks[9 * p + 3 * a + b];
+                    const double *Jj = w->Jn + (3 * jj + b) * width;
+                    for (v = 0; v < nj; v++) w->K[a * Z + oj + v] += h * Jj[v];
+                }
+        }
+        for (ee = 0; ee < m->D; ee++) {
+            long oe = m->z0[ee], ne = 6 + m->r[ee];
+            if (!touched[ee]) continue;
+            for (u = 0; u < 6 + rd; u++) {
+                double j0 = Ji[u], j1 = Ji[width + u], j2 = Ji[2 * width + u];
+                if (j0 == 0.0 && j1 == 0.0 && j2 == 0.0) continue;
+                for (v = 0; v < ne; v++)
+                    H[(o + u) * Z + oe + v] += j0 * w->K[oe + v] + j1 * w->K[Z + oe + v]
+                                               + j2 * w->K[2 * Z + oe + v];
+            }
+        }
+    }
+    return E;
+}
+
+/* The step's energy; with g, its gradient and Hessian (Z, Z) in each domain's centre, turn
+ * about it and coordinates set into g and H. */
+static double framed_energy(const af_framed *m, const double *st, framed_scratch *w,
+                            double inertia, double *g, double *H) {
+    long d, i, k, b, Z = m->Z;
+    const double *c = st, *R = st + 3 * m->D, *q = st + 12 * m->D;
+    double E = 0.0;
+    if (g) {
+        for (i = 0; i < Z; i++) g[i] = 0.0;
+        for (i = 0; i < Z * Z; i++) H[i] = 0.0;
+    }
+    for (d = 0; d < m->D; d++) {
+        long r = m->r[d], q0 = m->q0[d], o = m->z0[d];
+        const double *Rd = R + 9 * d;
+        double M[9], v = 0.0, GR[3][9], a9[9], b9[9];
+        for (i = 0; i < 9; i++) M[i] = w->T0[9 * d + i];
+        for (b = 0; b < r; b++)
+            for (i = 0; i < 9; i++) M[i] += q[q0 + b] * w->T[9 * (q0 + b) + i];
+        for (i = 0; i < 3; i++) v += c[3 * d + i] * c[3 * d + i];
+        v *= m->mass[d];
+        for (b = 0; b < r; b++) v += 2.0 * m->a[q0 + b] * q[q0 + b] + q[q0 + b] * q[q0 + b];
+        E += 0.5 * inertia * v - sum9(Rd, M);
+        for (i = 0; i < 3; i++) E -= w->t[3 * d + i] * c[3 * d + i];
+        E += domain_quartic(m, (int)d, q + q0, g ? w->gq : NULL, w->Hq, w->quartic);
+        if (!g) continue;
+        turned(Rd, GR);
+        for (i = 0; i < 3; i++) {
+            g[o + i] = inertia * m->mass[d] * c[3 * d + i] - w->t[3 * d + i];
+            g[o + 3 + i] = -sum9(GR[i], M);
+            H[(o + i) * Z + o + i] = inertia * m->mass[d];
+            for (k = 0; k < 3; k++) {
+                double v2 = 0.0;
+                int e;
+                cross_with((int)i, GR[k], a9);
+                cross_with((int)k, GR[i], b9);
+                for (e = 0; e < 9; e++) v2 += 0.5 * (a9[e] + b9[e]) * M[e];
+                H[(o + 3 + i) * Z + o + 3 + k] = -v2;
+            }
+        }
+        for (b = 0; b < r; b++) {
+            const double *Tb = w->T + 9 * (q0 + b);
+            long cc;
+            g[o + 6 + b] = inertia * (m->a[q0 + b] + q[q0 + b]) - sum9(Rd, Tb) + w->gq[b];
+            H[(o + 6 + b) * Z + o + 6 + b] = inertia;
+            for (k = 0; k < 3; k++) {
+                double v3 = -sum9(GR[k], Tb);
+                H[(o + 3 + k) * Z + o + 6 + b] = v3;
+                H[(o + 6 + b) * Z + o + 3 + k] = v3;
+            }
+            for (cc = 0; cc < r; cc++) H[(o + 6 + b) * Z + o + 6 + cc] += w->Hq[b * r + cc];
+        }
+    }
+    framed_positions(m, st, m->joint_nodes, m->nodes, w->x);
+    return E + joint_terms(m, st, w, g, H);
+}
+
+/* The derivatives in the tree's unknowns: g (Z,) and H (Z, Z) from the free-centre ones
+ * (framed_energy), and N (3 D, Z), the centres' moves per unit move of the tree's unknowns
+ * less the identity. HN, CN: scratch (Z, Z) and (3 D, Z). */
+static double framed_derivatives(const af_framed *m, const double *st, framed_scratch *w,
+                                 double inertia, double *g, double *H, double *N, double *HN,
+                                 double *CN, double *gc_all) {
+    long Z = m->Z, D = m->D, C = 3 * D, p, i, j, a, b;
+    const double *R = st + 3 * D;
+    double E = framed_energy(m, st, w, inertia, g, H);
+    for (i = 0; i < C * Z; i++) N[i] = 0.0;
+    for (p = 0; p < m->links; p++) {
+        int f = m->chain[2 * p], d = m->chain[2 * p + 1];
+        const double *arm = m->arms + 3 * p, *Rf = R + 9 * f;
+        double wv[3], gc[3], gw;
+        long zc = m->z0[f], zt = m->z0[f] + 3;
+        for (a = 0; a < 3; a++) wv[a] = Rf[3 * a] * arm[0] + Rf[3 * a + 1] * arm[1] + Rf[3 * a + 2] * arm[2];
+        if (f != d) for (a = 0; a < 3; a++) N[(3 * d + a) * Z + zc + a] += 1.0;
+        N[(3 * d) * Z + zt + 1] += wv[2];
+        N[(3 * d) * Z + zt + 2] -= wv[1];
+        N[(3 * d + 1) * Z + zt] -= wv[2];
+        N[(3 * d + 1) * Z + zt + 2] += wv[0];
+        N[(3 * d + 2) * Z + zt] += wv[1];
+        N[(3 * d + 2) * Z + zt + 1] -= wv[0];
+        for (a = 0; a < 3; a++) gc[a] = g[m->z0[d] + a];
+        gw = gc[0] * wv[0] + gc[1] * wv[1] + gc[2] * wv[2];
+        for (a = 0; a < 3; a++) {
+            for (b = 0; b < 3; b++) H[(zt + a) * Z + zt + b] += 0.5 * (gc[a] * wv[b] + gc[b] * wv[a]);
+            H[(zt + a) * Z + zt + a] -= gw;
+        }
+    }
+    /* H + HN + HN^T + N^T H[C, C] N, HN = H[:, C] N; g + N^T g[C] */
+    for (i = 0; i < Z * Z; i++) HN[i] = 0.0;
+    for (i = 0; i < C * Z; i++) CN[i] = 0.0;
+    for (i = 0; i < Z; i++)
+        for (a = 0; a < C; a++) {
+            double h = H[i * Z + m->z0[a / 3] + a % 3];
+            if (h == 0.0) continue;
+            for (j = 0; j < Z; j++) HN[i * Z + j] += h * N[a * Z + j];
+        }
+    for (a = 0; a < C; a++)
+        for (b = 0; b < C; b++) {
+            double h = H[(m->z0[a / 3] + a % 3) * Z + m->z0[b / 3] + b % 3];
+            if (h == 0.0) continue;
+            for (j = 0; j < Z; j++) CN[a * Z + j] += h * N[b * Z + j];
+        }
+    for (i = 0; i < Z; i++)
+        for (j = 0; j < Z; j++) H[i * Z + j] += HN[i * Z + j] + HN[j * Z + i];
+    for (a = 0; a < C; a++)
+        for (i = 0; i < Z; i++) {
+            double n = N[a * Z + i];
+            if (n == 0.0) continue;
+            for (j = 0; j < Z; j++) H[i * Z + j] += n * CN[a * Z + j];
+        }
+    for (a = 0; a < C; a++) gc_all[a] = g[m->z0[a / 3] + a % 3];
+    for (a = 0; a < C; a++)
+        for (i = 0; i < Z; i++) g[i] += N[a * Z + i] * gc_all[a];
+    return E;
+}
+
+/* dz = -H^-1 g by Cholesky, or with H's eigenvalues mirrored and floored at MIRROR_FLOOR of
+ * the largest. L, V, B: (Z, Z) scratch; lam, t1: (Z,). */
+static void framed_descent(const double *H, const double *g, double *dz, double *L, double *V,
+                           double *B, double *lam, double *t1, long r) {
+    long i, k;
+    if (cholesky(H, L, r)) {
+        for (i = 0; i < r; i++) {
+            double s = g[i];
+            for (k = 0; k < i; k++) s -= L[i * r + k] * t1[k];
+            t1[i] = s / L[i * r + i];
+        }
+        for (i = r - 1; i >= 0; i--) {
+            double s = t1[i];
+            for (k = i + 1; k < r; k++) s -= L[k * r + i] * dz[k];
+            dz[i] = s / L[i * r + i];
+        }
+    } else {
+        double largest = 0.0;
+        jacobi(H, V, lam, B, r);
+        for (i = 0; i < r; i++) if (fabs(lam[i]) > largest) largest = fabs(lam[i]);
+        for (i = 0; i < r; i++) {
+            double s = 0.0, l = fabs(lam[i]);
+            for (k = 0; k < r; k++) s += V[k * r + i] * g[k];
+            t1[i] = s / (l > MIRROR_FLOOR * largest ? l : MIRROR_FLOOR * largest);
+        }
+        for (i = 0; i < r; i++) {
+            double s = 0.0;
+            for (k = 0; k < r; k++) s += V[i * r + k] * t1[k];
+            dz[i] = s;
+        }
+    }
+    for (i = 0; i < r; i++) dz[i] = -dz[i];
+}
+
+/* the largest node move of dz (the centres' free moves dz + N dz), m */
+static double framed_bound(const af_framed *m, const double *dz, const double *N) {
+    long d, a, j, b, Z = m->Z;
+    double worst = 0.0;
+    for (d = 0; d < m->D; d++) {
+        long o = m->z0[d];
+        double c2 = 0.0, t2 = 0.0, q2 = 0.0, v;
+        for (a = 0; a < 3; a++) {
+            v = dz[o + a];
+            for (j = 0; j < Z; j++) v += N[(3 * d + a) * Z + j] * dz[j];
+            c2 += v * v;
+            t2 += dz[o + 3 + a] * dz[o + 3 + a];
+        }
+        for (b = 0; b < m->r[d]; b++) q2 += dz[o + 6 + b] * dz[o + 6 + b];
+        v = sqrt(c2) + sqrt(t2) * m->radius[d] + sqrt(q2) * m->reach[d];
+        if (v > worst) worst = v;
+    }
+    return worst;
+}
+
+/* exp([theta]_x) (9) by Rodrigues' formula */
+static void rotation_of(double t0, double t1, double t2, double *out) {
+    double angle = sqrt(t0 * t0 + t1 * t1 + t2 * t2);
+    double first = angle > 0 ? sin(angle) / angle : 1.0;
+    double half = angle > 0 ? sin(0.5 * angle) / (0.5 * angle) : 1.0;
+    double K[9] = {0, -t2, t1, t2, 0, -t0, -t1, t0, 0};
+    int i, j, l;
+    for (i = 0; i < 3; i++)
+        for (j = 0; j < 3; j++) {
+            double KK = 0.0;
+            for (l = 0; l < 3; l++) KK += K[3 * i + l] * K[3 * l + j];
+            out[3 * i + j] = (i == j ? 1.0 : 0.0) + first * K[3 * i + j] + 0.5 * half * half * KK;
+        }
+}
+
+static void mul3(const double *A, const double *B, double *out) {
+    int i, j;
+    for (i = 0; i < 3; i++)
+        for (j = 0; j < 3; j++)
+            out[3 * i + j] = A[3 * i] * B[j] + A[3 * i + 1] * B[3 + j] + A[3 * i + 2] * B[6 + j];
+}
+
+/* to_moves: each domain's own move t (3 D) of centres c; else the centres c of moves t */
+static void framed_tree(const af_framed *m, const double *R, double *c, double *t, int to_moves) {
+    long k, i, j;
+    for (k = 0; k < m->D; k++) {
+        int e = m->order[k], p = m->parent[e];
+        for (i = 0; i < 3; i++) {
+            double v = 0.0;
+            for (j = 0; j < 3; j++) v += R[9 * e + 3 * i + j] * m->arm_own[3 * e + j];
+            if (p < 0) v += m->arm_parent[3 * e + i];
+            else {
+                v += c[3 * p + i];
+                for (j = 0; j < 3; j++) v += R[9 * p + 3 * i + j] * m->arm_parent[3 * e + j];
+            }
+            if (to_moves) t[3 * e + i] = c[3 * e + i] - v;
+            else c[3 * e + i] = v + t[3 * e + i];
+        }
+    }
+}
+
+/* out = st moved by alpha dz (turns by exp, own moves added, centres carried, q added);
+ * t: (3 D) scratch */
+static void framed_retract(const af_framed *m, const double *st, const double *dz, double alpha,
+                           double *out, double *t) {
+    long d, a, b, D = m->D;
+    double turn[9];
+    framed_tree(m, st + 3 * D, (double *)st, t, 1);
+    for (b = 0; b < m->Q; b++) out[12 * D + b] = st[12 * D + b];
+    for (d = 0; d < D; d++) {
+        long o = m->z0[d];
+        rotation_of(alpha * dz[o + 3], alpha * dz[o + 4], alpha * dz[o + 5], turn);
+        mul3(turn, st + 3 * D + 9 * d, out + 3 * D + 9 * d);
+        for (a = 0; a < 3; a++) t[3 * d + a] += alpha * dz[o + a];
+        for (b = 0; b < m->r[d]; b++) out[12 * D + m->q0[d] + b] += alpha * dz[o + 6 + b];
+    }
+    framed_tree(m, out + 3 * D, out, t, 0);
+}
+
+/* each 3 x 3 block of R (D of them) replaced by its nearest rotation, by Newton's iteration
+ * X <- (X + X^-T) / 2 to round-off */
+static void nearest_rotations(double *R, long D) {
+    long d, it, k;
+    for (d = 0; d < D; d++) {
+        double *X = R + 9 * d;
+        for (it = 0; it < 20; it++) {
+            double a = X[0], b = X[1], c = X[2], e = X[3], f = X[4], g = X[5], h = X[6],
+                   i = X[7], j = X[8], change = 0.0;
+            double det = a * (f * j - g * i) - b * (e * j - g * h) + c * (e * i - f * h);
+            double inv[9] = {(f * j - g * i) / det, -(e * j - g * h) / det, (e * i - f * h) / det,
+                             -(b * j - c * i) / det, (a * j - c * h) / det, -(a * i - b * h) / det,
+                             (b * g - c * f) / det, -(a * g - c * e) / det, (a * f - b * e) / det};
+            for (k = 0; k < 9; k++) {
+                double v = 0.5 * (X[k] + inv[k]);
+                if (fabs(v - X[k]) > change) change = fabs(v - X[k]);
+                X[k] = v;
+            }
+            if (change <= 1e-16) break;
+        }
+    }
+}
+
+/* Newton's start: each frame turned on by its last turn, its own move and q carried on */
+static void framed_extrapolated(const af_framed *m, const double *now, const double *before,
+                                double *out, double *t, double *t2) {
+    long d, i, j, D = m->D;
+    double bt[9], turn[9];
+    for (d = 0; d < D; d++) {
+        const double *Rn = now + 3 * D + 9 * d, *Rb = before + 3 * D + 9 * d;
+        for (i = 0; i < 3; i++) for (j = 0; j < 3; j++) bt[3 * i + j] = Rb[3 * j + i];
+        mul3(Rn, bt, turn);
+        mul3(turn, Rn, out + 3 * D + 9 * d);
+    }
+    nearest_rotations(out + 3 * D, D);
+    framed_tree(m, now + 3 * D, (double *)now, t, 1);
+    framed_tree(m, before + 3 * D, (double *)before, t2, 1);
+    for (i = 0; i < 3 * D; i++) t[i] = 2.0 * t[i] - t2[i];
+    framed_tree(m, out + 3 * D, out, t, 0);
+    for (i = 0; i < m->Q; i++) out[12 * D + i] = 2.0 * now[12 * D + i] - before[12 * D + i];
+}
+
+int af_framed_step(af_framed *m, const double *now, const double *before, double *next,
+                   const double *force, double dt, int max_iter) {
+    long Z = m->Z, D = m->D, S = 12 * D + m->Q, i, it;
+    double *cursor = m->work, inertia, tolerance, bound = INFINITY;
+    framed_scratch w;
+    double *g, *H, *N, *HN, *CN, *L, *V, *B, *lam, *t1, *dz, *gc, *state, *trial, *t, *t2;
+#define TAKE(count) (cursor += (count), cursor - (count))
+    if (!(dt > 0.0) || max_iter < 1) return AF_BAD_INPUT;
+    for (i = 0; i < 3L * m->n; i++) if (!isfinite(force[i])) return AF_BAD_INPUT;
+    for (i = 0; i < S; i++) if (!isfinite(now[i]) || !isfinite(before[i])) return AF_BAD_INPUT;
+    w.T0 = TAKE(9 * D); w.T = TAKE(9 * m->Q); w.t = TAKE(3 * D);
+    w.x = TAKE(3 * m->nodes); w.grad = TAKE(3 * m->nodes); w.blocks = TAKE(9 * m->pairs);
+    w.Jn = TAKE(3L * m->nodes * (6 + m->rmax)); w.K = TAKE(3 * Z);
+    w.gq = TAKE(m->rmax); w.Hq = TAKE(m->rmax * m->rmax);
+    w.quartic = TAKE((m->rmax + 2) * (m->rmax + 2) * (m->rmax + 2) / 6 * 2 + 2 * m->rmax * m->rmax);
+    g = TAKE(Z); H = TAKE(Z * Z); N = TAKE(3 * D * Z); HN = TAKE(Z * Z); CN = TAKE(3 * D * Z);
+    L = TAKE(Z * Z); V = TAKE(Z * Z); B = TAKE(Z * Z); lam = TAKE(Z); t1 = TAKE(Z);
+    dz = TAKE(Z); gc = TAKE(3 * D); state = TAKE(S); trial = TAKE(S); t = TAKE(3 * D);
+    t2 = TAKE(3 * D);
+#undef TAKE
+    inertia = 1.0 / (dt * dt);
+    framed_targets(m, now, before, force, inertia, w.T0, w.T, w.t);
+    framed_extrapolated(m, now, before, state, t, t2);
+    tolerance = STEP_TOLERANCE * m->size;
+    for (it = 1; it <= max_iter; it++) {
+        double E = framed_derivatives(m, state, &w, inertia, g, H, N, HN, CN, gc), last, alpha,
+               slope = 0.0;
+        if (!isfinite(E)) return AF_NOT_CONVERGED;
+        for (i = 0; i < Z; i++) if (!isfinite(g[i])) return AF_NOT_CONVERGED;
+        framed_descent(H, g, dz, L, V, B, lam, t1, Z);
+        last = bound;
+        bound = framed_bound(m, dz, N);
+        if (bound <= tolerance || (bound < last && last < INFINITY
+                                   && bound * bound / last <= tolerance)) {
+            framed_retract(m, state, dz, 1.0, next, t);
+            nearest_rotations(next + 3 * D, D);
+            m->iterations = (int)it;
+            return AF_OK;
+        }
+        for (i = 0; i < Z; i++) slope += g[i] * dz[i];
+        for (alpha = 1.0;; alpha *= 0.5) {
+            if (alpha < 1.0 && alpha * bound <= tolerance) {
+                if (bound <= 1e3 * tolerance) {  /* round-off: no decrease resolved */
+                    memcpy(next, state, (size_t)S * sizeof(double));
+                    m->iterations = (int)it;
+                    return AF_OK;
+                }
+                return AF_NOT_CONVERGED;
+            }
+            framed_retract(m, state, dz, alpha, trial, t);
+            if (framed_energy(m, trial, &w, inertia, NULL, NULL) <= E + ARMIJO * alpha * slope)
+                break;
+        }
+        memcpy(state, trial, (size_t)S * sizeof(double));
+    }
+    m->iterations = (int)max_iter;
     return AF_NOT_CONVERGED;
 }
