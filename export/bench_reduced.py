@@ -6,8 +6,10 @@ files, the mean time of a backward-Euler step (dt = 0.02 s, 100 steps from rest,
 out) in the library (numba), in runtime.ReducedSimulator (numpy) and in the C runtime (export/c,
 built with the system C compiler; left out without one), and its validation's tip error against
 the full FEM (static for a modal basis; with --snapshots S, bases of the modes and S directions
-fitted to the default declared loads, the largest over 3 unseen drags' rollouts). Prints a
-table and writes JSON (atomically). Run alone."""
+fitted to the default declared loads, the largest over 3 unseen drags' rollouts); with
+--framed, also the framed model (anisofem.reduced.FramedModel) of each mesh, its runtimes
+export/framed_runtime.py and the C runtime's af_framed_step ("framed" in the fitted column).
+Prints a table and writes JSON (atomically). Run alone."""
 import os
 import tempfile
 import time
@@ -16,9 +18,10 @@ import numpy as np
 
 from anisofem.convergence import cantilever
 from anisofem.files import publish
-from anisofem.reduced import ReducedModel
+from anisofem.reduced import FramedModel, ReducedModel
 
 from . import native, reduced
+from .framed_runtime import FramedSimulator
 from .runtime import ReducedSimulator
 
 #: mesh label -> box_beam cells of the 0.1 m cantilever (5 tets per cell)
@@ -75,8 +78,44 @@ def measure(cells, modes, folder, snapshots=0, lib=None):
             "tip_error": v.tip_error, "validation_cases": v.cases}
 
 
-def run(sizes=tuple(MESHES), modes=MODES, out=None, snapshots=0):
-    """Measure every (size, modes) pair; print the table, write JSON to out."""
+def measure_framed(cells, folder, lib=None):
+    """One row: the framed model (anisofem.reduced.FramedModel, its defaults) of
+    cantilever(cells); lib, the C runtime's shared library (None: no C column)."""
+    scene = cantilever(cells, 1)
+    model = FramedModel(scene)
+    path = os.path.join(folder, "framed")
+    reduced.write_framed(model, path)
+    size = sum(os.path.getsize(path + ext) for ext in (".json", ".bin"))
+    force = np.asarray(scene.external_force)
+
+    def library(states):
+        after, report = model.step(*states, DT)
+        if not report.converged:
+            raise RuntimeError(f"framed step failed: {report.message}")
+        return after, states[0]
+    sim = FramedSimulator(path)
+
+    def runtime(states):
+        return sim.step(*states, force, DT), states[0]
+    c_ms = None
+    if lib is not None:
+        c_sim = native.CFramedSimulator(path, lib)
+
+        def c_runtime(states):
+            return c_sim.step(*states, force, DT), states[0]
+        c_ms = 1e3 * _step_times(c_runtime, (c_sim.rest_state(),) * 2)
+    v = model.validation
+    return {"tets": scene.mesh.n_tets, "unknowns": scene.n_free, "modes": None,
+            "snapshots": "framed", "r": model.r, "build_s": model.build_seconds,
+            "snapshot_s": model.snapshots.seconds, "validation_s": v.full_seconds,
+            "file_mb": size / 1e6, "library_ms": 1e3 * _step_times(library, (model.rest(),) * 2),
+            "runtime_ms": 1e3 * _step_times(runtime, (sim.rest_state(),) * 2), "c_ms": c_ms,
+            "tip_error": v.tip_error, "validation_cases": v.cases}
+
+
+def run(sizes=tuple(MESHES), modes=MODES, out=None, snapshots=0, framed=False):
+    """Measure every (size, modes) pair, and with framed the framed model of each size; print
+    the table, write JSON to out."""
     rows = []
     with tempfile.TemporaryDirectory() as folder:
         lib = native.build(folder) if native.compiler() else None
@@ -84,6 +123,9 @@ def run(sizes=tuple(MESHES), modes=MODES, out=None, snapshots=0):
             for m in modes:
                 rows.append(measure(MESHES[size], m, folder, snapshots, lib))
                 print(f"  {size} tets, {m} modes done", flush=True)
+            if framed:
+                rows.append(measure_framed(MESHES[size], folder, lib))
+                print(f"  {size} tets, framed done", flush=True)
     return publish({"steps": STEPS, "dt": DT, "rows": rows}, _print, out)
 
 
@@ -98,4 +140,4 @@ def _print(report):
     print(f"(ms per backward-Euler step of {report['dt']} s, mean of {report['steps'] - 1} after "
           f"the first; the build, snapshots included, leaves out the validation's full FEM; "
           f"tip err: static for modal bases, the largest over 3 unseen drags' rollouts for "
-          f"fitted ones)")
+          f"fitted and framed ones)")

@@ -182,10 +182,12 @@ def _bench_reduced(argv):
     parser.add_argument("--snapshots", type=int, default=0,
                         help="directions fitted to the default declared loads, added to each "
                              "model's modes (0: modes and modal derivatives)")
+    parser.add_argument("--framed", action="store_true",
+                        help="also the framed model (anisofem.reduced.FramedModel) of each mesh")
     parser.add_argument("--json", default=result_path("bench_reduced.json"),
                         help="where to write the JSON")
     args = parser.parse_args(argv)
-    bench_reduced.run(args.sizes, args.modes, args.json, args.snapshots)
+    bench_reduced.run(args.sizes, args.modes, args.json, args.snapshots, args.framed)
 
 
 def _bake_reduced(argv):

@@ -137,3 +137,12 @@ def test_bake_command_writes_the_framed_models_per_fiber_angle(tmp_path, capsys)
     after = sim.step(now, now, sim.masses[:, None] * np.asarray(sim.header["gravity"]),
                      sim.header["dt"])
     assert np.isfinite(sim.positions(after)).all()
+
+
+def test_bench_row_measures_the_framed_model(tmp_path):
+    from export import bench_reduced, native
+    lib = native.build(str(tmp_path / "c")) if native.compiler() else None
+    row = bench_reduced.measure_framed((6, 1, 1), str(tmp_path), lib=lib)
+    assert row["tets"] == 30 and row["snapshots"] == "framed" and row["validation_cases"] == 3
+    assert row["library_ms"] > 0 and row["runtime_ms"] > 0 and (lib is None or row["c_ms"] > 0)
+    assert 0 <= row["tip_error"] < 0.5
