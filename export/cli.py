@@ -227,6 +227,7 @@ def _bake_reduced(argv):
     where = (f"on {header['validation'][0]['cases']} unseen loads"
              if args.snapshots or args.framed else "in the static answer")
     kind = f"{header['domains']} framed domains, " if args.framed else ""
-    print(f"wrote {args.output}.json and .bin: {header['title']}, {kind}r = {header['r'][0]}, fiber "
+    print(f"wrote {args.output}.json and .bin: {header['title']}, {kind}r = {header['r'][0]}, "
+          f"fiber "
           f"angles {header['fiber_angles']}; tip within {100 * worst:.2g}% of the full FEM "
           f"{where} at every angle")

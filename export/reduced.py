@@ -7,15 +7,19 @@ basis (n, 3, r) m per unit of q, 0 on held components; c1 (r,), C2 (r, r), S3 (r
 W4 (T, r), T = r (r + 1) (r + 2) / 6, the coefficients of the energy (runtime.ReducedSimulator);
 masses (n,) kg; held (n, 3) uint8; tets (m, 4) int32, the mesh it was built on; surface (k, 3)
 int32, the boundary triangles; with a display mesh, the basis interpolated at its vertices
-(physics on the model's mesh, drawing on the display's). The header: model_format REDUCED_FORMAT, title, n, m, r, modes,
-snapshots (the principal directions fitted to declared loads, 0 for a modal basis),
-frequencies (Hz), c0 (J), build_seconds, validation (anisofem.reduced.model.Validation: the
-tip and field errors against the full FEM, statically or on `cases` unseen loads), gravity
-(m/s^2) and material.
+(physics on the model's mesh, drawing on the display's). The header: model_format
+REDUCED_FORMAT, title, n, m, r, modes, snapshots (the principal directions fitted to declared
+loads, 0 for a modal basis), frequencies (Hz), c0 (J), build_seconds, validation
+(anisofem.reduced.model.Validation: the tip and field errors against the full FEM, statically
+or on `cases` unseen loads), gravity (m/s^2) and material.
+
+`--framed` writes a FramedModel instead (write_framed; format FRAMED_FORMAT, stepped by
+framed_runtime.FramedSimulator and the C runtime's af_framed_step; export/README.md).
 
 `python -m export bake-reduced SCENE -o PATH` writes the models of a baked scene (export.bake)
 at several fiber angles in one pair of files, for the browser page: the arrays that depend on
-the fiber once per angle A as NAME@A (runtime.ReducedSimulator(path, angle=A) reads them).
+the fiber once per angle A as NAME@A (runtime.ReducedSimulator(path, angle=A) reads them);
+with --framed the framed models (bake_framed).
 """
 import dataclasses
 

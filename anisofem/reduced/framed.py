@@ -22,8 +22,12 @@ exactly for these kinematics:
   3 x 3 moments of its basis, precomputed (FramedModel._targets): no mesh data per step.
 - The joints, the elements whose nodes lie in more than one domain (or on held nodes), are
   evaluated element by element: a layer one element thick at each cut.
-Each Newton step turns R_d by exp([theta_d]) and takes the exact gradient and Hessian in
-(c_d, theta_d, q_d) at theta_d = 0, so the step is Newton's on the model's own energy.
+The domains form a kinematic tree from the held nodes (anisofem.reduced.domains.tree): a
+domain's centre is carried by its parent's turn and its own about a pivot on their interface,
+c_e = c_p + R_p a_e + R_e b_e + t_e, so that a turn swings the domains beyond it on their arcs
+(FramedModel._plant). Each Newton step moves t_e, turns R_e by exp([theta_e]) and q_e, and
+takes the exact gradient and Hessian in (t_e, theta_e, q_e) at theta = 0: the step is Newton's
+on the model's own energy, started from the extrapolated state.
 """
 import math
 import time
@@ -191,8 +195,8 @@ class FramedModel:
         self._joint_map = _block_map(tets, pairs, self.labels[nodes] >= 0)
 
     def _pack(self):
-        """The domains' moments and the joint nodes' rows in the packed arrays of
-        anisofem.reduced.framed_kernels."""
+        """The domains' moments, polynomials and every node's rest offset and basis rows in
+        the packed arrays of anisofem.reduced.framed_kernels."""
         D = self.domains
         self._r = np.array([d.r for d in D], np.int64)
         self._q0 = np.array([d.q.start for d in D], np.int64)
@@ -216,7 +220,8 @@ class FramedModel:
             np.array([p.c0 for p in P]), np.concatenate([p.c1 for p in P]),
             np.concatenate([p.C2.ravel() for p in P]), np.concatenate([p.S3.ravel() for p in P]),
             np.concatenate([p.W4.ravel() for p in P]),
-            np.vstack([np.zeros((1, 3), np.int64), np.cumsum(sizes, axis=0)[:-1]]).astype(np.int64))
+            np.vstack([np.zeros((1, 3), np.int64),
+                       np.cumsum(sizes, axis=0)[:-1]]).astype(np.int64))
         self._zc = self._z0[:, None] + np.arange(3)
         self._zt = self._zc + 3
         self._zq = np.concatenate([np.arange(d.z.start + 6, d.z.stop) for d in D]).astype(int)
@@ -227,8 +232,9 @@ class FramedModel:
 
     def rest(self):
         """The rest state: every frame at its domain's rest centre, unturned, q = 0."""
-        return FramedState(np.array([d.centre for d in self.domains]), np.tile(np.eye(3), (len(self.domains), 1, 1)),
-                           np.zeros(self._q_size))
+        D = len(self.domains)
+        return FramedState(np.array([d.centre for d in self.domains]),
+                           np.tile(np.eye(3), (D, 1, 1)), np.zeros(self._q_size))
 
     def positions(self, state):
         """Full positions (n, 3), m, of a FramedState."""
@@ -440,7 +446,8 @@ class FramedModel:
             dz = _descent(H, g)
             last, bound = bound, self._bound(T @ dz)
             # the step after this one, at the rate of this one's decrease
-            if bound <= tolerance or (bound < last < math.inf and bound * bound / last <= tolerance):
+            if bound <= tolerance or (bound < last < math.inf
+                                      and bound * bound / last <= tolerance):
                 return _orthonormal(self.retract(state, dz)), NewtonReport(True, it, bound,
                                                                            "converged")
             alpha, slope = 1.0, float(g @ dz)

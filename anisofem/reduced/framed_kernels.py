@@ -284,7 +284,8 @@ def tree_centres(order, parent, arm_parent, arm_own, R, moves, c, to_moves):
     for e in order:
         p = parent[e]
         for i in range(3):
-            s = R[e, i, 0] * arm_own[e, 0] + R[e, i, 1] * arm_own[e, 1] + R[e, i, 2] * arm_own[e, 2]
+            s = (R[e, i, 0] * arm_own[e, 0] + R[e, i, 1] * arm_own[e, 1]
+                 + R[e, i, 2] * arm_own[e, 2])
             if p < 0:
                 s += arm_parent[e, i]
             else:
