@@ -85,7 +85,8 @@ class FramedSimulator:
         self.parent, self.order = a["parent"].astype(np.int64), a["order"].astype(np.int64)
         self.arm_parent, self.arm_own = a["arm_parent"], a["arm_own"]
         self.chain, self.arms = a["chain"].astype(np.int64), a["arms"]
-        self.joint_tets = a["joint_tets"].astype(np.int64)
+        self.joint_nodes, local = np.unique(a["joint_tets"], return_inverse=True)
+        self._local = local.reshape(a["joint_tets"].shape)              # in joint_nodes
         self.joint_grads, self.joint_weights = a["joint_grads"], a["joint_weights"]
         self.mu, self.lam, self.kappa = a["mu"], a["lam"], a["kappa"]
         self.fiber = a["fiber"]
@@ -209,7 +210,7 @@ class FramedSimulator:
              - np.sum(R * M) - np.sum(t * c))
         for e, P in enumerate(self.polynomials):
             E += _quartic(P, q[self.q0[e]:self.q0[e] + self.r[e]])[0]
-        x = self._positions(state, self._joint_nodes)
+        x = self._positions(state, self.joint_nodes)
         return E + _elements(self, x, want=0)[0]
 
     def _derivatives(self, state, targets, inertia):
@@ -264,7 +265,7 @@ class FramedSimulator:
         """Add the joints' gradient and Hessian, chained through each node's frame, to g and H;
         returns their energy."""
         c, R, q = state
-        nodes = self._joint_nodes
+        nodes = self.joint_nodes
         x = self._positions(state, nodes)
         E, gx, Hx = _elements(self, x, want=2)
         k = nodes.size
@@ -292,13 +293,6 @@ class FramedSimulator:
         J = Jn.reshape(3 * k, -1)
         H += J.T @ Hx @ J
         return E
-
-    @property
-    def _joint_nodes(self):
-        if not hasattr(self, "_nodes"):
-            self._nodes, local = np.unique(self.joint_tets, return_inverse=True)
-            self._local = local.reshape(self.joint_tets.shape)
-        return self._nodes
 
     def _retract(self, state, dz, alpha):
         c, R, q = state
