@@ -26,8 +26,9 @@ the same order: the two agree to round-off.
         now, before = sim.step(now, before, force, dt=0.02), now
     x = sim.positions(now)                           # (n, 3), m
 
-A state is a tuple (c (D, 3) m, R (D, 3, 3), q (Q,)). It needs numpy and runtime.py (copy
-both files together).
+A state is a tuple (c (D, 3) m, R (D, 3, 3), q (Q,), base (3, 4)): base [R_g | c_g] carries
+the held nodes rigidly, x = R_g x0 + c_g (step(..., base=) moves them: a hand, a character).
+It needs numpy and runtime.py (copy both files together).
 """
 import numpy as np
 
@@ -101,19 +102,21 @@ class FramedSimulator:
     # -- states ----------------------------------------------------------------------------
 
     def rest_state(self):
-        """The rest state: every frame at its rest centre, unturned, q = 0."""
+        """The rest state: every frame at its rest centre, unturned, q = 0, the held nodes
+        where they were built."""
         D = self.r.size
-        return (self.centre.copy(), np.tile(np.eye(3), (D, 1, 1)), np.zeros(int(self.r.sum())))
+        return (self.centre.copy(), np.tile(np.eye(3), (D, 1, 1)), np.zeros(int(self.r.sum())),
+                np.eye(3, 4))
 
     def positions(self, state):
         """Full positions (n, 3), m, of a state."""
         return self._positions(state, np.arange(self.labels.size))
 
     def _positions(self, state, nodes):
-        c, R, q = state
+        c, R, q, base = state
         d = self.labels[nodes]
         free = d >= 0
-        x = self.rest_positions[nodes].copy()
+        x = self.rest_positions[nodes] @ base[:, :3].T + base[:, 3]
         local = self.Y[nodes[free]].copy()
         for e in range(self.r.size):
             rows = d[free] == e
@@ -138,15 +141,18 @@ class FramedSimulator:
 
     # -- the step --------------------------------------------------------------------------
 
-    def step(self, now, before, force, dt, max_iter=50):
+    def step(self, now, before, force, dt, base=None, max_iter=50):
         """One backward-Euler step of dt s after the state `now` (`before` a step earlier, equal
-        to now from rest), under nodal forces `force` (n, 3), N (all of them: gravity too):
-        returns the next state; its Newton iterations are in self.iterations."""
+        to now from rest), under nodal forces `force` (n, 3), N (all of them: gravity too);
+        base (3, 4) [R_g | c_g]: where the held nodes are at the step's end, R_g x0 + c_g (a
+        rigid motion carrying the body; default: where they are in now). Returns the next
+        state; its Newton iterations are in self.iterations."""
         if not dt > 0:
             raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
+        base = now[3] if base is None else _rigid_motion(base)
         inertia = 1.0 / dt ** 2
         targets = self._targets(self.project(force), inertia, now, before)
-        state = self._extrapolated(now, before)
+        state = self._extrapolated(now, before, base)
         tolerance = STEP_TOLERANCE * self.size
         bound = np.inf
         for it in range(1, max_iter + 1):
@@ -178,7 +184,7 @@ class FramedSimulator:
     def _targets(self, load, inertia, now, before):
         """The load's moments plus the inertia's pull towards x_hat = 2 x(now) - x(before)."""
         T0, T, t = (v.copy() for v in load)
-        for (c, R, q), alpha in ((now, 2.0), (before, -1.0)):
+        for (c, R, q, _), alpha in ((now, 2.0), (before, -1.0)):
             w = inertia * alpha
             for e in range(self.r.size):
                 s = slice(self.q0[e], self.q0[e] + self.r[e])
@@ -202,7 +208,7 @@ class FramedSimulator:
         return M
 
     def _energy(self, state, targets, inertia):
-        c, R, q = state
+        c, R, q, _ = state
         T0, T, t = targets
         M = self._pulled(q, T0, T)
         E = (0.5 * inertia * (self.mass @ np.einsum("di,di->d", c, c)
@@ -216,7 +222,7 @@ class FramedSimulator:
     def _derivatives(self, state, targets, inertia):
         """(energy, gradient (Z,), Hessian (Z, Z), Jacobian (Z, Z) of the free-centre unknowns
         in the tree's): the library's FramedModel._derivatives."""
-        c, R, q = state
+        c, R, q, _ = state
         T0, T, t = targets
         Z = self.n_unknowns
         g, H = np.zeros(Z), np.zeros((Z, Z))
@@ -264,7 +270,7 @@ class FramedSimulator:
     def _joint_derivatives(self, state, g, H):
         """Add the joints' gradient and Hessian, chained through each node's frame, to g and H;
         returns their energy."""
-        c, R, q = state
+        c, R, q, _ = state
         nodes = self.joint_nodes
         x = self._positions(state, nodes)
         E, gx, Hx = _elements(self, x, want=2)
@@ -295,30 +301,33 @@ class FramedSimulator:
         return E
 
     def _retract(self, state, dz, alpha):
-        c, R, q = state
+        c, R, q, base = state
         R2 = _rotations(alpha * dz[self.zt]) @ R
-        return (self._centres(self._moves(state) + alpha * dz[self.zc], R2), R2,
-                q + alpha * dz[self.zq])
+        return (self._centres(self._moves(state) + alpha * dz[self.zc], R2, base), R2,
+                q + alpha * dz[self.zq], base)
 
-    def _carried(self, c, R, e):
+    def _carried(self, c, R, base, e):
+        """Where domain e's parent (the base for the held nodes) carries its pivot."""
         p = self.parent[e]
-        return self.arm_parent[e] if p < 0 else c[p] + R[p] @ self.arm_parent[e]
+        if p < 0:
+            return base[:, :3] @ self.arm_parent[e] + base[:, 3]
+        return c[p] + R[p] @ self.arm_parent[e]
 
     def _moves(self, state):
-        c, R, _ = state
-        return np.array([c[e] - self._carried(c, R, e) - R[e] @ self.arm_own[e]
+        c, R, _, base = state
+        return np.array([c[e] - self._carried(c, R, base, e) - R[e] @ self.arm_own[e]
                          for e in range(self.r.size)])
 
-    def _centres(self, t, R):
+    def _centres(self, t, R, base):
         c = np.empty_like(t)
         for e in self.order:
-            c[e] = self._carried(c, R, e) + R[e] @ self.arm_own[e] + t[e]
+            c[e] = self._carried(c, R, base, e) + R[e] @ self.arm_own[e] + t[e]
         return c
 
-    def _extrapolated(self, now, before):
+    def _extrapolated(self, now, before, base):
         R = _nearest_rotations(now[1] @ before[1].transpose(0, 2, 1) @ now[1])
-        return (self._centres(2 * self._moves(now) - self._moves(before), R), R,
-                2 * now[2] - before[2])
+        return (self._centres(2 * self._moves(now) - self._moves(before), R, base), R,
+                2 * now[2] - before[2], base)
 
     def _bound(self, dz):
         q = np.sqrt(np.add.reduceat(dz[self.zq] ** 2, self.q0))
@@ -419,5 +428,14 @@ def _nearest_rotations(R):
 
 
 def _orthonormal(state):
-    c, R, q = state
-    return c, _nearest_rotations(R), q
+    c, R, q, base = state
+    return c, _nearest_rotations(R), q, base
+
+
+def _rigid_motion(base):
+    """base as a (3, 4) float64 [R | c], R a rotation to 1e-9; ValueError naming it otherwise."""
+    base = _real(base, "base", (3, 4))
+    R = base[:, :3]
+    if not (np.abs(R @ R.T - np.eye(3)).max() < 1e-9 and np.linalg.det(R) > 0):
+        raise ValueError("base: its first 3 columns must be a rotation (orthonormal, det 1)")
+    return base

@@ -12,7 +12,7 @@ from export import reduced as writer
 from export.cli import main
 from export.framed_runtime import FRAMED_FORMAT, FramedSimulator
 from export.runtime import ReducedSimulator
-from test_framed_model import beam_scene, t_scene
+from test_framed_model import beam_scene, swung_base, t_scene
 
 
 @pytest.fixture(scope="module")
@@ -24,20 +24,21 @@ def written(tmp_path_factory):
     return scene, model, path
 
 
-def rollouts(scene, model, sim, steps, drag):
+def rollouts(scene, model, sim, steps, drag, base=None):
     """Largest position difference between the library's and the runtime's rollouts (the drag
-    for the first half, then released) over the largest displacement; the Newton iterations
-    of each, per step."""
+    for the first half, then released; the held nodes at base(k) (3, 4) at step k where
+    given) over the largest displacement; the Newton iterations of each, per step."""
     now = before = model.rest()
     a = b = sim.rest_state()
     worst = size = 0.0
     iterations = []
     for k in range(steps):
         extra = drag if k < steps // 2 else np.zeros_like(drag)
-        after, report = model.step(now, before, 0.02, force=extra)
+        at = None if base is None else base(k + 1)
+        after, report = model.step(now, before, 0.02, force=extra, base=at)
         assert report.converged
         now, before = after, now
-        a, b = sim.step(a, b, scene.external_force + extra, 0.02), a
+        a, b = sim.step(a, b, scene.external_force + extra, 0.02, base=at), a
         iterations.append((report.iterations, sim.iterations))
         x = model.positions(now)
         worst = max(worst, np.abs(x - sim.positions(a)).max())
@@ -59,6 +60,19 @@ def test_runtime_steps_like_the_library(written):
     error, iterations = rollouts(scene, model, FramedSimulator(path), 100, arm_drag(scene))
     assert error < 1e-9
     assert all(a == b for a, b in iterations)
+
+
+def test_runtime_follows_a_moving_base_like_the_library(written):
+    """The T's foot turned and moved (test_framed_model.swung_base) while an arm is dragged:
+    the same iterations, within 1e-9 of the largest displacement; a base that is not a rigid
+    motion is refused."""
+    scene, model, path = written
+    sim = FramedSimulator(path)
+    error, iterations = rollouts(scene, model, sim, 40, arm_drag(scene), swung_base)
+    assert error < 1e-9 and all(a == b for a, b in iterations)
+    now = sim.rest_state()
+    with pytest.raises(ValueError, match="base: its first 3 columns must be a rotation"):
+        sim.step(now, now, scene.external_force, 0.02, base=np.ones((3, 4)))
 
 
 def test_runtime_steps_quadratic_tets_with_fibers_like_the_library(tmp_path):

@@ -31,7 +31,7 @@ on the model's own energy, started from the extrapolated state.
 """
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg as sla
@@ -65,13 +65,16 @@ STEP_TOLERANCE = 1e-8
 @dataclass
 class FramedState:
     """A framed model's state: c (D, 3) the domains' centres, m; R (D, 3, 3) their rotations;
-    q (Q,) every domain's local coordinates, one after another (FramedModel.domains[d].q)."""
+    q (Q,) every domain's local coordinates, one after another (FramedModel.domains[d].q);
+    base (3, 4) [R_g | c_g], where the held nodes are: x = R_g x0 + c_g (a rigid motion; the
+    identity by default)."""
     c: np.ndarray
     R: np.ndarray
     q: np.ndarray
+    base: np.ndarray = field(default_factory=lambda: np.eye(3, 4))
 
     def copy(self):
-        return FramedState(self.c.copy(), self.R.copy(), self.q.copy())
+        return FramedState(self.c.copy(), self.R.copy(), self.q.copy(), self.base.copy())
 
 
 @dataclass
@@ -239,8 +242,8 @@ class FramedModel:
     def positions(self, state):
         """Full positions (n, 3), m, of a FramedState."""
         x = np.empty_like(self.x0)
-        fk.node_positions(state.c, state.R, state.q, self._labels, self._Y, self._U, self.x0,
-                          self._q0, self._r, x)
+        fk.node_positions(state.c, state.R, state.q, state.base, self._labels, self._Y, self._U,
+                          self.x0, self._q0, self._r, x)
         return x
 
     def project(self, force):
@@ -258,16 +261,19 @@ class FramedModel:
 
     # -- stepping --------------------------------------------------------------------------
 
-    def step(self, now, before, dt, force=None, max_iter=50):
+    def step(self, now, before, dt, force=None, base=None, max_iter=50):
         """One backward-Euler step of dt s from `now` (a FramedState), `before` being the
         state a step earlier (equal to now from rest): x_hat = 2 x(now) - x(before). Under the
-        scene's loads plus nodal forces `force` (n, 3), N. Returns (next state,
+        scene's loads plus nodal forces `force` (n, 3), N; base (3, 4) [R_g | c_g]: where the
+        held nodes are at the step's end, x = R_g x0 + c_g (a rigid motion that carries the
+        body: a hand, a character; default: where they are in now). Returns (next state,
         NewtonReport)."""
         if not dt > 0:
             raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
+        base = now.base if base is None else rigid_motion(base)
         inertia = 1.0 / dt ** 2
         targets = self._targets(self._load(force), inertia, ((now, 2.0), (before, -1.0)))
-        return self._newton(self._extrapolated(now, before), targets, inertia, max_iter)
+        return self._newton(self._extrapolated(now, before, base), targets, inertia, max_iter)
 
     def solve(self, force=None, start=None, max_iter=50):
         """The static equilibrium under the scene's loads plus nodal forces `force` (n, 3), N,
@@ -370,7 +376,8 @@ class FramedModel:
     def _joint_positions(self, state):
         labels, Y, U, x0 = self._joint_rows
         x = np.empty_like(x0)
-        fk.node_positions(state.c, state.R, state.q, labels, Y, U, x0, self._q0, self._r, x)
+        fk.node_positions(state.c, state.R, state.q, state.base, labels, Y, U, x0, self._q0,
+                          self._r, x)
         return x
 
     def retract(self, state, dz, alpha=1.0):
@@ -378,24 +385,27 @@ class FramedModel:
         exp(alpha [dtheta]), each centre's own move t by alpha dt, the centres carried by the
         turns (FramedModel._plant), q + alpha dq."""
         R = rotations(alpha * dz[self._zt]) @ state.R
-        return FramedState(self._centres(self._moves(state) + alpha * dz[self._zc], R), R,
-                           state.q + alpha * dz[self._zq])
+        return FramedState(self._centres(self._moves(state) + alpha * dz[self._zc], R,
+                                         state.base), R, state.q + alpha * dz[self._zq],
+                           state.base)
 
-    def _extrapolated(self, now, before):
-        """Newton's start for the step after `now`: each frame turned on by its last turn
-        (R_now R_before^T R_now), its own move and q carried on as far."""
+    def _extrapolated(self, now, before, base):
+        """Newton's start for the step after `now`, the held nodes moved to base: each frame
+        turned on by its last turn (R_now R_before^T R_now), its own move and q carried on as
+        far."""
         R = _orthonormal(FramedState(now.c, now.R @ before.R.transpose(0, 2, 1) @ now.R,
                                      now.q)).R
-        return FramedState(self._centres(2 * self._moves(now) - self._moves(before), R), R,
-                           2 * now.q - before.q)
+        return FramedState(self._centres(2 * self._moves(now) - self._moves(before), R, base),
+                           R, 2 * now.q - before.q, base)
 
     def _plant(self, pivots):
         """The kinematic tree (anisofem.reduced.domains.tree): domain e's centre is
-        c_e = c_p + R_p a_e + R_e b_e + t_e, p its parent (c = 0, R = I for the held nodes),
-        a_e its pivot's rest offset from the parent's centre, b_e its centre's from its pivot,
-        so that a turn of a domain carries the domains beyond it; t_e, its own move, is a
-        Newton unknown. _chain lists (f, d, v) for each domain f on the path from the root to
-        d: R_f v is the arm by which f's turn moves d's centre."""
+        c_e = c_p + R_p a_e + R_e b_e + t_e, p its parent (for the held nodes the base, c_g
+        and R_g), a_e its pivot's rest offset from the parent's centre, b_e its centre's from
+        its pivot, so that a turn of a domain carries the domains beyond it; t_e, its own
+        move, is a Newton unknown. _chain (P, 2) lists (f, d) for each domain f on the path
+        from the root to d, and _arms (P, 3) its rest arm v: R_f v is the arm by which f's
+        turn moves d's centre."""
         centres = np.array([d.centre for d in self.domains])
         self._arm_parent = pivots - np.where(self.parent[:, None] >= 0,
                                              centres[self.parent], 0.0)
@@ -415,15 +425,16 @@ class FramedModel:
     def _moves(self, state):
         """(D, 3) each domain's own move t_e (FramedModel._plant) in state, m."""
         t = np.empty_like(state.c)
-        fk.tree_centres(self._order, self.parent, self._arm_parent, self._arm_own, state.R, t,
-                        state.c, True)
+        fk.tree_centres(self._order, self.parent, self._arm_parent, self._arm_own, state.base,
+                        state.R, t, state.c, True)
         return t
 
-    def _centres(self, t, R):
-        """(D, 3) the centres of own moves t (D, 3) and rotations R (D, 3, 3), m."""
+    def _centres(self, t, R, base):
+        """(D, 3) the centres of own moves t (D, 3) and rotations R (D, 3, 3) with the held
+        nodes at base (3, 4), m."""
         c = np.empty_like(t)
-        fk.tree_centres(self._order, self.parent, self._arm_parent, self._arm_own, R, t, c,
-                        False)
+        fk.tree_centres(self._order, self.parent, self._arm_parent, self._arm_own, base, R, t,
+                        c, False)
         return c
 
     def _bound(self, dz):
@@ -486,6 +497,15 @@ def _descent(H, g):
         lam, V = np.linalg.eigh(H)
         lam = np.maximum(np.abs(lam), 1e-10 * np.abs(lam).max())
         return -V @ ((V.T @ g) / lam)
+
+
+def rigid_motion(base):
+    """base as a (3, 4) [R | c], R a rotation to 1e-9; ValueError naming `base` otherwise."""
+    base = as_float_array(base, "base", shape=(3, 4))
+    R = base[:, :3]
+    if not (np.abs(R @ R.T - np.eye(3)).max() < 1e-9 and np.linalg.det(R) > 0):
+        raise ValueError("base: its first 3 columns must be a rotation (orthonormal, det 1)")
+    return base
 
 
 def rotations(theta):

@@ -145,14 +145,17 @@ def domain_derivatives(inertia, c, R, q, a, mass, T0, T, t, q0, r, z0, g, H):
 
 
 @njit(cache=True, fastmath=_SUMS)
-def node_positions(c, R, q, dom, Y, U, x0, q0, r, out):
+def node_positions(c, R, q, base, dom, Y, U, x0, q0, r, out):
     """Positions (k, 3) of nodes in domains dom (k,): R (y + U q) + c in their domain (rest
-    offsets Y (k, 3), basis rows U (k, 3, rmax)), x0 where held (dom -1)."""
+    offsets Y (k, 3), basis rows U (k, 3, rmax)), base (3, 4) [R_g | c_g] moving x0 where
+    held (dom -1): R_g x0 + c_g."""
     y = np.empty(3)
     for i in range(dom.size):
         d = dom[i]
         if d < 0:
-            out[i] = x0[i]
+            for a in range(3):
+                out[i, a] = (base[a, 0] * x0[i, 0] + base[a, 1] * x0[i, 1]
+                             + base[a, 2] * x0[i, 2] + base[a, 3])
             continue
         for a in range(3):
             s = Y[i, a]
@@ -277,17 +280,19 @@ def tree_chain(R, chain, arms, zc, zt, g, H, N):
 
 
 @njit(cache=True, fastmath=_SUMS)
-def tree_centres(order, parent, arm_parent, arm_own, R, moves, c, to_moves):
+def tree_centres(order, parent, arm_parent, arm_own, base, R, moves, c, to_moves):
     """The kinematic tree's centres (anisofem.reduced.framed): c_e = c_p + R_p a_e + R_e b_e
-    + t_e (a_e absolute where the parent is the held nodes, p < 0), parents first in order.
-    to_moves False: c (D, 3) from the own moves t (D, 3); True: moves from the centres c."""
+    + t_e (where the parent is the held nodes, p < 0, c_p and R_p are the base's (3, 4)
+    [R_g | c_g]), parents first in order. to_moves False: c (D, 3) from the own moves t
+    (D, 3); True: moves from the centres c."""
     for e in order:
         p = parent[e]
         for i in range(3):
             s = (R[e, i, 0] * arm_own[e, 0] + R[e, i, 1] * arm_own[e, 1]
                  + R[e, i, 2] * arm_own[e, 2])
             if p < 0:
-                s += arm_parent[e, i]
+                s += base[i, 3] + (base[i, 0] * arm_parent[e, 0] + base[i, 1] * arm_parent[e, 1]
+                                   + base[i, 2] * arm_parent[e, 2])
             else:
                 s += c[p, i] + (R[p, i, 0] * arm_parent[e, 0] + R[p, i, 1] * arm_parent[e, 1]
                                 + R[p, i, 2] * arm_parent[e, 2])
