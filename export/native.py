@@ -138,8 +138,8 @@ def _pointer(a):
 
 class CFramedSimulator:
     """A framed model's arrays files (path without extension) stepped by the C runtime at
-    `lib`: framed_runtime.FramedSimulator's interface, a state a tuple (c (D, 3), R (D, 3, 3),
-    q (Q,))."""
+    `lib`: framed_runtime.FramedSimulator's interface, a state flat (af_framed_state_size,):
+    centres, rotations, coordinates, base."""
 
     def __init__(self, path, lib, angle=None):
         c = ctypes.CDLL(lib)
@@ -152,7 +152,7 @@ class CFramedSimulator:
             getattr(c, name).argtypes = [ctypes.c_void_p]
         c.af_framed_rest_state.argtypes = [ctypes.c_void_p, double_p]
         c.af_framed_step.argtypes = [ctypes.c_void_p, double_p, double_p, double_p, double_p,
-                                     ctypes.c_double, ctypes.c_int]
+                                     double_p, ctypes.c_double, ctypes.c_int]
         c.af_framed_positions.argtypes = [ctypes.c_void_p, double_p, double_p]
         error = ctypes.create_string_buffer(512)
         handle = c.af_framed_load(str(path).encode(), None if angle is None
@@ -174,13 +174,18 @@ class CFramedSimulator:
         """The rest state, flat (af_framed_state_size,)."""
         return self._rest.copy()
 
-    def step(self, now, before, force, dt, max_iter=50):
+    def step(self, now, before, force, dt, base=None, max_iter=50):
         """The state after now (flat states; before a step earlier) under nodal forces (n, 3),
-        N; RuntimeError naming the C runtime's code where it fails."""
+        N, the held nodes carried by base (3, 4) [R_g | c_g] (None: now's); RuntimeError
+        naming the C runtime's code where it fails."""
         after = np.empty(self.size)
         force = _force_array(force, self.n)
+        if base is not None:
+            base = np.ascontiguousarray(np.concatenate([np.asarray(base, float)[:, :3].ravel(),
+                                                        np.asarray(base, float)[:, 3]]))
         code = self._c.af_framed_step(self._handle, _pointer(now), _pointer(before),
-                                      _pointer(after), _pointer(force), dt, max_iter)
+                                      _pointer(after), _pointer(force),
+                                      None if base is None else _pointer(base), dt, max_iter)
         if code != 0:
             raise RuntimeError(f"af_framed_step: {CODES.get(code, code)}")
         return after

@@ -139,8 +139,10 @@ def framed(tmp_path_factory, built):
 
 
 def test_c_steps_the_framed_model_like_the_numpy_runtime_over_200_steps(framed):
-    """A drag of half the T's weight at an arm's tip for 100 steps, then released: the same
-    Newton iterations, positions within 1e-9 of the deflection."""
+    """A drag of half the T's weight at an arm's tip for 100 steps, then released, while the
+    foot is turned and moved (test_framed_model.swung_base): the same Newton iterations,
+    positions within 1e-9 of the deflection."""
+    from test_framed_model import swung_base
     from export.framed_runtime import FramedSimulator
     scene, path, lib = framed
     py, c = FramedSimulator(path), native.CFramedSimulator(path, lib)
@@ -151,8 +153,8 @@ def test_c_steps_the_framed_model_like_the_numpy_runtime_over_200_steps(framed):
     worst = size = 0.0
     for k in range(200):
         f = drag if k < 100 else scene.external_force
-        a, b = py.step(a, b, f, 0.02), a
-        ca, cb = c.step(ca, cb, f, 0.02), ca
+        a, b = py.step(a, b, f, 0.02, base=swung_base(k + 1)), a
+        ca, cb = c.step(ca, cb, f, 0.02, base=swung_base(k + 1)), ca
         assert c.iterations == py.iterations
         x = py.positions(a)
         worst = max(worst, np.abs(c.positions(ca) - x).max())
@@ -176,3 +178,5 @@ def test_c_runtime_refuses_a_framed_file_for_the_linear_step_and_back(framed, bu
         c.step(now, now, bad, 0.02)
     with pytest.raises(RuntimeError, match="bad input"):
         c.step(now, now, np.zeros((c.n, 3)), -0.02)
+    with pytest.raises(RuntimeError, match="bad input"):  # a base that is not a rigid motion
+        c.step(now, now, np.zeros((c.n, 3)), 0.02, base=np.ones((3, 4)))

@@ -726,31 +726,38 @@ fail:
 #undef I32
 
 int af_framed_vertices(const af_framed *m) { return m->n; }
-int af_framed_state_size(const af_framed *m) { return 12 * m->D + m->Q; }
+int af_framed_state_size(const af_framed *m) { return 12 * m->D + m->Q + 12; }
 const double *af_framed_masses(const af_framed *m) { return m->masses; }
 const double *af_framed_rest_positions(const af_framed *m) { return m->rest; }
 int af_framed_iterations(const af_framed *m) { return m->iterations; }
 
+/* the base of a state: [R_g (9, row-major) | c_g (3)] after its coordinates */
+#define BASE(m, st) ((st) + 12 * (m)->D + (m)->Q)
+
 void af_framed_rest_state(const af_framed *m, double *state) {
     long d, i;
-    for (i = 0; i < 12L * m->D + m->Q; i++) state[i] = 0.0;
+    for (i = 0; i < 12L * m->D + m->Q + 12; i++) state[i] = 0.0;
     for (d = 0; d < m->D; d++) {
         for (i = 0; i < 3; i++) state[3 * d + i] = m->centre[3 * d + i];
         for (i = 0; i < 3; i++) state[3 * m->D + 9 * d + 4 * i] = 1.0;
     }
+    for (i = 0; i < 3; i++) BASE(m, state)[4 * i] = 1.0;
 }
 
 /* positions (3 per node) of `nodes` (count of them; all where NULL) into out */
 static void framed_positions(const af_framed *m, const double *st, const int *nodes, long count,
                              double *out) {
-    const double *c = st, *R = st + 3 * m->D, *q = st + 12 * m->D;
+    const double *c = st, *R = st + 3 * m->D, *q = st + 12 * m->D, *base = BASE(m, st);
     long k, a, b;
     for (k = 0; k < count; k++) {
         long i = nodes ? nodes[k] : k;
         int d = m->labels[i];
         double y[3];
-        if (d < 0) {
-            for (a = 0; a < 3; a++) out[3 * k + a] = m->rest[3 * i + a];
+        if (d < 0) {  /* held: carried by the base */
+            const double *x0 = m->rest + 3 * i;
+            for (a = 0; a < 3; a++)
+                out[3 * k + a] = base[3 * a] * x0[0] + base[3 * a + 1] * x0[1]
+                                 + base[3 * a + 2] * x0[2] + base[9 + a];
             continue;
         }
         for (a = 0; a < 3; a++) {
@@ -1234,16 +1241,20 @@ static void mul3(const double *A, const double *B, double *out) {
             out[3 * i + j] = A[3 * i] * B[j] + A[3 * i + 1] * B[3 + j] + A[3 * i + 2] * B[6 + j];
 }
 
-/* to_moves: each domain's own move t (3 D) of centres c; else the centres c of moves t */
-static void framed_tree(const af_framed *m, const double *R, double *c, double *t, int to_moves) {
+/* to_moves: each domain's own move t (3 D) of centres c; else the centres c of moves t; the
+ * roots hang from base (12) */
+static void framed_tree(const af_framed *m, const double *R, const double *base, double *c,
+                        double *t, int to_moves) {
     long k, i, j;
     for (k = 0; k < m->D; k++) {
         int e = m->order[k], p = m->parent[e];
         for (i = 0; i < 3; i++) {
             double v = 0.0;
             for (j = 0; j < 3; j++) v += R[9 * e + 3 * i + j] * m->arm_own[3 * e + j];
-            if (p < 0) v += m->arm_parent[3 * e + i];
-            else {
+            if (p < 0) {
+                v += base[9 + i];
+                for (j = 0; j < 3; j++) v += base[3 * i + j] * m->arm_parent[3 * e + j];
+            } else {
                 v += c[3 * p + i];
                 for (j = 0; j < 3; j++) v += R[9 * p + 3 * i + j] * m->arm_parent[3 * e + j];
             }
@@ -1259,8 +1270,8 @@ static void framed_retract(const af_framed *m, const double *st, const double *d
                            double *out, double *t) {
     long d, a, b, D = m->D;
     double turn[9];
-    framed_tree(m, st + 3 * D, (double *)st, t, 1);
-    for (b = 0; b < m->Q; b++) out[12 * D + b] = st[12 * D + b];
+    framed_tree(m, st + 3 * D, BASE(m, st), (double *)st, t, 1);
+    for (b = 0; b < m->Q + 12; b++) out[12 * D + b] = st[12 * D + b];
     for (d = 0; d < D; d++) {
         long o = m->z0[d];
         rotation_of(alpha * dz[o + 3], alpha * dz[o + 4], alpha * dz[o + 5], turn);
@@ -1268,7 +1279,7 @@ static void framed_retract(const af_framed *m, const double *st, const double *d
         for (a = 0; a < 3; a++) t[3 * d + a] += alpha * dz[o + a];
         for (b = 0; b < m->r[d]; b++) out[12 * D + m->q0[d] + b] += alpha * dz[o + 6 + b];
     }
-    framed_tree(m, out + 3 * D, out, t, 0);
+    framed_tree(m, out + 3 * D, BASE(m, out), out, t, 0);
 }
 
 /* each 3 x 3 block of R (D of them) replaced by its nearest rotation, by Newton's iteration
@@ -1294,9 +1305,10 @@ static void nearest_rotations(double *R, long D) {
     }
 }
 
-/* Newton's start: each frame turned on by its last turn, its own move and q carried on */
+/* Newton's start, the held nodes at base (12): each frame turned on by its last turn, its own
+ * move and q carried on */
 static void framed_extrapolated(const af_framed *m, const double *now, const double *before,
-                                double *out, double *t, double *t2) {
+                                const double *base, double *out, double *t, double *t2) {
     long d, i, j, D = m->D;
     double bt[9], turn[9];
     for (d = 0; d < D; d++) {
@@ -1306,21 +1318,39 @@ static void framed_extrapolated(const af_framed *m, const double *now, const dou
         mul3(turn, Rn, out + 3 * D + 9 * d);
     }
     nearest_rotations(out + 3 * D, D);
-    framed_tree(m, now + 3 * D, (double *)now, t, 1);
-    framed_tree(m, before + 3 * D, (double *)before, t2, 1);
+    memcpy(BASE(m, out), base, 12 * sizeof(double));
+    framed_tree(m, now + 3 * D, BASE(m, now), (double *)now, t, 1);
+    framed_tree(m, before + 3 * D, BASE(m, before), (double *)before, t2, 1);
     for (i = 0; i < 3 * D; i++) t[i] = 2.0 * t[i] - t2[i];
-    framed_tree(m, out + 3 * D, out, t, 0);
+    framed_tree(m, out + 3 * D, base, out, t, 0);
     for (i = 0; i < m->Q; i++) out[12 * D + i] = 2.0 * now[12 * D + i] - before[12 * D + i];
 }
 
+/* base: 12 doubles, a rotation (row-major) and a translation: a rigid motion to 1e-9 */
+static int rigid(const double *base) {
+    int i, j, k;
+    for (i = 0; i < 12; i++) if (!isfinite(base[i])) return 0;
+    for (i = 0; i < 3; i++)
+        for (j = 0; j < 3; j++) {
+            double s = 0.0;
+            for (k = 0; k < 3; k++) s += base[3 * i + k] * base[3 * j + k];
+            if (fabs(s - (i == j ? 1.0 : 0.0)) > 1e-9) return 0;
+        }
+    return base[0] * (base[4] * base[8] - base[5] * base[7])
+           - base[1] * (base[3] * base[8] - base[5] * base[6])
+           + base[2] * (base[3] * base[7] - base[4] * base[6]) > 0.0;
+}
+
 int af_framed_step(af_framed *m, const double *now, const double *before, double *next,
-                   const double *force, double dt, int max_iter) {
-    long Z = m->Z, D = m->D, S = 12 * D + m->Q, i, it;
+                   const double *force, const double *base, double dt, int max_iter) {
+    long Z = m->Z, D = m->D, S = 12 * D + m->Q + 12, i, it;
     double *cursor = m->work, inertia, tolerance, bound = INFINITY;
     framed_scratch w;
     double *g, *H, *N, *HN, *CN, *L, *V, *B, *lam, *t1, *dz, *gc, *state, *trial, *t, *t2;
 #define TAKE(count) (cursor += (count), cursor - (count))
     if (!(dt > 0.0) || max_iter < 1) return AF_BAD_INPUT;
+    if (!base) base = BASE(m, now);
+    if (!rigid(base)) return AF_BAD_INPUT;
     for (i = 0; i < 3L * m->n; i++) if (!isfinite(force[i])) return AF_BAD_INPUT;
     for (i = 0; i < S; i++) if (!isfinite(now[i]) || !isfinite(before[i])) return AF_BAD_INPUT;
     w.T0 = TAKE(9 * D); w.T = TAKE(9 * m->Q); w.t = TAKE(3 * D);
@@ -1335,7 +1365,7 @@ int af_framed_step(af_framed *m, const double *now, const double *before, double
 #undef TAKE
     inertia = 1.0 / (dt * dt);
     framed_targets(m, now, before, force, inertia, w.T0, w.T, w.t);
-    framed_extrapolated(m, now, before, state, t, t2);
+    framed_extrapolated(m, now, before, base, state, t, t2);
     tolerance = STEP_TOLERANCE * m->size;
     for (it = 1; it <= max_iter; it++) {
         double E = framed_derivatives(m, state, &w, inertia, g, H, N, HN, CN, gc), last, alpha,

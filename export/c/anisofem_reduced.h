@@ -74,13 +74,15 @@ AF_API void af_reduced_positions(const af_reduced *model, const double *q, doubl
  * A framed model (`python -m export reduced --framed`, or `bake-reduced --framed` with an
  * angle): domains in their own rotating frames, for bodies that bend and swing far; the step
  * of export/framed_runtime.py's FramedSimulator. A state is af_framed_state_size doubles:
- * each domain's centre (3 D, m), rotation (9 D, row-major) and coordinates (Q).
+ * each domain's centre (3 D, m), rotation (9 D, row-major) and coordinates (Q), then the base
+ * (12: a rotation R_g, row-major, and a translation c_g, m) that carries the held vertices,
+ * x = R_g x0 + c_g.
  *
  *   af_framed *m = af_framed_load("t", NULL, err, sizeof err);
  *   int size = af_framed_state_size(m);
  *   double *now = malloc(size * sizeof(double)), *before = ..., *next = ...;
  *   af_framed_rest_state(m, now); af_framed_rest_state(m, before);
- *   af_framed_step(m, now, before, next, force, 0.02, 50);  // then before = now, now = next
+ *   af_framed_step(m, now, before, next, force, NULL, 0.02, 50);  // before = now, now = next
  *   af_framed_positions(m, next, x);
  */
 typedef struct af_framed af_framed;
@@ -95,10 +97,14 @@ AF_API const double *af_framed_rest_positions(const af_framed *model);
 /* The rest state: every frame at its domain's rest centre, unturned, q = 0. */
 AF_API void af_framed_rest_state(const af_framed *model, double *state);
 /* One backward-Euler step of dt s after the state now (before: the state a step earlier, now
- * itself from rest) into next, under nodal forces force (n x 3, N, gravity included).
- * Returns AF_OK, or a negative code with next unchanged. */
+ * itself from rest) into next, under nodal forces force (n x 3, N, gravity included); base
+ * (12 doubles: R_g row-major, c_g) where the held vertices are at the step's end (a hand or a
+ * character carrying the body), or NULL to keep now's. Returns AF_OK, or a negative code
+ * (AF_BAD_INPUT: a non-finite force or state, dt <= 0, a base that is not a rigid motion)
+ * with next unchanged. */
 AF_API int af_framed_step(af_framed *model, const double *now, const double *before,
-                          double *next, const double *force, double dt, int max_iter);
+                          double *next, const double *force, const double *base, double dt,
+                          int max_iter);
 AF_API int af_framed_iterations(const af_framed *model);
 /* Positions x (n x 3), m, of a state. */
 AF_API void af_framed_positions(const af_framed *model, const double *state, double *x);
