@@ -57,23 +57,14 @@ class CReducedSimulator:
     `lib` (build's path); angle: the fiber angle of a file of several, as its header writes it."""
 
     def __init__(self, path, lib, angle=None):
-        c = ctypes.CDLL(lib)
+        c, handle = _open(lib, "af_reduced", path, angle,
+                          ("af_reduced_vertices", "af_reduced_coordinates",
+                           "af_reduced_iterations"))
         double_p = ctypes.POINTER(ctypes.c_double)
-        c.af_reduced_load.restype = ctypes.c_void_p
-        c.af_reduced_load.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p,
-                                      ctypes.c_size_t]
-        c.af_reduced_free.argtypes = [ctypes.c_void_p]
-        for name in ("af_reduced_vertices", "af_reduced_coordinates", "af_reduced_iterations"):
-            getattr(c, name).argtypes = [ctypes.c_void_p]
         c.af_reduced_step.argtypes = [ctypes.c_void_p, double_p, double_p, double_p,
                                       ctypes.c_double, ctypes.c_double, ctypes.c_int]
         c.af_reduced_positions.argtypes = [ctypes.c_void_p, double_p, double_p]
         c.af_reduced_set_constant_force.argtypes = [ctypes.c_void_p, double_p]
-        error = ctypes.create_string_buffer(512)
-        handle = c.af_reduced_load(str(path).encode(), None if angle is None
-                                   else str(angle).encode(), error, len(error))
-        if not handle:
-            raise ValueError(error.value.decode())
         self._c, self._handle = c, handle
         self.n = c.af_reduced_vertices(handle)
         self.r = c.af_reduced_coordinates(handle)
@@ -122,6 +113,24 @@ class CReducedSimulator:
         return x
 
 
+def _open(lib, prefix, path, angle, counts):
+    """(ctypes library, model handle) of PREFIX_load(path, angle) in the shared library lib,
+    PREFIX_free and the functions `counts` (of the handle alone) typed; ValueError with the C
+    runtime's message where the file cannot be stepped."""
+    c = ctypes.CDLL(lib)
+    load = getattr(c, prefix + "_load")
+    load.restype = ctypes.c_void_p
+    load.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p, ctypes.c_size_t]
+    for name in (prefix + "_free",) + tuple(counts):
+        getattr(c, name).argtypes = [ctypes.c_void_p]
+    error = ctypes.create_string_buffer(512)
+    handle = load(str(path).encode(), None if angle is None else str(angle).encode(), error,
+                  len(error))
+    if not handle:
+        raise ValueError(error.value.decode())
+    return c, handle
+
+
 def _force_array(force, n):
     """force as a contiguous float64 (n, 3) array; ValueError naming its shape otherwise."""
     force = np.ascontiguousarray(force, dtype=np.float64)
@@ -142,23 +151,13 @@ class CFramedSimulator:
     centres, rotations, coordinates, base."""
 
     def __init__(self, path, lib, angle=None):
-        c = ctypes.CDLL(lib)
+        c, handle = _open(lib, "af_framed", path, angle,
+                          ("af_framed_vertices", "af_framed_state_size", "af_framed_iterations"))
         double_p = ctypes.POINTER(ctypes.c_double)
-        c.af_framed_load.restype = ctypes.c_void_p
-        c.af_framed_load.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p,
-                                     ctypes.c_size_t]
-        c.af_framed_free.argtypes = [ctypes.c_void_p]
-        for name in ("af_framed_vertices", "af_framed_state_size", "af_framed_iterations"):
-            getattr(c, name).argtypes = [ctypes.c_void_p]
         c.af_framed_rest_state.argtypes = [ctypes.c_void_p, double_p]
         c.af_framed_step.argtypes = [ctypes.c_void_p, double_p, double_p, double_p, double_p,
                                      double_p, ctypes.c_double, ctypes.c_int]
         c.af_framed_positions.argtypes = [ctypes.c_void_p, double_p, double_p]
-        error = ctypes.create_string_buffer(512)
-        handle = c.af_framed_load(str(path).encode(), None if angle is None
-                                  else str(angle).encode(), error, len(error))
-        if not handle:
-            raise ValueError(error.value.decode())
         self._c, self._handle = c, handle
         self.n = c.af_framed_vertices(handle)
         self.size = c.af_framed_state_size(handle)

@@ -84,6 +84,21 @@ def _display_masses(scene, display):
     return np.bincount(display.tets.ravel(), np.repeat(volumes, 4), display.n_vertices)
 
 
+def _angle_scenes(name, angles):
+    """(angles as floats, the baked scene `name` (export.bake.SCENES) with the trained material
+    (Material.paper, fiber stiffness E) and gravity at each fiber angle, degrees from x towards
+    z); ValueError naming the scene or the angles."""
+    if name not in SCENES:
+        raise ValueError(f"scene: expected one of {sorted(SCENES)}, got {name!r}")
+    angles = [float(a) for a in angles]
+    if not angles:
+        raise ValueError("angles: give at least one fiber angle")
+    vertices, tets, held = scene_mesh(name)
+    mesh = TetMesh(vertices, tets)
+    return angles, [Scene(mesh, Material.paper(fiber_direction(a), Material.paper().young),
+                          fixed=held, gravity=GRAVITY) for a in angles]
+
+
 def bake(name, out, modes, angles, snapshots=0):
     """Write the reduced models of the baked scene `name` (export.bake.SCENES; the trained
     material: Material.paper with fiber stiffness E, gravity) at each fiber angle (degrees from
@@ -92,28 +107,19 @@ def bake(name, out, modes, angles, snapshots=0):
     snapshots: principal directions fitted to the scene's default declared loads (a drag of
     half the body's weight at each free end) added to the modes (0: modes and their modal
     derivatives). Returns the header."""
-    if name not in SCENES:
-        raise ValueError(f"scene: expected one of {sorted(SCENES)}, got {name!r}")
-    angles = [float(a) for a in angles]
-    if not angles:
-        raise ValueError("angles: give at least one fiber angle")
-    vertices, tets, held = scene_mesh(name)
-    mesh = TetMesh(vertices, tets)
+    angles, scenes = _angle_scenes(name, angles)
     arrays, ranks, checks = {}, [], []
-    for angle in angles:
-        material = Material.paper(fiber_direction(angle), Material.paper().young)
-        model = ReducedModel(Scene(mesh, material, fixed=held, gravity=GRAVITY), modes=modes,
-                             snapshots=snapshots)
+    for angle, scene in zip(angles, scenes):
+        model = ReducedModel(scene, modes=modes, snapshots=snapshots)
         P, tag = model.polynomial, f"@{angle:g}"
         arrays.update({"basis" + tag: model.basis.reshape(-1, 3, model.r), "c1" + tag: P.c1,
                        "C2" + tag: P.C2, "S3" + tag: P.S3, "W4" + tag: P.W4})
         ranks.append(model.r)
         checks.append(dataclasses.asdict(model.validation))
-    arrays.update({"rest_positions": vertices, "masses": np.asarray(model.scene.masses),
-                   "held": held.astype(np.uint8), "tets": tets.astype(np.int32),
-                   "surface": runtime.surface_triangles(vertices, tets).astype(np.int32)})
+    arrays.update(_mesh_arrays(model.scene))
+    mesh = model.scene.mesh
     header = {"model_format": runtime.REDUCED_FORMAT, "scene": name, "title": SCENES[name][0],
-              "n": int(vertices.shape[0]), "m": int(tets.shape[0]), "modes": modes,
+              "n": mesh.n_vertices, "m": mesh.n_tets, "modes": modes,
               "snapshots": snapshots,
               "fiber_angles": angles, "r": ranks, "validation": checks, "dt": DT,
               "gravity": list(GRAVITY)}
@@ -180,25 +186,18 @@ def bake_framed(name, out, angles):
     """Write the framed models (anisofem.reduced.FramedModel) of the baked scene `name` at each
     fiber angle (degrees from x towards z) as out.json and out.bin, for the browser page: the
     mesh arrays once, framed_arrays once per angle as NAME@A. Returns the header."""
-    if name not in SCENES:
-        raise ValueError(f"scene: expected one of {sorted(SCENES)}, got {name!r}")
-    angles = [float(a) for a in angles]
-    if not angles:
-        raise ValueError("angles: give at least one fiber angle")
-    vertices, tets, held = scene_mesh(name)
-    mesh = TetMesh(vertices, tets)
-    arrays, checks, unknowns, sizes = {}, [], [], []
-    for angle in angles:
-        material = Material.paper(fiber_direction(angle), Material.paper().young)
-        model = FramedModel(Scene(mesh, material, fixed=held, gravity=GRAVITY))
+    angles, scenes = _angle_scenes(name, angles)
+    arrays, checks, unknowns = {}, [], []
+    for angle, scene in zip(angles, scenes):
+        model = FramedModel(scene)
         arrays.update(framed_arrays(model, f"@{angle:g}"))
         checks.append(dataclasses.asdict(model.validation))
         unknowns.append(model.r)
-        sizes.append(model.size)
     arrays.update(_mesh_arrays(model.scene))
+    mesh = model.scene.mesh
     header = {"model_format": FRAMED_FORMAT, "scene": name, "title": SCENES[name][0],
-              "n": int(vertices.shape[0]), "m": int(tets.shape[0]),
-              "domains": len(model.domains), "fiber_angles": angles, "r": unknowns,
-              "size": sizes[0], "validation": checks, "dt": DT, "gravity": list(GRAVITY)}
+              "n": mesh.n_vertices, "m": mesh.n_tets, "domains": len(model.domains),
+              "fiber_angles": angles, "r": unknowns, "size": model.size,
+              "validation": checks, "dt": DT, "gravity": list(GRAVITY)}
     write_arrays(out, arrays, header)
     return header

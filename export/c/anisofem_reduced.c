@@ -418,9 +418,11 @@ static void jacobi(const double *H, double *V, double *lam, double *B, long r) {
     for (i = 0; i < r; i++) lam[i] = B[i * r + i];
 }
 
-/* p = -H^-1 g by Cholesky, or with H's eigenvalues clamped to CLAMP of the largest. */
+/* p = -H^-1 g by Cholesky, or where H is not positive definite with its eigenvalues clamped
+ * to floor_share of the largest (mirror: their absolute values so clamped). */
 static void newton_direction(const double *H, const double *g, double *p, double *L,
-                             double *V, double *lam, double *B, double *t1, long r) {
+                             double *V, double *lam, double *B, double *t1, long r,
+                             double floor_share, int mirror) {
     long i, k;
     if (cholesky(H, L, r)) {
         for (i = 0; i < r; i++) {  /* L y = g */
@@ -438,9 +440,9 @@ static void newton_direction(const double *H, const double *g, double *p, double
         jacobi(H, V, lam, B, r);
         for (i = 0; i < r; i++) if (fabs(lam[i]) > largest) largest = fabs(lam[i]);
         for (i = 0; i < r; i++) {
-            double s = 0.0, floor_ = CLAMP * largest;
+            double s = 0.0, floor_ = floor_share * largest, l = mirror ? fabs(lam[i]) : lam[i];
             for (k = 0; k < r; k++) s += V[k * r + i] * g[k];
-            t1[i] = s / (lam[i] > floor_ ? lam[i] : floor_);
+            t1[i] = s / (l > floor_ ? l : floor_);
         }
         for (i = 0; i < r; i++) {
             double s = 0.0;
@@ -525,7 +527,7 @@ int af_reduced_step(af_reduced *m, double *q, double *w, const double *force, do
             return AF_OK;
         }
         if (it == max_iter) break;
-        newton_direction(H, g, p, L, V, lam, J, t1, r);
+        newton_direction(H, g, p, L, V, lam, J, t1, r, CLAMP, 0);
         a1 = dot(g, p, r);
         if (!(a1 < 0.0)) break;
         a2 = 0.5 * form(H, p, r);
@@ -1165,40 +1167,6 @@ static double framed_derivatives(const af_framed *m, const double *st, framed_sc
     return E;
 }
 
-/* dz = -H^-1 g by Cholesky, or with H's eigenvalues mirrored and floored at MIRROR_FLOOR of
- * the largest. L, V, B: (Z, Z) scratch; lam, t1: (Z,). */
-static void framed_descent(const double *H, const double *g, double *dz, double *L, double *V,
-                           double *B, double *lam, double *t1, long r) {
-    long i, k;
-    if (cholesky(H, L, r)) {
-        for (i = 0; i < r; i++) {
-            double s = g[i];
-            for (k = 0; k < i; k++) s -= L[i * r + k] * t1[k];
-            t1[i] = s / L[i * r + i];
-        }
-        for (i = r - 1; i >= 0; i--) {
-            double s = t1[i];
-            for (k = i + 1; k < r; k++) s -= L[k * r + i] * dz[k];
-            dz[i] = s / L[i * r + i];
-        }
-    } else {
-        double largest = 0.0;
-        jacobi(H, V, lam, B, r);
-        for (i = 0; i < r; i++) if (fabs(lam[i]) > largest) largest = fabs(lam[i]);
-        for (i = 0; i < r; i++) {
-            double s = 0.0, l = fabs(lam[i]);
-            for (k = 0; k < r; k++) s += V[k * r + i] * g[k];
-            t1[i] = s / (l > MIRROR_FLOOR * largest ? l : MIRROR_FLOOR * largest);
-        }
-        for (i = 0; i < r; i++) {
-            double s = 0.0;
-            for (k = 0; k < r; k++) s += V[i * r + k] * t1[k];
-            dz[i] = s;
-        }
-    }
-    for (i = 0; i < r; i++) dz[i] = -dz[i];
-}
-
 /* the largest node move of dz (the centres' free moves dz + N dz), m */
 static double framed_bound(const af_framed *m, const double *dz, const double *N) {
     long d, a, j, b, Z = m->Z;
@@ -1372,7 +1340,7 @@ int af_framed_step(af_framed *m, const double *now, const double *before, double
                slope = 0.0;
         if (!isfinite(E)) return AF_NOT_CONVERGED;
         for (i = 0; i < Z; i++) if (!isfinite(g[i])) return AF_NOT_CONVERGED;
-        framed_descent(H, g, dz, L, V, B, lam, t1, Z);
+        newton_direction(H, g, dz, L, V, lam, B, t1, Z, MIRROR_FLOOR, 1);
         last = bound;
         bound = framed_bound(m, dz, N);
         if (bound <= tolerance || (bound < last && last < INFINITY
