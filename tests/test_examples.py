@@ -16,6 +16,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ("finger_control.py", "finger_control.png", "wrote out/finger_control.png"),
     ("finger_control.py reduced", "finger_control.png", "wrote out/finger_control.png"),
     ("finger_control.py framed", "finger_control.png", "wrote out/finger_control.png"),
+    ("tail.py", "tail.png", "wrote out/tail.png"),
     ("actuator.py", "actuator.png", "bending grows with pressure: True"),
     ("actuator.py twist", "actuator_twist.png", "bending grows with pressure: True"),
     ("two_region_part.py", "two_region_part.png", "converged: True"),
@@ -40,5 +41,8 @@ def test_example_runs_and_draws(tmp_path, script, picture, says):
         last = [line for line in r.stdout.splitlines() if "kPa" in line][-1]
         bent, twisted = (float(last.split(word)[1].split()[0]) for word in ("bent", "twisted"))
         assert bent > 20 and (abs(twisted) > 20 if args else abs(twisted) < 2), last
+    if script == "tail.py":  # the framed runtime follows the full FEM through the whip
+        error = float(r.stdout.split("the framed model within ")[1].split("%")[0])
+        assert error < 5.0, r.stdout
     if script == "finger_control.py":  # the controller brings the tip to both targets
         assert r.stdout.count(": reached") == 2 and "missed" not in r.stdout, r.stdout
