@@ -88,6 +88,10 @@ class FramedSimulator:
         self.chain, self.arms = a["chain"].astype(np.int64), a["arms"]
         self.joint_nodes, local = np.unique(a["joint_tets"], return_inverse=True)
         self._local = local.reshape(a["joint_tets"].shape)              # in joint_nodes
+        rows = (3 * self._local[:, :, None] + np.arange(3)).reshape(self._local.shape[0], -1)
+        self._grad_index = rows.ravel()               # each element entry's place in (3 k,)
+        self._hess_index = (rows[:, :, None] * 3 * self.joint_nodes.size
+                            + rows[:, None, :]).ravel()      # and in (3 k, 3 k)
         self.joint_grads, self.joint_weights = a["joint_grads"], a["joint_weights"]
         self.mu, self.lam, self.kappa = a["mu"], a["lam"], a["kappa"]
         self.fiber = a["fiber"]
@@ -370,8 +374,8 @@ def _elements(sim, x, want):
                                                              sim.fiber)[:, None])
     P = F @ S
     k = x.shape[0]
-    grad = np.zeros((k, 3))
-    np.add.at(grad, tets, np.einsum("mp,mpab,mpnb->mna", w, P, G))
+    grad = np.bincount(sim._grad_index, np.einsum("mp,mpab,mpnb->mna", w, P, G).ravel(),
+                       3 * k).reshape(k, 3)
     if want == 1:
         return energy, grad
     Q = np.einsum("mpab,mpnb->mpna", F, G)                          # q_a = F G_a
@@ -387,11 +391,7 @@ def _elements(sim, x, want):
           + 8 * kappa[..., None, None, None, None]
           * np.einsum("mpi,mpk,mpn,mpl->mpnilk", Fd, Fd, s, s))
     He = np.einsum("mp,mpnilk->mnilk", w, He)
-    n = tets.shape[1]
-    rows = (3 * tets[:, :, None] + np.arange(3)).reshape(-1, 3 * n)  # (m, 3n)
-    Hx = np.zeros((3 * k, 3 * k))
-    np.add.at(Hx, (rows[:, :, None], rows[:, None, :]),
-              He.reshape(-1, 3 * n, 3 * n))
+    Hx = np.bincount(sim._hess_index, He.ravel(), 9 * k * k).reshape(3 * k, 3 * k)
     return energy, grad, Hx
 
 
