@@ -20,7 +20,7 @@ rotating frame with a local basis (anisofem.reduced.framed):
 
     model = FramedModel(scene)                           # 4 bands, 12 coordinates per domain
     now = before = model.rest()
-    after, report = model.step(now, before, dt=0.02)
+    after, report = model.step(now, before, dt=0.02)     # base=[R_g | c_g]: a moving base
     x = model.positions(after)
 
 The Neo-Hookean base is not polynomial in q and is refused.
