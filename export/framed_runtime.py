@@ -211,13 +211,18 @@ class FramedSimulator:
         np.add.at(M, self.domain_of_q, q[:, None, None] * T)
         return M
 
-    def _energy(self, state, targets, inertia):
+    def _moment_energy(self, state, targets, inertia):
+        """(the inertia and load terms' energy (module docstring), J; M (D, 3, 3), each
+        domain's T0 + q . T)."""
         c, R, q, _ = state
         T0, T, t = targets
         M = self._pulled(q, T0, T)
-        E = (0.5 * inertia * (self.mass @ np.einsum("di,di->d", c, c)
-                              + 2 * self.a @ q + q @ q)
-             - np.sum(R * M) - np.sum(t * c))
+        return (0.5 * inertia * (self.mass @ np.einsum("di,di->d", c, c) + 2 * self.a @ q
+                                 + q @ q) - np.sum(R * M) - np.sum(t * c)), M
+
+    def _energy(self, state, targets, inertia):
+        q = state[2]
+        E = self._moment_energy(state, targets, inertia)[0]
         for e, P in enumerate(self.polynomials):
             E += _quartic(P, q[self.q0[e]:self.q0[e] + self.r[e]])[0]
         x = self._positions(state, self.joint_nodes)
@@ -230,9 +235,7 @@ class FramedSimulator:
         T0, T, t = targets
         Z = self.n_unknowns
         g, H = np.zeros(Z), np.zeros((Z, Z))
-        M = self._pulled(q, T0, T)
-        E = (0.5 * inertia * (self.mass @ np.einsum("di,di->d", c, c) + 2 * self.a @ q + q @ q)
-             - np.sum(R * M) - np.sum(t * c))
+        E, M = self._moment_energy(state, targets, inertia)
         GR = np.einsum("jab,dbc->djac", GEN, R)                   # (D, 3, 3, 3)
         for e in range(self.r.size):
             zc, zt, rd = self.zc[e], self.zt[e], self.r[e]
