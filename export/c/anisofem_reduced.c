@@ -154,10 +154,12 @@ void af_reduced_free(af_reduced *m) {
 
 /* Read PATH.json and the .bin it names into *json and *bin (bin_size bytes), checking the
  * arrays format and the model format `format` (`command` rebuilds a file of another); the
- * tag "@angle" (or "") into tag; 0 with a message, nothing left allocated. */
+ * tag "@angle" (or "") into tag; a zeroed model of model_size bytes into *model; 0 with a
+ * message, nothing left allocated. */
 static int open_model(const char *path, const char *angle, const char *format,
                       const char *command, char **json, char **bin, long *bin_size, char *tag,
-                      size_t tag_size, char *error, size_t error_size) {
+                      size_t tag_size, size_t model_size, void **model, char *error,
+                      size_t error_size) {
     char name[4096], text[128], hint[256];
     const char *v;
     snprintf(name, sizeof name, "%s.json", path);
@@ -194,8 +196,15 @@ static int open_model(const char *path, const char *angle, const char *format,
         snprintf(name, sizeof name, "%.*s%s", dir, path, text);
     }
     *bin = read_file(name, bin_size);
-    if (*bin) return 1;
-    say(error, error_size, "path: cannot read %s (%s)", name, strerror(errno));
+    if (!*bin) {
+        say(error, error_size, "path: cannot read %s (%s)", name, strerror(errno));
+        goto fail;
+    }
+    *model = calloc(1, model_size);
+    if (*model) return 1;
+    say(error, error_size, "no memory for a model%s%s", "", "");
+    free(*bin);
+    *bin = NULL;
 fail:
     free(*json);
     *json = NULL;
@@ -211,15 +220,9 @@ af_reduced *af_reduced_load(const char *path, const char *angle, char *error,
     spec s;
     af_reduced *m;
     if (!open_model(path, angle, REDUCED_FORMAT, "python -m export reduced", &json, &bin,
-                    &bin_size, tag, sizeof tag, error, error_size))
+                    &bin_size, tag, sizeof tag, sizeof *m, (void **)&m, error, error_size))
         return NULL;
     table = value_of(json, "arrays");
-    m = calloc(1, sizeof *m);
-    if (!m) {
-        say(error, error_size, "no memory for a model%s%s", "", "");
-        free(json); free(bin);
-        return NULL;
-    }
     if (!(m->rest = load_array(table, bin, bin_size, "rest_positions", "", 2, &s, error, error_size)))
         goto fail;
     m->n = (int)s.shape[0];
@@ -649,15 +652,10 @@ af_framed *af_framed_load(const char *path, const char *angle, char *error, size
     spec s;
     af_framed *m;
     if (!open_model(path, angle, FRAMED_FORMAT, "python -m export reduced --framed", &json,
-                    &bin, &bin_size, tag, sizeof tag, error, error_size))
+                    &bin, &bin_size, tag, sizeof tag, sizeof *m, (void **)&m, error,
+                    error_size))
         return NULL;
     table = value_of(json, "arrays");
-    m = calloc(1, sizeof *m);
-    if (!m) {
-        say(error, error_size, "no memory for a model%s%s", "", "");
-        free(json); free(bin);
-        return NULL;
-    }
     v = value_of(json, "size");
     m->size = v ? strtod(v, NULL) : 0.0;
     {   /* the mesh arrays carry no tag */
