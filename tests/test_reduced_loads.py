@@ -9,7 +9,7 @@ import pytest
 
 import anisofem as af
 from anisofem import ladder, meshgen
-from anisofem.reduced import Drag, Loads, ReducedModel, default_loads
+from anisofem.reduced import Carry, Drag, Loads, ReducedModel, default_loads
 from anisofem.reduced import loads as loads_module
 from anisofem.reduced.snapshots import principal_directions
 from test_reduced import cantilever, random_q
@@ -93,8 +93,8 @@ def test_unseen_cases_stay_within_the_declaration_and_repeat(long_beam):
     assert all(np.array_equal(a[1], b[1]) for a, b in zip(cases, again))
     others = np.setdiff1d(np.arange(long_beam.mesh.n_vertices), end)
     m = long_beam.masses
-    for which, f in cases:
-        assert which == 0
+    for which, f, carry in cases:
+        assert which == 0 and carry is None
         turn = f[others].sum(axis=0) / m[others].sum()  # gravity's change, m/s^2
         g = long_beam.gravity + turn
         pull = f[end].sum(axis=0) - m[end].sum() * turn
@@ -166,6 +166,12 @@ def test_the_trade_lists_the_fitted_rungs():
     (lambda end: Loads(cone=181), "cone"),
     (lambda end: Loads(cone=float("nan")), "cone"),
     (lambda end: Loads(drags=("tip",)), "drags"),
+    (lambda end: Carry(turn=-1), "turn"),
+    (lambda end: Carry(turn=190), "turn"),
+    (lambda end: Carry(move=float("nan")), "move"),
+    (lambda end: Carry(move=-0.1), "move"),
+    (lambda end: Carry(seconds=0.0), "seconds"),
+    (lambda end: Loads(carry=(30, 0.1)), "carry"),
 ])
 def test_bad_declarations_are_refused(long_beam, make, message):
     end = af.metrics.end_vertices(long_beam.mesh, 0, "max")
@@ -185,5 +191,31 @@ def test_declarations_the_scene_cannot_take_are_refused(long_beam):
         ReducedModel(flat, modes=2, snapshots=2, loads=Loads(cone=10))
     with pytest.raises(TypeError, match="loads"):
         ReducedModel(long_beam, modes=2, snapshots=2, loads="tip")
+    with pytest.raises(ValueError, match="carry: the linear reduced model holds"):
+        ReducedModel(long_beam, modes=2, snapshots=2, loads=Loads(carry=Carry(turn=30)))
     with pytest.raises(ValueError, match="snapshots"):
         ReducedModel(long_beam, modes=2, snapshots=-1)
+
+
+def test_a_carry_adds_its_inertia_to_the_build_and_draws_carries_within_it(long_beam):
+    """Build: the cone widened to the turn (8 gravity cases), the move's inertia along the 14
+    directions and the turn's about 6 axes, each in 3 shares; unseen cases: from rest, smooth,
+    then held at a turn and a move of the held vertices within the declaration."""
+    carry = Carry(turn=40, move=0.05, seconds=0.4)
+    chains = loads_module.build_cases(long_beam, Loads(carry=carry))
+    assert len(chains) == 8 + 14 + 6 and all(len(c) == 3 for c in chains[:20])
+    peak = math.pi ** 2 / (2 * 0.4 ** 2)
+    move = chains[0][-1]
+    assert move.sum(axis=0) == pytest.approx(long_beam.masses.sum() * 0.05 * peak
+                                             * np.array(loads_module.ANY_DIRECTION[0]))
+    held = long_beam.fixed_mask.any(axis=1)
+    h = long_beam.mesh.vertices[held].mean(axis=0)
+    for _, _, base in loads_module.unseen_cases(long_beam, Loads(carry=carry), 10, seed=2):
+        assert np.allclose(base(0.0), np.eye(3, 4))
+        for t in (0.1, 0.4, 1.0):
+            R, c = base(t)[:, :3], base(t)[:, 3]
+            assert np.allclose(R @ R.T, np.eye(3)) and np.linalg.det(R) > 0
+            angle = math.degrees(math.acos(np.clip((np.trace(R) - 1) / 2, -1, 1)))
+            assert angle <= 40 + 1e-9 and np.linalg.norm(R @ h + c - h) <= 0.05 + 1e-12
+        assert np.allclose(base(0.4), base(1.0))
+        assert angle >= 0.3 * 40 - 1e-9

@@ -26,8 +26,8 @@ rotating frame with a local basis (anisofem.reduced.framed):
 The Neo-Hookean base is not polynomial in q and is refused.
 """
 from .framed import FramedModel, FramedState
-from .loads import Drag, Loads, default_loads
+from .loads import Carry, Drag, Loads, default_loads
 from .model import MODES, NewtonReport, ReducedModel
 
-__all__ = ["MODES", "Drag", "FramedModel", "FramedState", "Loads", "NewtonReport",
+__all__ = ["MODES", "Carry", "Drag", "FramedModel", "FramedState", "Loads", "NewtonReport",
            "ReducedModel", "default_loads"]

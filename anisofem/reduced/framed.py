@@ -281,14 +281,17 @@ class FramedModel:
         start = self.rest() if start is None else start.copy()
         return self._newton(start, self._targets(self._load(force), 0.0, ()), 0.0, max_iter)
 
-    def rollout(self, phases, dt):
+    def rollout(self, phases, dt, base=None):
         """Positions (k + 1, n, 3) from rest through phases ((extra nodal force (n, 3) N or
-        None, steps), ...) of dt s, and whether every step converged."""
+        None, steps), ...) of dt s, the held nodes carried by base (t -> (3, 4), or None), and
+        whether every step converged."""
         now = before = self.rest()
-        xs, ok = [self.positions(now)], True
+        xs, ok, k = [self.positions(now)], True, 0
         for force, steps in phases:
             for _ in range(steps):
-                after, report = self.step(now, before, dt, force=force)
+                k += 1
+                at = None if base is None else base(k * dt)
+                after, report = self.step(now, before, dt, force=force, base=at)
                 ok &= report.converged
                 now, before = after, now
                 xs.append(self.positions(now))

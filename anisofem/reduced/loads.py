@@ -7,8 +7,9 @@ validate it.
 A Drag is a force of up to `magnitude` N on a set of vertices, spread over them in proportion
 to their mass (a hand or a hook grabbing a region, a controller's actuator), in any direction
 or in given ones. `cone` lets the scene's gravity turn by up to that many degrees (a body
-carried around). Without a declaration (default_loads) a model handles the scene's own loads
-and a drag of half the body's weight at each free end.
+carried around). A Carry moves the held vertices rigidly (the framed model's base): a turn,
+a move, and the shortest time either takes. Without a declaration (default_loads) a model
+handles the scene's own loads and a drag of half the body's weight at each free end.
 """
 import math
 from dataclasses import dataclass, field
@@ -84,12 +85,60 @@ class Drag:
 
 
 @dataclass(frozen=True)
+class Carry:
+    """The held vertices carried by a rigid motion (a hand, a character): turned by up to
+    `turn` degrees about any axis through their centroid and moved up to `move` m, each motion
+    taking at least `seconds` s (FramedModel.step's base; the linear model holds its held
+    vertices in place)."""
+    turn: float = 0.0
+    move: float = 0.0
+    seconds: float = 0.5
+
+    def __post_init__(self):
+        if not _real(self.turn) or not 0.0 <= self.turn <= 180.0:
+            raise ValueError(f"turn: expected an angle from 0 to 180 degrees, got {self.turn!r}")
+        if not _real(self.move) or not self.move >= 0:
+            raise ValueError(f"move: expected a finite distance >= 0 m, got {self.move!r}")
+        if not _real(self.seconds) or not self.seconds > 0:
+            raise ValueError(f"seconds: expected a finite time > 0 s, got {self.seconds!r}")
+        for name in ("turn", "move", "seconds"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+
+    def inertia(self, scene):
+        """The nodal forces (k, n, 3), N, of the carry's largest accelerations (a move and a
+        turn along half a cosine over `seconds`): its move's, uniform, along each of
+        ANY_DIRECTION, and its turn's about each axis both ways, growing with the distance
+        from the held vertices' centroid."""
+        peak = math.pi ** 2 / (2 * self.seconds ** 2)
+        m = scene.masses[:, None]
+        forces = [self.move * peak * m * np.asarray(d) for d in ANY_DIRECTION] if self.move else []
+        if self.turn:
+            h = scene.mesh.vertices[scene.fixed_mask.any(axis=1)].mean(axis=0)
+            arm = scene.mesh.vertices - h
+            for axis in np.vstack([np.eye(3), -np.eye(3)]):
+                forces.append(math.radians(self.turn) * peak * m * np.cross(axis, arm))
+        return np.array(forces).reshape(-1, scene.mesh.n_vertices, 3)
+
+    def base(self, scene, axis, angle, shift, t):
+        """The base (3, 4) [R_g | c_g] at time t (s) of the carry turning by `angle` rad about
+        `axis` (a unit 3-vector) through the held vertices' centroid and moving by `shift`
+        (3,), m, along half a cosine over `seconds`, then holding."""
+        s = 0.5 - 0.5 * math.cos(math.pi * min(t / self.seconds, 1.0))
+        K = np.cross(np.eye(3), np.asarray(axis, float))        # [axis]_x
+        a = s * angle
+        R = np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * (K @ K)
+        h = scene.mesh.vertices[scene.fixed_mask.any(axis=1)].mean(axis=0)
+        return np.hstack([R, (h - R @ h + s * np.asarray(shift, float))[:, None]])
+
+
+@dataclass(frozen=True)
 class Loads:
     """What a reduced model must handle beyond the scene's own dead loads: drags (Drag, any
-    number) and a gravity cone (degrees, 0 to 180: the scene's gravity may turn by up to this
-    angle)."""
+    number), a gravity cone (degrees, 0 to 180: the scene's gravity may turn by up to this
+    angle) and a carry (Carry: the held vertices moved rigidly; the framed model only)."""
     drags: tuple = field(default_factory=tuple)
     cone: float = 0.0
+    carry: Carry = None
 
     def __post_init__(self):
         drags = tuple(self.drags)
@@ -100,6 +149,8 @@ class Loads:
         if not _real(self.cone) or not 0.0 <= self.cone <= 180.0:
             raise ValueError(f"cone: expected an angle from 0 to 180 degrees, got {self.cone!r}")
         object.__setattr__(self, "cone", float(self.cone))
+        if self.carry is not None and not isinstance(self.carry, Carry):
+            raise TypeError(f"carry: expected a Carry, got {type(self.carry).__name__}")
 
     def check(self, scene):
         """ValueError unless every drag names vertices of the scene's mesh of which at least one
@@ -119,6 +170,8 @@ class Loads:
         if self.cone > 0 and not np.any(scene.gravity):
             raise ValueError(f"cone: {self.cone} degrees of gravity direction, but the scene "
                              f"has no gravity")
+        if self.carry is not None and not scene.fixed_mask.any():
+            raise ValueError("carry: the scene holds no vertex to carry")
 
 
 def _real(value):
@@ -182,11 +235,19 @@ def build_cases(scene, loads):
     """The static load cases a basis is fitted to, as chains of extra nodal forces (n, 3), N,
     over the scene's own: each drag along each candidate direction at SHARES of its magnitude
     (a chain, solved in order), and gravity turned to CONE_DIRECTIONS points on the cone's rim
-    and on the cone at half its angle (one-case chains)."""
+    and on the cone at half its angle (one-case chains); a carry widens the cone to its turn
+    and adds its inertia (Carry.inertia) at SHARES."""
     chains = [[s * d.force(scene, direction) for s in SHARES]
               for d in loads.drags for direction in d.candidate_directions]
-    if loads.cone > 0:
-        for angle in (loads.cone, loads.cone / 2):
+    cone = loads.cone
+    if loads.carry is not None:
+        # a carried body feels gravity turn by the carry's turn, and the carry's inertia as a
+        # body force of up to its largest acceleration, any direction
+        if np.any(scene.gravity):
+            cone = max(cone, loads.carry.turn)
+        chains += [[s * f for s in SHARES] for f in loads.carry.inertia(scene)]
+    if cone > 0:
+        for angle in (cone, cone / 2):
             for k in range(CONE_DIRECTIONS):
                 direction = _cone_direction(scene.gravity, math.radians(angle),
                                             2 * math.pi * k / CONE_DIRECTIONS)
@@ -198,7 +259,9 @@ def unseen_cases(scene, loads, count, seed=0):
     """`count` load cases drawn from the declaration (reproducibly, from `seed`), almost surely
     none of the build's: a random drag along a random direction (uniform on the sphere, or one
     of its declared directions) at SMALLEST_UNSEEN to 1 of its magnitude, with gravity turned
-    to a random direction within the cone. Returns [(drag index or None, force (n, 3), N)]."""
+    to a random direction within the cone, and with a carry, the held vertices carried along
+    a random axis and direction at SMALLEST_UNSEEN to 1 of its turn and move. Returns
+    [(drag index or None, force (n, 3), N, base (t -> (3, 4)) or None)]."""
     rng = np.random.default_rng(seed)
     cases = []
     for _ in range(count):
@@ -217,5 +280,16 @@ def unseen_cases(scene, loads, count, seed=0):
             angle = math.radians(loads.cone) * math.sqrt(rng.uniform())
             f += gravity_change(scene, _cone_direction(scene.gravity, angle,
                                                        rng.uniform(0, 2 * math.pi)))
-        cases.append((which, f))
+        cases.append((which, f, _drawn_carry(scene, loads.carry, rng)))
     return cases
+
+
+def _drawn_carry(scene, carry, rng):
+    """A random carry of the declared one (None without): t -> base (3, 4)."""
+    if carry is None:
+        return None
+    axis, way = rng.normal(size=3), rng.normal(size=3)
+    angle = math.radians(carry.turn) * rng.uniform(SMALLEST_UNSEEN, 1.0)
+    shift = carry.move * rng.uniform(SMALLEST_UNSEEN, 1.0) * way / np.linalg.norm(way)
+    axis = axis / np.linalg.norm(axis)
+    return lambda t: carry.base(scene, axis, angle, shift, t)

@@ -130,6 +130,9 @@ class ReducedModel:
                 raise TypeError(f"loads: expected an anisofem.reduced.Loads, got "
                                 f"{type(loads).__name__}")
             loads.check(scene)
+            if loads.carry is not None:
+                raise ValueError("carry: the linear reduced model holds its held vertices in "
+                                 "place; FramedModel carries them (its step's base)")
         _check_memory(scene, modes, derivatives, snapshots)
         t0 = time.perf_counter()
         self.scene, self.loads, self.snapshots, self.fitted = scene, loads, None, 0
@@ -290,25 +293,28 @@ _MESSAGES = {kernels.CONVERGED: "converged", kernels.SPENT: "{} iterations spent
 
 def validate_rollouts(model, drawn, cases):
     """A reduced model's Validation over rollouts of the first `cases` of `drawn` [(drag index or
-    None, extra force (n, 3))] whose full rollout turns no element inside out: `model` has
-    scene, x0, loads and rollout(phases, dt) -> (positions (k + 1, n, 3), converged)."""
+    None, extra force (n, 3), base (t -> (3, 4)) or None)] whose full rollout turns no element
+    inside out: `model` has scene, x0, loads and rollout(phases, dt[, base]) -> (positions
+    (k + 1, n, 3), converged). Displacements are taken from where the base carries the rest
+    shape."""
     tip_error = field_error = seconds = 0.0
     converged, used, inverted = True, 0, 0
     zero = np.zeros_like(model.x0)
-    for which, force in drawn:
+    for which, force, base in drawn:
         if used == cases:
             break
         phases = ((force, HOLD_STEPS), (zero, HOLD_STEPS))
         t0 = time.perf_counter()
-        full, full_ok = full_rollout(model.scene, phases, VALIDATION_DT)
+        full, full_ok = full_rollout(model.scene, phases, VALIDATION_DT, base)
         seconds += time.perf_counter() - t0
         if any((volume_change(model.scene.mesh, x) <= -1.0).any() for x in full):
             inverted += 1
             continue
         used += 1
-        reduced, reduced_ok = model.rollout(phases, VALIDATION_DT)
+        extra = () if base is None else (base,)
+        reduced, reduced_ok = model.rollout(phases, VALIDATION_DT, *extra)
         converged &= full_ok and reduced_ok
-        u, d = full - model.x0, reduced[:len(full)] - full
+        u, d = full - carried(model.x0, base, len(full), VALIDATION_DT), reduced[:len(full)] - full
         size = np.linalg.norm(u, axis=2)
         tip = (np.asarray(model.loads.drags[which].vertices) if which is not None
                else moving_tip(u[int(np.argmax(size.max(axis=1)))]))
@@ -320,16 +326,36 @@ def validate_rollouts(model, drawn, cases):
                       seconds, bool(converged), used, inverted)
 
 
-def full_rollout(scene, phases, dt):
+def x0_carried(scene, base):
+    """The scene's rest positions carried by base (3, 4) [R_g | c_g], m."""
+    return scene.mesh.vertices @ base[:, :3].T + base[:, 3]
+
+
+def carried(x0, base, count, dt):
+    """(count, n, 3) the rest positions x0 carried by base (t -> (3, 4)) at steps 0 .. count - 1
+    of dt s (x0 each step where base is None)."""
+    if base is None:
+        return np.broadcast_to(x0, (count,) + x0.shape)
+    return np.array([x0 @ b[:, :3].T + b[:, 3] for b in (base(k * dt) for k in range(count))])
+
+
+def full_rollout(scene, phases, dt, base=None):
     """The full FEM's positions (k + 1, n, 3) from rest through phases ((extra nodal force (n,
-    3) N, steps), ...) of dt s, exact backward Euler, and whether every step converged (a
-    failed step ends the rollout there): what ReducedModel.rollout is compared with."""
+    3) N, steps), ...) of dt s, exact backward Euler, the held vertices carried by base (t ->
+    (3, 4) [R_g | c_g], or None), and whether every step converged (a failed step ends the
+    rollout there): what ReducedModel.rollout is compared with."""
     x = scene.initial_positions()
     v = np.zeros_like(x)
     xs = [x]
+    k = 0
     for force, steps in phases:
-        stepper = Stepper(scene.plus_force(force), dt, warn=False)
+        loaded = scene.plus_force(force)
+        stepper = Stepper(loaded, dt, warn=False)
         for _ in range(steps):
+            k += 1
+            if base is not None:
+                b = base(k * dt)
+                stepper.scene = loaded.held_at(x0_carried(scene, b))
             result = stepper(x, v)
             if result.newton.failed:
                 return np.array(xs), False
