@@ -326,9 +326,9 @@ def validate_rollouts(model, drawn, cases):
                       seconds, bool(converged), used, inverted)
 
 
-def x0_carried(scene, base):
-    """The scene's rest positions carried by base (3, 4) [R_g | c_g], m."""
-    return scene.mesh.vertices @ base[:, :3].T + base[:, 3]
+def moved(x, base):
+    """Positions x (n, 3), m, moved by the rigid motion base (3, 4) [R_g | c_g]."""
+    return x @ base[:, :3].T + base[:, 3]
 
 
 def carried(x0, base, count, dt):
@@ -336,7 +336,7 @@ def carried(x0, base, count, dt):
     of dt s (x0 each step where base is None)."""
     if base is None:
         return np.broadcast_to(x0, (count,) + x0.shape)
-    return np.array([x0 @ b[:, :3].T + b[:, 3] for b in (base(k * dt) for k in range(count))])
+    return np.array([moved(x0, base(k * dt)) for k in range(count)])
 
 
 def full_rollout(scene, phases, dt, base=None):
@@ -354,8 +354,7 @@ def full_rollout(scene, phases, dt, base=None):
         for _ in range(steps):
             k += 1
             if base is not None:
-                b = base(k * dt)
-                stepper.scene = loaded.held_at(x0_carried(scene, b))
+                stepper.scene = loaded.held_at(moved(scene.mesh.vertices, base(k * dt)))
             result = stepper(x, v)
             if result.newton.failed:
                 return np.array(xs), False
