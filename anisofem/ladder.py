@@ -76,12 +76,14 @@ class Rung:
     "surrogate" for a learned model's rung. make(scene,
     dt) returns advance(x, v) -> (x, v, info) for one step of dt, with info a dict holding
     "failed" (bool) and any of "iterations", "factorizations", "linear_iterations". dt_factor:
-    the rung steps dt_factor times the scene's dt.
+    the rung steps dt_factor times the scene's dt. refusal(scene): None where the rung can
+    model the scene, else the note that says why not (rungs refused alike share one note).
     """
     name: str
     kind: str
     make: Callable
     dt_factor: int = 1
+    refusal: Callable = None
 
 
 def fem_rung(name, method="auto", dt_factor=1, **options):
@@ -155,7 +157,10 @@ def framed_rung(bands, coordinates):
             now, before = after, now
             return model.positions(now), report
         return _stepping(model.build_seconds, dt, step)
-    return Rung(f"{FRAMED_PREFIX} b{bands} c{coordinates}", "reduced", make)
+    def refusal(scene):
+        why = framed_refusal(scene)
+        return why and f"framed rungs not run: {why}"
+    return Rung(f"reduced framed b{bands} c{coordinates}", "reduced", make, refusal=refusal)
 
 
 def body_rung(body, modes, snapshots):
@@ -202,7 +207,6 @@ REDUCED_FITTED = ((4, 16), (8, 20))
 #: (bands, coordinates) of the listed framed rungs: domains in their own frames, for bodies
 #: whose parts swing far (a T's or a Y's arms under drags), where one linear basis drifts.
 FRAMED = ((4, 12),)
-FRAMED_PREFIX = "reduced framed"
 
 
 def fem_rungs():
@@ -399,7 +403,8 @@ def _physical_reference_only(rungs, inverted, notes):
 def _representable(rungs, scene, notes):
     """rungs without those that cannot model the scene, saying so in notes: the reduced ones
     where it has Neo-Hookean elements (the reduced model's energy is exact only for the StVK
-    base) or load curves; the surrogates where it has pressure or load curves."""
+    base) or load curves; the surrogates where it has pressure or load curves; any rung its
+    own refusal turns away (Rung.refusal)."""
     left = {}
     if scene.neohookean.any():
         left["reduced"] = "the reduced model needs the StVK base material"
@@ -412,11 +417,14 @@ def _representable(rungs, scene, notes):
         if any(r.kind == kind for r in rungs):
             notes.append(f"{kind} rungs not run: {why}")
             rungs = [r for r in rungs if r.kind != kind]
-    why = framed_refusal(scene)
-    if why and any(r.name.startswith(FRAMED_PREFIX) for r in rungs):
-        notes.append(f"framed rungs not run: {why}")
-        rungs = [r for r in rungs if not r.name.startswith(FRAMED_PREFIX)]
-    return rungs
+    kept = []
+    for r in rungs:
+        note = r.refusal(scene) if r.refusal else None
+        if not note:
+            kept.append(r)
+        elif note not in notes:
+            notes.append(note)
+    return kept
 
 
 def registered_rungs(scene, dt, notes):
