@@ -100,7 +100,6 @@ class FramedSimulator:
         self.zt = self.zc + 3
         self.zq = np.concatenate([np.arange(z + 6, z + 6 + rd)
                                   for z, rd in zip(self.z0, self.r)]).astype(np.int64)
-        self.domain_of_q = np.repeat(np.arange(self.r.size), self.r)
         self.iterations = 0
 
     # -- states ----------------------------------------------------------------------------
@@ -207,9 +206,7 @@ class FramedSimulator:
 
     def _pulled(self, q, T0, T):
         """(D, 3, 3) T0_d + sum_b q_b T_b over each domain's coordinates."""
-        M = T0.copy()
-        np.add.at(M, self.domain_of_q, q[:, None, None] * T)
-        return M
+        return T0 + np.add.reduceat(q[:, None, None] * T, self.q0)
 
     def _moment_energy(self, state, targets, inertia):
         """(the inertia and load terms' energy (module docstring), J; M (D, 3, 3), each

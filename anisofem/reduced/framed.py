@@ -396,8 +396,7 @@ class FramedModel:
         """Newton's start for the step after `now`, the held nodes moved to base: each frame
         turned on by its last turn (R_now R_before^T R_now), its own move and q carried on as
         far."""
-        R = _orthonormal(FramedState(now.c, now.R @ before.R.transpose(0, 2, 1) @ now.R,
-                                     now.q)).R
+        R = _nearest_rotations(now.R @ before.R.transpose(0, 2, 1) @ now.R)
         return FramedState(self._centres(2 * self._moves(now) - self._moves(before), R, base),
                            R, 2 * now.q - before.q, base)
 
@@ -522,10 +521,15 @@ def rotations(theta):
     return np.eye(3) + first[:, None, None] * K + (0.5 * half ** 2)[:, None, None] * (K @ K)
 
 
+def _nearest_rotations(R):
+    """(D, 3, 3) the rotation nearest each of R (D, 3, 3)."""
+    u, _, vt = np.linalg.svd(R)
+    return u @ vt
+
+
 def _orthonormal(state):
     """state with each R its nearest rotation (against round-off over many steps)."""
-    u, _, vt = np.linalg.svd(state.R)
-    state.R = u @ vt
+    state.R = _nearest_rotations(state.R)
     return state
 
 
