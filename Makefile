@@ -7,6 +7,7 @@ VENV ?= .venv
 TORCH_SPEC ?= torch==2.13.0
 PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
+TEST_WORKERS ?= 2
 
 .PHONY: demo test bench pretrained clean web web-assets test-web install-mpi test-mpi
 
@@ -24,8 +25,12 @@ $(VENV)/.installed: $(VENV)/.fem
 demo: $(VENV)/.fem
 	$(PY) examples/cantilever.py
 
+# The suite runs on TEST_WORKERS processes, one file per process at a time (pytest-xdist);
+# tests/test_threads.py measures busy cores, so it runs alone afterwards.
 test: $(VENV)/.installed
-	$(PY) -m pytest -q $(PYTEST_ARGS) --ignore=tests/mpi tests
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile $(PYTEST_ARGS) --ignore=tests/mpi \
+	  --ignore=tests/test_threads.py tests
+	$(PY) -m pytest -q $(PYTEST_ARGS) tests/test_threads.py
 
 # The petsc engine (anisofem.distributed): PETSc, Open MPI, petsc4py and mpi4py (apt as root or
 # with sudo; a few minutes), then its tests on 1 and 2 MPI ranks.
