@@ -340,18 +340,12 @@ class FramedModel:
         return E, g, H
 
     def _derivatives(self, state, targets, inertia):
-        """derivatives(), and the Jacobian (r, r) of the free-centre unknowns (each domain's
-        centre, its turn about it, q) in the tree's."""
+        """derivatives(), and N (3 D, r): the moves of the centres per unit move of the tree's
+        unknowns, less the identity (framed_kernels.tree_chain)."""
         E, g, H = self._free_derivatives(state, targets, inertia)
-        N = np.zeros((self._centre_rows.size, self.r))
+        N = np.zeros((3 * len(self.domains), self.r))
         fk.tree_chain(state.R, self._chain, self._arms, self._zc, self._zt, g, H, N)
-        C = self._centre_rows
-        HN = H[:, C] @ N
-        H += HN + HN.T + N.T @ (H[np.ix_(C, C)] @ N)
-        g += N.T @ g[C]
-        T = np.eye(self.r)
-        T[C] += N
-        return E, g, H, T
+        return E, g, H, N
 
     def _free_derivatives(self, state, targets, inertia):
         """(energy J, gradient (r,), Hessian (r, r)) in each domain's centre c_d (m), its turn
@@ -396,7 +390,8 @@ class FramedModel:
         """Newton's start for the step after `now`, the held nodes moved to base: each frame
         turned on by its last turn (R_now R_before^T R_now), its own move and q carried on as
         far."""
-        R = _nearest_rotations(now.R @ before.R.transpose(0, 2, 1) @ now.R)
+        R = now.R @ before.R.transpose(0, 2, 1) @ now.R
+        fk.nearest_rotations(R)
         return FramedState(self._centres(2 * self._moves(now) - self._moves(before), R, base),
                            R, 2 * now.q - before.q, base)
 
@@ -439,12 +434,12 @@ class FramedModel:
                         c, False)
         return c
 
-    def _bound(self, dz):
-        """The largest node move of the step dz, bounded per domain, m."""
-        q = np.sqrt(np.add.reduceat(dz[self._zq] ** 2, self._q0)) if dz[self._zq].size else 0.0
-        return float(np.max(np.linalg.norm(dz[self._zc], axis=1)
-                            + np.linalg.norm(dz[self._zt], axis=1) * self._radius
-                            + q * self._reach))
+    def _bound(self, dz, N):
+        """The largest node move of the step dz in the tree's unknowns, its centres carried
+        by N (3 D, r) (_derivatives), bounded per domain, m."""
+        moved = dz.copy()
+        moved[self._centre_rows] += N @ dz
+        return fk.step_bound(moved, self._z0, self._r, self._radius, self._reach)
 
     def _newton(self, state, targets, inertia, max_iter):
         """Minimize the step's energy from `state` by Newton with a backtracking line search
@@ -453,11 +448,11 @@ class FramedModel:
         tolerance = STEP_TOLERANCE * self.size
         bound = math.inf
         for it in range(1, max_iter + 1):
-            E, g, H, T = self._derivatives(state, targets, inertia)
+            E, g, H, N = self._derivatives(state, targets, inertia)
             if not (np.isfinite(E) and np.isfinite(g).all() and np.isfinite(H).all()):
                 return state, NewtonReport(False, it, bound, "non-finite energy")
             dz = _descent(H, g)
-            last, bound = bound, self._bound(T @ dz)
+            last, bound = bound, self._bound(dz, N)
             # the step after this one, at the rate of this one's decrease
             if bound <= tolerance or (bound < last < math.inf
                                       and bound * bound / last <= tolerance):
@@ -494,7 +489,7 @@ def _descent(H, g):
     """-H^-1 g, by Cholesky, or where H is not positive definite with its eigenvalues
     mirrored and floored at 1e-10 of the largest."""
     try:
-        return -sla.cho_solve(sla.cho_factor(H), g)
+        return -sla.cho_solve(sla.cho_factor(H, check_finite=False), g, check_finite=False)
     except np.linalg.LinAlgError:
         lam, V = np.linalg.eigh(H)
         lam = np.maximum(np.abs(lam), 1e-10 * np.abs(lam).max())
@@ -511,25 +506,16 @@ def rigid_motion(base):
 
 
 def rotations(theta):
-    """exp([theta_d]_x) (D, 3, 3) of rotation vectors theta (D, 3), by Rodrigues' formula
-    (1 - cos a written 2 sin^2(a/2), which keeps its digits at small angles)."""
-    angle = np.linalg.norm(theta, axis=1)
-    K = np.einsum("dj,jab->dab", theta, GEN)
-    safe = np.where(angle > 0, angle, 1.0)
-    first = np.where(angle > 0, np.sin(angle) / safe, 1.0)
-    half = np.where(angle > 0, np.sin(0.5 * angle) / (0.5 * safe), 1.0)
-    return np.eye(3) + first[:, None, None] * K + (0.5 * half ** 2)[:, None, None] * (K @ K)
-
-
-def _nearest_rotations(R):
-    """(D, 3, 3) the rotation nearest each of R (D, 3, 3)."""
-    u, _, vt = np.linalg.svd(R)
-    return u @ vt
+    """exp([theta_d]_x) (D, 3, 3) of rotation vectors theta (D, 3) (Rodrigues' formula)."""
+    theta = np.ascontiguousarray(theta, dtype=float)
+    out = np.empty((theta.shape[0], 3, 3))
+    fk.rodrigues(theta, out)
+    return out
 
 
 def _orthonormal(state):
     """state with each R its nearest rotation (against round-off over many steps)."""
-    state.R = _nearest_rotations(state.R)
+    fk.nearest_rotations(state.R)
     return state
 
 

@@ -197,6 +197,7 @@ def joint_derivatives(x, grad, blocks, pairs, pair_ptr, c, R, dom, U, r, z0, g, 
     Jn = np.zeros((k, 3, 6 + r.max()))
     _node_jacobians(x, c, R, dom, U, r, Jn)
     K = np.zeros((3, nz))
+    S = np.zeros((nz, nz))
     touched = np.zeros(r.size, np.bool_)
     for i in range(k):
         d = dom[i]
@@ -224,23 +225,25 @@ def joint_derivatives(x, grad, blocks, pairs, pair_ptr, c, R, dom, U, r, z0, g, 
             for a in range(3):
                 H[o + 3 + a, o + 6 + b] += cr[a]
                 H[o + 6 + b, o + 3 + a] += cr[a]
-        # Gauss-Newton part: K = sum_j hess_ij Jn_j over node i's neighbours, then Jn_i^T K
+        # Gauss-Newton part sum_j Jn_i^T hess_ij Jn_j, symmetric: K = sum_j hess_ij Jn_j over
+        # node i's neighbours in its own domain and the later ones, then Jn_i^T K, within the
+        # own domain its upper triangle only (mirrored below)
         touched[:] = False
         for p in range(pair_ptr[i], pair_ptr[i + 1]):
             j = pairs[p, 1]
             dj = dom[j]
-            if dj < 0:
+            if dj < d:
                 continue
+            oj, nj = z0[dj], 6 + r[dj]
             if not touched[dj]:
                 touched[dj] = True
-                K[:, z0[dj]:z0[dj] + 6 + r[dj]] = 0.0
-            oj, nj = z0[dj], 6 + r[dj]
+                K[:, oj:oj + nj] = 0.0
             for a in range(3):
                 for b in range(3):
                     h = blocks[p, a, b]
                     for v in range(nj):
                         K[a, oj + v] += h * Jn[j, b, v]
-        for e in range(r.size):
+        for e in range(d, r.size):
             if not touched[e]:
                 continue
             oe, ne = z0[e], 6 + r[e]
@@ -248,17 +251,25 @@ def joint_derivatives(x, grad, blocks, pairs, pair_ptr, c, R, dom, U, r, z0, g, 
                 j0, j1, j2 = Jn[i, 0, u], Jn[i, 1, u], Jn[i, 2, u]
                 if j0 == 0.0 and j1 == 0.0 and j2 == 0.0:
                     continue
-                for v in range(ne):
-                    H[o + u, oe + v] += j0 * K[0, oe + v] + j1 * K[1, oe + v] + j2 * K[2, oe + v]
+                for v in range(u if e == d else 0, ne):
+                    S[o + u, oe + v] += j0 * K[0, oe + v] + j1 * K[1, oe + v] + j2 * K[2, oe + v]
+    for u in range(nz):
+        H[u, u] += S[u, u]
+        for v in range(u + 1, nz):
+            H[u, v] += S[u, v]
+            H[v, u] += S[u, v]
 
 
 @njit(cache=True, fastmath=_SUMS)
 def tree_chain(R, chain, arms, zc, zt, g, H, N):
-    """The kinematic tree's chain rule (anisofem.reduced.framed): N (3 D, r), zeroed by the
-    caller, gets the moves of the centres (rows 3 d .. 3 d + 2 for domain d) per unit move of
-    the tree's unknowns, less the identity; each entry (f, d) of chain (P, 2) with its rest arm
-    arms (P, 3) adds I at f's own move (f != d) and -[R_f arm]_x at f's turn. The second
-    derivatives of the centres times the centre gradients g[zc] are added to H's turn blocks."""
+    """The kinematic tree's chain rule (anisofem.reduced.framed), in place: g (r,) and H (r, r)
+    in each domain's free centre, turn and coordinates become those in the tree's unknowns.
+    N (3 D, r), zeroed by the caller, gets the moves of the centres (rows 3 d .. 3 d + 2 for
+    domain d) per unit move of the tree's unknowns, less the identity; each entry (f, d) of
+    chain (P, 2) with its rest arm arms (P, 3) adds I at f's own move (f != d) and
+    -[R_f arm]_x at f's turn. Then, with C the centres' rows zc: the centres' second
+    derivatives times g[C] join H's turn blocks, H += HN + HN^T + N^T H[C, C] N with
+    HN = H[:, C] N, and g += N^T g[C]."""
     for p in range(chain.shape[0]):
         f, d = chain[p, 0], chain[p, 1]
         w = R[f] @ arms[p]
@@ -277,6 +288,92 @@ def tree_chain(R, chain, arms, zc, zt, g, H, N):
             for b in range(3):
                 H[zt[f, a], zt[f, b]] += 0.5 * (gc[a] * w[b] + gc[b] * w[a])
             H[zt[f, a], zt[f, a]] -= gw
+    C = zc.ravel()
+    nz, nc = g.size, C.size
+    HN = np.zeros((nz, nz))
+    CN = np.zeros((nc, nz))
+    for i in range(nz):
+        for a in range(nc):
+            h = H[i, C[a]]
+            if h != 0.0:
+                for j in range(nz):
+                    HN[i, j] += h * N[a, j]
+    for a in range(nc):
+        for b in range(nc):
+            h = H[C[a], C[b]]
+            if h != 0.0:
+                for j in range(nz):
+                    CN[a, j] += h * N[b, j]
+    for i in range(nz):
+        for j in range(nz):
+            H[i, j] += HN[i, j] + HN[j, i]
+    for a in range(nc):
+        for i in range(nz):
+            n = N[a, i]
+            if n != 0.0:
+                for j in range(nz):
+                    H[i, j] += n * CN[a, j]
+    gC = g[C].copy()
+    for a in range(nc):
+        for i in range(nz):
+            g[i] += N[a, i] * gC[a]
+
+
+@njit(cache=True)
+def rodrigues(theta, out):
+    """out (D, 3, 3) = exp([theta_d]_x) of rotation vectors theta (D, 3), by Rodrigues'
+    formula (1 - cos a written 2 sin^2(a/2), which keeps its digits at small angles)."""
+    for d in range(theta.shape[0]):
+        t0, t1, t2 = theta[d, 0], theta[d, 1], theta[d, 2]
+        angle = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        first = np.sin(angle) / angle if angle > 0 else 1.0
+        half = np.sin(0.5 * angle) / (0.5 * angle) if angle > 0 else 1.0
+        K = np.array([[0.0, -t2, t1], [t2, 0.0, -t0], [-t1, t0, 0.0]])
+        KK = K @ K
+        for i in range(3):
+            for j in range(3):
+                out[d, i, j] = (1.0 if i == j else 0.0) + first * K[i, j] + 0.5 * half * half * KK[i, j]
+
+
+@njit(cache=True)
+def nearest_rotations(R):
+    """Each R[d] (D, 3, 3), a rotation up to round-off, replaced in place by its nearest
+    rotation: the polar factor by X <- (X + X^-T) / 2, until no entry changes by 1e-16."""
+    for d in range(R.shape[0]):
+        X = R[d]
+        for _ in range(20):
+            # X^-T by cofactors: row i of the cofactor matrix over det
+            C = np.empty((3, 3))
+            for i in range(3):
+                i1, i2 = (i + 1) % 3, (i + 2) % 3
+                for j in range(3):
+                    j1, j2 = (j + 1) % 3, (j + 2) % 3
+                    C[i, j] = X[i1, j1] * X[i2, j2] - X[i1, j2] * X[i2, j1]
+            det = X[0, 0] * C[0, 0] + X[0, 1] * C[0, 1] + X[0, 2] * C[0, 2]
+            change = 0.0
+            for i in range(3):
+                for j in range(3):
+                    v = 0.5 * (X[i, j] + C[i, j] / det)
+                    change = max(change, abs(v - X[i, j]))
+                    X[i, j] = v
+            if change <= 1e-16:
+                break
+
+
+@njit(cache=True, fastmath=_SUMS)
+def step_bound(dz, z0, r, radius, reach):
+    """The largest node move of a step dz (r,) in the tree's unknowns plus its centres' moves,
+    bounded per domain: |dc_d| + |dtheta_d| radius_d + |dq_d| reach_d, m."""
+    worst = 0.0
+    for d in range(z0.size):
+        o = z0[d]
+        c = np.sqrt(dz[o] ** 2 + dz[o + 1] ** 2 + dz[o + 2] ** 2)
+        t = np.sqrt(dz[o + 3] ** 2 + dz[o + 4] ** 2 + dz[o + 5] ** 2)
+        q = 0.0
+        for b in range(r[d]):
+            q += dz[o + 6 + b] ** 2
+        worst = max(worst, c + t * radius[d] + np.sqrt(q) * reach[d])
+    return worst
 
 
 @njit(cache=True, fastmath=_SUMS)
