@@ -11,13 +11,17 @@ import { loadModel, loadScene, Simulation } from "./stepper.js";
 
 const params = new URLSearchParams(location.search);
 const ui = { scene: el("scene"), stepper: el("stepper"), angle: el("angle"), angleValue: el("angle-value"),
-             pause: el("pause"), reset: el("reset"), stats: el("stats"),
+             carry: el("carry"), pause: el("pause"), reset: el("reset"), stats: el("stats"),
              message: el("message") };
 // spring constant of a drag, N/m per kg of the dragged vertices' mass (a 1 cm pull accelerates
 // them at about 5 g)
 const DRAG_STIFFNESS = 5000.0;
 // vertices within this rest distance (m) of the picked one share the pull
 const DRAG_RADIUS = 0.008;
+// the carried held end of a framed model: turned about the vertical through the held
+// vertices' centroid by CARRY_TURN sin(2 pi t / CARRY_PERIOD) (rad, s)
+const CARRY_TURN = 0.5;
+const CARRY_PERIOD = 2.0;
 
 const renderer = new THREE.WebGLRenderer({ canvas: el("view"), antialias: true,
                                            preserveDrawingBuffer: true });
@@ -32,7 +36,7 @@ world.add(sun);
 
 const state = { sim: null, session: null, sceneData: null, body: null, ghost: null,
                 paused: params.get("paused") === "1", drag: null, times: [], busy: false,
-                lastFrame: null, owed: 0 };
+                lastFrame: null, owed: 0, carry: false };
 
 function el(id) { return document.getElementById(id); }
 
@@ -71,8 +75,28 @@ async function openScene(name, angle) {
   state.sim = reduced ? new Reduced(state.sceneData, angles[index])
                       : new Simulation(state.session, state.sceneData, angles[index]);
   state.times = [];
+  ui.carry.disabled = !framed;
   buildMeshes();
   say("");
+}
+
+// the base ([R_g | c_g], 12 numbers row by row) of the carried held end at time t (s)
+function carryBase(t) {
+  const rest = state.sceneData.arrays.rest_positions.data;
+  const held = state.sceneData.arrays.held.data;
+  const h = [0, 0, 0];
+  let count = 0;
+  for (let j = 0; j < state.sim.n; j++) {
+    if (!held[3 * j]) continue;
+    for (let c = 0; c < 3; c++) h[c] += rest[3 * j + c];
+    count += 1;
+  }
+  for (let c = 0; c < 3; c++) h[c] /= count;
+  const a = CARRY_TURN * Math.sin((2 * Math.PI * t) / CARRY_PERIOD);
+  const cos = Math.cos(a), sin = Math.sin(a);
+  return [cos, -sin, 0, h[0] - (cos * h[0] - sin * h[1]),
+          sin, cos, 0, h[1] - (sin * h[0] + cos * h[1]),
+          0, 0, 1, 0];
 }
 
 function buildMeshes() {
@@ -144,7 +168,9 @@ function dragForce() {
 
 async function advance(steps) {
   for (let k = 0; k < steps; k++) {
-    const ms = await state.sim.step(dragForce());
+    const carried = state.carry && state.sim instanceof FramedSimulation;
+    const base = carried ? carryBase((state.sim.steps + 1) * state.sim.dt) : null;
+    const ms = await state.sim.step(dragForce(), base);
     state.times.push(ms);
     if (state.times.length > 100) state.times.shift();
   }
@@ -244,6 +270,7 @@ ui.pause.addEventListener("click", () => {
   ui.pause.textContent = state.paused ? "run" : "pause";
 });
 ui.reset.addEventListener("click", () => { if (state.sim) { state.sim.reset(); updateBody(); } });
+ui.carry.addEventListener("change", () => { state.carry = ui.carry.checked; });
 ui.angle.addEventListener("input", () => {
   const angle = state.sceneData.header.fiber_angles[Number(ui.angle.value)];
   ui.angleValue.textContent = String(angle);
@@ -265,14 +292,17 @@ ui.scene.addEventListener("change", async () => {
 });
 ui.pause.textContent = state.paused ? "run" : "pause";
 
-// what the end-to-end test drives: run(checkpoints) from rest under gravity to the last
-// checkpoint, returning the positions (flat, float64) at each checkpoint step and the mean ms
-// per step
+// what the end-to-end test drives: run(checkpoints, carry) from rest under gravity to the last
+// checkpoint, the held end carried (carryBase) where carry is true, returning the positions
+// (flat, float64) at each checkpoint step, the mean ms per step and each step's base (null:
+// not carried)
 window.anisognn = {
   ready: false, error: null,
-  async run(checkpoints) {
+  async run(checkpoints, carry = false) {
     state.paused = true;
     while (state.busy) await new Promise((resolve) => setTimeout(resolve, 5));
+    state.carry = carry;
+    ui.carry.checked = carry;
     state.sim.reset();
     const positions = [];
     let total = 0;
@@ -284,8 +314,11 @@ window.anisognn = {
     }
     updateBody();
     renderer.render(world, camera);
+    const carried = carry && state.sim instanceof FramedSimulation;
+    const bases = [];
+    for (let k = 1; k <= state.sim.steps; k++) bases.push(carried ? carryBase(k * state.sim.dt) : null);
     return { positions, msPerStep: total / state.sim.steps, fiberAngle: state.sim.fiberAngle,
-             n: state.sim.n };
+             n: state.sim.n, bases };
   },
   // the page pixel (x, y) where vertex i is drawn; the mean height (m) of the vertices
   // farthest along x (a cantilever's tip); the vertex nearest a rest point (m)

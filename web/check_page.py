@@ -11,8 +11,10 @@ Chromium), and checks that
 - a file that is not a model and a scene the model cannot step each show a readable message;
 - with the reduced models (the stepper menu): the cantilever's positions at CHECKPOINTS within
   REDUCED_BOUND of runtime.ReducedSimulator's (the same float64 algorithm in JavaScript), the
-  drag raises its tip, and every scene steps without a message; the T's framed model within
-  REDUCED_BOUND of framed_runtime.FramedSimulator's, the page stating its validation error.
+  drag raises its tip, and every scene steps without a message; the T's framed model, its
+  foot carried (the page's "swing the held end"), within REDUCED_BOUND of
+  framed_runtime.FramedSimulator's stepped with the same bases, the page stating its
+  validation error.
 Prints the in-browser and the onnxruntime (CPU) ms per step.
 """
 import functools
@@ -96,17 +98,20 @@ def reduced_reference():
     return positions, float(np.linalg.norm(positions - sim.rest_positions, axis=2).max()), ms
 
 
-def framed_reference():
+def framed_reference(bases):
     """(positions at FRAMED_CHECKPOINTS (k, n, 3), largest displacement (m), ms per step, the
     model's largest validation tip error) of framed_runtime.FramedSimulator's rollout of the
-    T's framed model at fiber angle ANGLE."""
+    T's framed model at fiber angle ANGLE, its held vertices at bases[k] ([R_g | c_g], 12
+    numbers row by row, or None: unmoved) after step k + 1."""
     sim = framed_runtime.FramedSimulator(os.path.join(HERE, "scenes", "t-reduced"),
                                          angle=ANGLE)
     force = sim.masses[:, None] * np.asarray(sim.header["gravity"])
     now = before = sim.rest_state()
     positions, start = [], time.perf_counter()
     for step in range(1, FRAMED_CHECKPOINTS[-1] + 1):
-        now, before = sim.step(now, before, force, sim.header["dt"]), now
+        base = bases[step - 1]
+        base = None if base is None else np.reshape(base, (3, 4))
+        now, before = sim.step(now, before, force, sim.header["dt"], base=base), now
         if step in FRAMED_CHECKPOINTS:
             positions.append(sim.positions(now))
     ms = 1e3 * (time.perf_counter() - start) / FRAMED_CHECKPOINTS[-1]
@@ -162,7 +167,10 @@ def main():
     for name, scene in page["reducedScenes"].items():
         if scene["message"] or not scene["finite"]:
             failures.append(f"reduced scene {name}: {scene['message'] or 'a non-finite state'}")
-    expected, largest_f, framed_ms, framed_tip = framed_reference()
+    bases = page["framed"]["bases"]
+    if not any(bases):
+        failures.append("the T's framed rollout did not carry its foot")
+    expected, largest_f, framed_ms, framed_tip = framed_reference(bases)
     got = np.asarray(page["framed"]["positions"]).reshape(expected.shape)
     framed_gap = float(np.abs(got - expected).max() / largest_f)
     if not framed_gap <= REDUCED_BOUND:

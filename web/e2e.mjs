@@ -6,7 +6,8 @@
 // messages the page shows for a file that is not a model and for a scene the model cannot
 // step, the tip height before and during a drag upwards, and whether the other scenes (chosen
 // from the menu) step; then the same with the reduced models (OUT_DIR/reduced.png), and the
-// T's framed model at steps 1, 10 and 50 with the validation the page states.
+// T's framed model, its foot carried, at steps 1, 10 and 50 (with each step's base) and the
+// validation the page states.
 import fs from "node:fs";
 import path from "node:path";
 import { chromium } from "playwright-core";
@@ -68,8 +69,9 @@ try {
     result.reducedScenes[name] = { n: run.n, message: await page.textContent("#message"),
                                    finite: run.positions[0].every(Number.isFinite) };
     if (name === "t") {
-      // the T's framed model from rest (compared with runtime.py's FramedSimulator)
-      result.framed = await page.evaluate((k) => window.anisognn.run(k), FRAMED_CHECKPOINTS);
+      // the T's framed model from rest, its foot carried (compared with runtime.py's
+      // FramedSimulator, stepped with the same bases)
+      result.framed = await page.evaluate((k) => window.anisognn.run(k, true), FRAMED_CHECKPOINTS);
       result.framed.stats = await page.evaluate(() => window.anisognn.stats());
     }
   }

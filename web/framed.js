@@ -4,6 +4,8 @@
 // a step is Newton over each domain's own move t, turn theta and coordinates q (the domains'
 // centres carried along their kinematic tree), on the exact energy: each domain's quartic,
 // the inertia and loads through 3 x 3 moments, and the joint elements (StVK plus fibers).
+// A state's base (12 numbers, [R_g | c_g] row by row) carries the held vertices rigidly,
+// x = R_g x0 + c_g: a step may move it (a hand, a character).
 import { cholesky, choleskySolve, dot, quartic } from "./reduced.js";
 
 const STEP_TOLERANCE = 1e-8;
@@ -70,13 +72,14 @@ export class FramedSimulation {
     this.steps = 0;
   }
 
-  // One step under gravity plus extra (Float64Array 3 n, N per vertex, or null); returns the
-  // wall time in ms (the step and the positions).
-  async step(extra) {
+  // One step under gravity plus extra (Float64Array 3 n, N per vertex, or null), the held
+  // vertices moved to base (12 numbers, [R_g | c_g] row by row; null: where they are);
+  // returns the wall time in ms (the step and the positions).
+  async step(extra, base) {
     const start = performance.now();
     const force = new Float64Array(this.gravity);
     if (extra) for (let i = 0; i < force.length; i++) force[i] += extra[i];
-    const next = newton(this, force);
+    const next = newton(this, force, base ? Float64Array.from(base) : this.now.base);
     this.before = this.now;
     this.now = next;
     positions(this.m, this.arrays.rest_positions.data, next, null, this.x);
@@ -88,7 +91,8 @@ export class FramedSimulation {
 function rest(m) {
   const R = new Float64Array(9 * m.D);
   for (let d = 0; d < m.D; d++) R[9 * d] = R[9 * d + 4] = R[9 * d + 8] = 1;
-  return { c: new Float64Array(m.centre), R, q: new Float64Array(m.Q) };
+  return { c: new Float64Array(m.centre), R, q: new Float64Array(m.Q),
+           base: Float64Array.of(1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0) };
 }
 
 // The joints: their nodes (compact numbering), each element's nodes in it, the node pairs
@@ -137,7 +141,11 @@ function positions(m, restPositions, s, nodes, out) {
     const i = nodes ? nodes[k] : k;
     const d = m.labels[i];
     if (d < 0) {
-      for (let a = 0; a < 3; a++) out[3 * k + a] = restPositions[3 * i + a];
+      const b = s.base;
+      for (let a = 0; a < 3; a++) {
+        out[3 * k + a] = b[4 * a] * restPositions[3 * i] + b[4 * a + 1] * restPositions[3 * i + 1]
+          + b[4 * a + 2] * restPositions[3 * i + 2] + b[4 * a + 3];
+      }
       continue;
     }
     const y = [0, 0, 0];
@@ -531,12 +539,12 @@ function derivatives(sim, s, tg, inertia) {
   return { E, g: gOut, H: out, N, C };
 }
 
-// Newton from the extrapolated state: the next state
-function newton(sim, force) {
+// Newton from the extrapolated state, the held vertices at base: the next state
+function newton(sim, force, base) {
   const { m } = sim;
   const inertia = 1 / (sim.dt * sim.dt);
   const tg = targets(sim, force, inertia);
-  let s = extrapolated(m, sim.now, sim.before);
+  let s = extrapolated(m, sim.now, sim.before, base);
   const tolerance = STEP_TOLERANCE * sim.size;
   let bound = Infinity;
   for (let it = 1; it <= MAX_ITER; it++) {
@@ -671,15 +679,18 @@ function mul3(A, a, B, b, out, o) {
   }
 }
 
-// each domain's own move t (3 D), or with moves given, the centres (3 D) they make
-function tree(m, R, c, moves, toMoves) {
+// each domain's own move t (3 D), or with moves given, the centres (3 D) they make, the
+// held vertices at base
+function tree(m, R, c, moves, toMoves, base) {
   for (let k = 0; k < m.D; k++) {
     const e = m.order[k], p = m.parent[e];
     for (let i = 0; i < 3; i++) {
       let v = 0;
       for (let j = 0; j < 3; j++) v += R[9 * e + 3 * i + j] * m.arm_own[3 * e + j];
-      if (p < 0) v += m.arm_parent[3 * e + i];
-      else {
+      if (p < 0) {
+        v += base[4 * i + 3];
+        for (let j = 0; j < 3; j++) v += base[4 * i + j] * m.arm_parent[3 * e + j];
+      } else {
         v += c[3 * p + i];
         for (let j = 0; j < 3; j++) v += R[9 * p + 3 * i + j] * m.arm_parent[3 * e + j];
       }
@@ -691,7 +702,7 @@ function tree(m, R, c, moves, toMoves) {
 
 function ownMoves(m, s) {
   const t = new Float64Array(3 * m.D);
-  tree(m, s.R, s.c, t, true);
+  tree(m, s.R, s.c, t, true, s.base);
   return t;
 }
 
@@ -707,12 +718,13 @@ function retract(m, s, dz, alpha) {
     for (let b = 0; b < m.rs[d]; b++) q[m.q0[d] + b] += alpha * dz[o + 6 + b];
   }
   const c = new Float64Array(3 * m.D);
-  tree(m, R, c, t, false);
-  return { c, R, q };
+  tree(m, R, c, t, false, s.base);
+  return { c, R, q, base: s.base };
 }
 
-// Newton's start: each frame turned on by its last turn, its own move and q carried on
-function extrapolated(m, now, before) {
+// Newton's start, the held vertices at base: each frame turned on by its last turn, its own
+// move and q carried on
+function extrapolated(m, now, before, base) {
   const R = new Float64Array(9 * m.D), turn = new Float64Array(9), bt = new Float64Array(9);
   for (let d = 0; d < m.D; d++) {
     for (let i = 0; i < 3; i++) for (let j = 0; j < 3; j++) bt[3 * i + j] = before.R[9 * d + 3 * j + i];
@@ -723,8 +735,8 @@ function extrapolated(m, now, before) {
   const a = ownMoves(m, now), b = ownMoves(m, before);
   const moves = a.map((v, i) => 2 * v - b[i]);
   const c = new Float64Array(3 * m.D);
-  tree(m, R, c, moves, false);
-  return { c, R, q: now.q.map((v, i) => 2 * v - before.q[i]) };
+  tree(m, R, c, moves, false, base);
+  return { c, R, q: now.q.map((v, i) => 2 * v - before.q[i]), base };
 }
 
 function orthonormal(s) {
