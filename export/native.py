@@ -61,7 +61,19 @@ def build(folder):
     return lib
 
 
-class CReducedSimulator:
+class _CSimulator:
+    """What both C simulators share: nodal forces handed to C."""
+
+    def _forces(self, force):
+        """A pointer to force as a contiguous float64 (n, 3) array (kept alive on self), or
+        None."""
+        if force is None:
+            return None
+        self._force_buffer = _force_array(force, self.n)
+        return _pointer(self._force_buffer)
+
+
+class CReducedSimulator(_CSimulator):
     """A reduced model's arrays files (path without extension) stepped by the C runtime at
     `lib` (build's path); angle: the fiber angle of a file of several, as its header writes it."""
 
@@ -101,14 +113,6 @@ class CReducedSimulator:
                                        self._forces(force), dt, rtol, max_iter)
         if code != 0:
             raise RuntimeError(f"af_reduced_step: {CODES.get(code, code)}")
-
-    def _forces(self, force):
-        """A pointer to force as a contiguous float64 (n, 3) array (kept alive on self), or
-        None."""
-        if force is None:
-            return None
-        self._force_buffer = _force_array(force, self.n)
-        return _pointer(self._force_buffer)
 
     @property
     def iterations(self):
@@ -154,7 +158,7 @@ def _pointer(a):
     return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
 
-class CFramedSimulator:
+class CFramedSimulator(_CSimulator):
     """A framed model's arrays files (path without extension) stepped by the C runtime at
     `lib`: framed_runtime.FramedSimulator's interface, a state flat (af_framed_state_size,):
     centres, rotations, coordinates, base."""
@@ -167,6 +171,7 @@ class CFramedSimulator:
         c.af_framed_step.argtypes = [ctypes.c_void_p, double_p, double_p, double_p, double_p,
                                      double_p, ctypes.c_double, ctypes.c_int]
         c.af_framed_positions.argtypes = [ctypes.c_void_p, double_p, double_p]
+        c.af_framed_set_constant_force.argtypes = [ctypes.c_void_p, double_p]
         self._c, self._handle = c, handle
         self.n = c.af_framed_vertices(handle)
         self.size = c.af_framed_state_size(handle)
@@ -182,17 +187,22 @@ class CFramedSimulator:
         """The rest state, flat (af_framed_state_size,)."""
         return self._rest.copy()
 
+    def set_constant_force(self, force):
+        """A force (n, 3), N, added to every later step, projected once (None clears it)."""
+        code = self._c.af_framed_set_constant_force(self._handle, self._forces(force))
+        if code != 0:
+            raise RuntimeError(f"af_framed_set_constant_force: {CODES.get(code, code)}")
+
     def step(self, now, before, force, dt, base=None, max_iter=50):
-        """The state after now (flat states; before a step earlier) under nodal forces (n, 3),
-        N, the held nodes carried by base (3, 4) [R_g | c_g] (None: now's); RuntimeError
-        naming the C runtime's code where it fails."""
+        """The state after now (flat states; before a step earlier) under the constant force
+        plus nodal forces (n, 3), N (None: none), the held nodes carried by base (3, 4)
+        [R_g | c_g] (None: now's); RuntimeError naming the C runtime's code where it fails."""
         after = np.empty(self.size)
-        force = _force_array(force, self.n)
         if base is not None:
             base = np.ascontiguousarray(np.concatenate([np.asarray(base, float)[:, :3].ravel(),
                                                         np.asarray(base, float)[:, 3]]))
         code = self._c.af_framed_step(self._handle, _pointer(now), _pointer(before),
-                                      _pointer(after), _pointer(force),
+                                      _pointer(after), self._forces(force),
                                       None if base is None else _pointer(base), dt, max_iter)
         if code != 0:
             raise RuntimeError(f"af_framed_step: {CODES.get(code, code)}")

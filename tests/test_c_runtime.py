@@ -163,6 +163,27 @@ def test_c_steps_the_framed_model_like_the_numpy_runtime_over_200_steps(framed):
     assert worst < 1e-9 * size
 
 
+def test_the_framed_models_constant_force_set_once_steps_like_passing_it_every_step(framed):
+    """Gravity set once (af_framed_set_constant_force), a drag at an arm's tip passed per step
+    and then none (NULL): the same states as the whole force passed every step."""
+    scene, path, lib = framed
+    every, once = (native.CFramedSimulator(path, lib) for _ in range(2))
+    once.set_constant_force(scene.external_force)
+    drag = np.zeros_like(scene.external_force)
+    drag[np.argmax(scene.mesh.vertices[:, 0]), 1] = 0.5 * scene.masses.sum() * 9.81
+    a = b = every.rest_state()
+    ca = cb = once.rest_state()
+    for k in range(40):
+        a, b = every.step(a, b, scene.external_force + (drag if k < 20 else 0.0), 0.02), a
+        ca, cb = once.step(ca, cb, drag if k < 20 else None, 0.02), ca
+    moved = np.abs(every.positions(a) - scene.mesh.vertices).max()
+    assert moved > 1e-3 and np.abs(once.positions(ca) - every.positions(a)).max() < 1e-9 * moved
+    bad = scene.external_force.copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(RuntimeError, match="bad input"):
+        once.set_constant_force(bad)
+
+
 def test_c_runtime_refuses_a_framed_file_for_the_linear_step_and_back(framed, built):
     _, framed_path, lib = framed
     _, linear_path, _ = built

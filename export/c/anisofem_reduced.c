@@ -566,6 +566,7 @@ struct af_framed {
     double *rest, *masses, *Y, *U, *centre, *mass, *a, *J, *A, *B, *radius, *reach;
     double *c0, *c1, *C2, *S3, *W4, *arm_parent, *arm_own, *arms;
     double *grads, *weights, *mu, *lam, *kappa, *fiber;
+    double *constant;          /* the constant force's moments: T0 (9 D), T (9 Q), t (3 D) */
     double *work;
     int iterations;
 };
@@ -579,7 +580,7 @@ void af_framed_free(af_framed *m) {
     free(m->a); free(m->J); free(m->A); free(m->B); free(m->radius); free(m->reach);
     free(m->c0); free(m->c1); free(m->C2); free(m->S3); free(m->W4); free(m->arm_parent);
     free(m->arm_own); free(m->arms); free(m->grads); free(m->weights); free(m->mu);
-    free(m->lam); free(m->kappa); free(m->fiber); free(m->work);
+    free(m->lam); free(m->kappa); free(m->fiber); free(m->constant); free(m->work);
     free(m);
 }
 
@@ -712,7 +713,11 @@ af_framed *af_framed_load(const char *path, const char *angle, char *error, size
                                   + (rm + 2) * (rm + 2) * (rm + 2) / 6 * 2 + 3 * rm * rm
                                   + 4 * rm + 256);
         m->work = malloc(doubles * sizeof(double));
-        if (!m->work) { say(error, error_size, "no memory for a model%s%s", "", ""); goto fail; }
+        m->constant = calloc((size_t)(9 * D + 9 * m->Q + 3 * D), sizeof(double));
+        if (!m->work || !m->constant) {
+            say(error, error_size, "no memory for a model%s%s", "", "");
+            goto fail;
+        }
     }
     free(tets); free(json); free(bin);
     return m;
@@ -729,6 +734,19 @@ int af_framed_state_size(const af_framed *m) { return 12 * m->D + m->Q + 12; }
 const double *af_framed_masses(const af_framed *m) { return m->masses; }
 const double *af_framed_rest_positions(const af_framed *m) { return m->rest; }
 int af_framed_iterations(const af_framed *m) { return m->iterations; }
+
+static void framed_moments(const af_framed *m, const double *force, double *T0, double *T,
+                           double *t);
+
+int af_framed_set_constant_force(af_framed *m, const double *force) {
+    long i, count = 9L * m->D + 9L * m->Q + 3L * m->D;
+    if (force) for (i = 0; i < 3L * m->n; i++) if (!isfinite(force[i])) return AF_BAD_INPUT;
+    for (i = 0; i < count; i++) m->constant[i] = 0.0;
+    if (force)
+        framed_moments(m, force, m->constant, m->constant + 9L * m->D,
+                       m->constant + 9L * m->D + 9L * m->Q);
+    return AF_OK;
+}
 
 /* the base of a state: [R_g (9, row-major) | c_g (3)] after its coordinates */
 #define BASE(m, st) ((st) + 12 * (m)->D + (m)->Q)
@@ -785,16 +803,10 @@ static void add_product(double w, const double *R, const double *M, double *out)
                                    + R[3 * i + 2] * M[6 + j]);
 }
 
-/* the targets T0 (9 D), T (9 Q), t (3 D): the force's moments plus the inertia's pull towards
- * x_hat = 2 x(now) - x(before) */
-static void framed_targets(const af_framed *m, const double *now, const double *before,
-                           const double *force, double inertia, double *T0, double *T,
+/* T0 (9 D), T (9 Q), t (3 D) += the moments of nodal forces force (n x 3) */
+static void framed_moments(const af_framed *m, const double *force, double *T0, double *T,
                            double *t) {
-    long i, a, b, c, k, d;
-    double M[9];
-    for (i = 0; i < 9L * m->D; i++) T0[i] = 0.0;
-    for (i = 0; i < 9L * m->Q; i++) T[i] = 0.0;
-    for (i = 0; i < 3L * m->D; i++) t[i] = 0.0;
+    long i, a, b, c, d;
     for (i = 0; i < m->n; i++) {
         d = m->labels[i];
         if (d < 0) continue;
@@ -809,6 +821,20 @@ static void framed_targets(const af_framed *m, const double *now, const double *
             }
         }
     }
+}
+
+/* the targets T0 (9 D), T (9 Q), t (3 D): the constant force's and force's moments (force
+ * NULL: none) plus the inertia's pull towards x_hat = 2 x(now) - x(before) */
+static void framed_targets(const af_framed *m, const double *now, const double *before,
+                           const double *force, double inertia, double *T0, double *T,
+                           double *t) {
+    long i, a, b, c, k, d;
+    double M[9];
+    const double *K0 = m->constant, *K = K0 + 9L * m->D, *Kt = K + 9L * m->Q;
+    for (i = 0; i < 9L * m->D; i++) T0[i] = K0[i];
+    for (i = 0; i < 9L * m->Q; i++) T[i] = K[i];
+    for (i = 0; i < 3L * m->D; i++) t[i] = Kt[i];
+    if (force) framed_moments(m, force, T0, T, t);
     for (k = 0; k < 2; k++) {
         const double *st = k == 0 ? now : before;
         const double *R = st + 3 * m->D, *q = st + 12 * m->D;
@@ -1337,7 +1363,7 @@ int af_framed_step(af_framed *m, const double *now, const double *before, double
     if (!(dt > 0.0) || max_iter < 1) return AF_BAD_INPUT;
     if (!base) base = BASE(m, now);
     if (!rigid(base)) return AF_BAD_INPUT;
-    for (i = 0; i < 3L * m->n; i++) if (!isfinite(force[i])) return AF_BAD_INPUT;
+    if (force) for (i = 0; i < 3L * m->n; i++) if (!isfinite(force[i])) return AF_BAD_INPUT;
     for (i = 0; i < S; i++) if (!isfinite(now[i]) || !isfinite(before[i])) return AF_BAD_INPUT;
     w.T0 = TAKE(9 * D); w.T = TAKE(9 * m->Q); w.t = TAKE(3 * D);
     w.x = TAKE(3 * m->nodes); w.grad = TAKE(3 * m->nodes); w.blocks = TAKE(9 * m->pairs);

@@ -82,7 +82,8 @@ AF_API void af_reduced_positions(const af_reduced *model, const double *q, doubl
  *   int size = af_framed_state_size(m);
  *   double *now = malloc(size * sizeof(double)), *before = ..., *next = ...;
  *   af_framed_rest_state(m, now); af_framed_rest_state(m, before);
- *   af_framed_step(m, now, before, next, force, NULL, 0.02, 50);  // before = now, now = next
+ *   af_framed_set_constant_force(m, gravity);                     // once (n x 3, N)
+ *   af_framed_step(m, now, before, next, drag, NULL, 0.02, 50);   // before = now, now = next
  *   af_framed_positions(m, next, x);
  */
 typedef struct af_framed af_framed;
@@ -96,10 +97,15 @@ AF_API const double *af_framed_masses(const af_framed *model);
 AF_API const double *af_framed_rest_positions(const af_framed *model);
 /* The rest state: every frame at its domain's rest centre, unturned, q = 0. */
 AF_API void af_framed_rest_state(const af_framed *model, double *state);
+/* A nodal force (n x 3, N) every step adds to its own, gravity say: its projection is stored
+ * once (the per-step force then need only hold drags). NULL clears it. Returns AF_OK or
+ * AF_BAD_INPUT (non-finite). */
+AF_API int af_framed_set_constant_force(af_framed *model, const double *force);
 /* One backward-Euler step of dt s after the state now (before: the state a step earlier, now
- * itself from rest) into next, under nodal forces force (n x 3, N, gravity included); base
- * (12 doubles: R_g row-major, c_g) where the held vertices are at the step's end (a hand or a
- * character carrying the body), or NULL to keep now's. Returns AF_OK, or a negative code
+ * itself from rest) into next, under the constant force plus nodal forces force (n x 3, N;
+ * NULL: none); base (12 doubles: R_g row-major, c_g) where the held vertices are at the
+ * step's end (a hand or a character carrying the body), or NULL to keep now's. Returns
+ * AF_OK, or a negative code
  * (AF_BAD_INPUT: a non-finite force or state, dt <= 0, a base that is not a rigid motion)
  * with next unchanged. */
 AF_API int af_framed_step(af_framed *model, const double *now, const double *before,
