@@ -116,7 +116,7 @@ def _reduced(argv):
                              "mesh: the body's accuracy at the scene mesh's cost")
     parser.add_argument("--display", metavar="MESH",
                         help="a coarser mesh file of the same body: the file moves its vertices "
-                             "(the basis interpolated there) instead of the model's")
+                             "(interpolated in the model's elements) instead of the model's")
     parser.add_argument("--framed", action="store_true",
                         help="the framed model instead (anisofem.reduced.FramedModel: domains "
                              "in their own rotating frames, for bodies that bend and swing "
@@ -128,10 +128,10 @@ def _reduced(argv):
         if args.body and args.display:
             raise ValueError("--body, --display: give one (--body draws on the scene's mesh)")
         scene = scene_of(args)
+        shown = None if args.display is None else read_mesh(args.display)
         if args.framed:
-            return _framed(parser, args, scene)
-        display = (scene.mesh if args.body else
-                   None if args.display is None else read_mesh(args.display))
+            return _framed(args, scene, shown)
+        display = scene.mesh if args.body else shown
         built = body_of(args, scene, args.body, "--body") if args.body else scene
         model = ReducedModel(built, modes=args.modes, snapshots=args.snapshots)
         header = reduced.write(model, args.output, title=args.scene, gravity=scene.gravity,
@@ -144,16 +144,18 @@ def _reduced(argv):
           f"{model.build_seconds:.2g} s{_checked(model.validation)}")
 
 
-def _framed(parser, args, scene):
-    """python -m export reduced --framed: the FramedModel of the scene, written."""
+def _framed(args, scene, display):
+    """python -m export reduced --framed: the FramedModel of the scene, written (for the
+    vertices of the TetMesh display, where given)."""
     from anisofem.reduced import FramedModel
 
     from . import reduced
-    if args.body or args.display or args.snapshots:
+    if args.body or args.snapshots:
         raise ValueError("--framed: builds on the scene's own mesh from its default declared "
-                         "loads; --body, --display and --snapshots are the linear model's")
+                         "loads; --body and --snapshots are the linear model's")
     model = FramedModel(scene, modes=args.modes)
-    header = reduced.write_framed(model, args.output, title=args.scene, gravity=scene.gravity)
+    header = reduced.write_framed(model, args.output, title=args.scene, gravity=scene.gravity,
+                                  display=display)
     print(f"wrote {args.output}.json and .bin: {header['n']} vertices, {header['m']} tets, "
           f"{header['domains']} domains, {header['unknowns']} unknowns, "
           f"{header['joint_elements']} joint elements, built in "

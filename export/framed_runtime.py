@@ -28,7 +28,9 @@ the same order: the two agree to round-off.
 
 A state is a tuple (c (D, 3) m, R (D, 3, 3), q (Q,), base (3, 4)): base [R_g | c_g] carries
 the held nodes rigidly, x = R_g x0 + c_g (step(..., base=) moves them: a hand, a character).
-It needs numpy and runtime.py (copy both files together).
+A file written with a display mesh (`--display`) moves the display's vertices, each a
+weighted sum of the model's nodes (display_nodes, display_weights): forces are given and
+positions returned on them. It needs numpy and runtime.py (copy both files together).
 """
 import numpy as np
 
@@ -67,6 +69,9 @@ class FramedSimulator:
         self.rest_positions, self.masses = a["rest_positions"], a["masses"]
         self.held, self.surface = a["held"].astype(bool), a["surface"]
         self.labels, self.Y, self.U = a["labels"].astype(np.int64), a["Y"], a["U"]
+        self._x0 = a.get("physics_rest", self.rest_positions)   # the model's own nodes
+        self._display = ((a["display_nodes"].astype(np.int64), a["display_weights"])
+                         if "display_nodes" in a else None)
         self.r = a["r"].astype(np.int64)
         self.q0 = np.concatenate([[0], np.cumsum(self.r)[:-1]]).astype(np.int64)
         self.z0 = np.concatenate([[0], np.cumsum(6 + self.r)[:-1]]).astype(np.int64)
@@ -112,14 +117,19 @@ class FramedSimulator:
                 np.eye(3, 4))
 
     def positions(self, state):
-        """Full positions (n, 3), m, of a state."""
-        return self._positions(state, np.arange(self.labels.size))
+        """Full positions (n, 3), m, of a state (of the display's vertices where it has one)."""
+        if self._display is None:
+            return self._positions(state, np.arange(self.labels.size))
+        nodes, weights = self._display
+        x = self._positions(state, nodes.ravel()).reshape(nodes.shape + (3,))
+        return np.einsum("pk,pka->pa", weights, x)
 
     def _positions(self, state, nodes):
+        """Positions (k, 3), m, of the model's nodes `nodes` (k,) in a state."""
         c, R, q, base = state
         d = self.labels[nodes]
         free = d >= 0
-        x = self.rest_positions[nodes] @ base[:, :3].T + base[:, 3]
+        x = self._x0[nodes] @ base[:, :3].T + base[:, 3]
         local = self.Y[nodes[free]].copy()
         for e in range(self.r.size):
             rows = d[free] == e
@@ -129,8 +139,15 @@ class FramedSimulator:
         return x
 
     def project(self, force):
-        """The moments (F0 (D, 3, 3), F (Q, 3, 3), Fsum (D, 3)) of nodal forces (n, 3), N."""
+        """The moments (F0 (D, 3, 3), F (Q, 3, 3), Fsum (D, 3)) of nodal forces (n, 3), N (on
+        the display's vertices where it has one: each spread over its model nodes by its
+        weights)."""
         f = _real(force, "force", self.rest_positions.shape)
+        if self._display is not None:
+            nodes, weights = self._display
+            spread = (weights[:, :, None] * f[:, None, :]).reshape(-1, 3)
+            f = np.stack([np.bincount(nodes.ravel(), spread[:, a], self.labels.size)
+                          for a in range(3)], axis=1)
         F0 = np.zeros((self.r.size, 3, 3))
         F = np.zeros((int(self.r.sum()), 3, 3))
         Fs = np.zeros((self.r.size, 3))

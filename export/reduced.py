@@ -14,7 +14,8 @@ loads, 0 for a modal basis), frequencies (Hz), c0 (J), build_seconds, validation
 or on `cases` unseen loads), gravity (m/s^2) and material.
 
 `--framed` writes a FramedModel instead (write_framed; format FRAMED_FORMAT, stepped by
-framed_runtime.FramedSimulator and the C runtime's af_framed_step; export/README.md).
+framed_runtime.FramedSimulator and the C runtime's af_framed_step; export/README.md), for a
+display mesh too.
 
 `python -m export bake-reduced SCENE -o PATH` writes the models of a baked scene (export.bake)
 at several fiber angles in one pair of files, for the browser page: the arrays that depend on
@@ -27,6 +28,7 @@ import numpy as np
 
 from anisofem import Material, Scene, TetMesh
 from anisofem.reduced import FramedModel, ReducedModel
+from anisofem.reduced.display import node_weights
 from anisofem.scene import GRAVITY
 
 from . import runtime
@@ -127,15 +129,24 @@ def bake(name, out, modes, angles, snapshots=0):
     return header
 
 
-def write_framed(model, path, title="", gravity=None):
+def write_framed(model, path, title="", gravity=None, display=None):
     """Write the FramedModel `model` as path.json and path.bin for
     framed_runtime.FramedSimulator; returns the header. gravity (3,) m/s^2: the scene's,
-    recorded for a viewer (the runtime takes every force per step)."""
+    recorded for a viewer (the runtime takes every force per step). display: a coarser
+    TetMesh of the same body whose vertices the file moves instead of the model's, each a
+    weighted sum of the model's nodes in the element holding it (display_nodes (p, k) int32,
+    display_weights (p, k); the model's own rest positions as physics_rest (N, 3)): the
+    model's accuracy at the display mesh's cost."""
     scene = model.scene
     arrays = {**_mesh_arrays(scene), **framed_arrays(model)}
+    mesh = scene.mesh
+    if display is not None:
+        arrays.update(_framed_display(model, display))
+        mesh = display
     joints = model._joint_elements
-    header = {"model_format": FRAMED_FORMAT, "title": title, "n": scene.mesh.n_vertices,
-              "m": scene.mesh.n_tets, "domains": len(model.domains),
+    header = {"model_format": FRAMED_FORMAT, "title": title, "n": mesh.n_vertices,
+              "m": mesh.n_tets, "physics_tets": scene.mesh.n_tets,
+              "domains": len(model.domains),
               "r": [d.r for d in model.domains], "unknowns": model.r,
               "joint_elements": int(joints.tets.shape[0]), "size": model.size,
               "build_seconds": model.build_seconds,
@@ -153,6 +164,23 @@ def _mesh_arrays(scene):
     return {"rest_positions": mesh.vertices, "masses": np.asarray(scene.masses, np.float64),
             "held": scene.fixed_mask.astype(np.uint8), "tets": mesh.tets.astype(np.int32),
             "surface": runtime.surface_triangles(mesh.vertices, mesh.tets).astype(np.int32)}
+
+
+def _framed_display(model, display):
+    """The arrays of write_framed for a display mesh: its own mesh arrays (lumped masses in
+    the scene's density; a vertex held where every node that weighs in it is held), each
+    vertex's model nodes and weights, and the model's rest positions."""
+    scene = model.scene
+    nodes, weights = node_weights(scene.mesh, display.vertices)
+    weighs = np.abs(weights) > 1e-12
+    held = np.all(~weighs | (model.labels[nodes] < 0), axis=1)
+    return {"rest_positions": display.vertices, "masses": _display_masses(scene, display),
+            "held": np.repeat(held[:, None], 3, axis=1).astype(np.uint8),
+            "tets": display.tets.astype(np.int32),
+            "surface": runtime.surface_triangles(display.vertices,
+                                                 display.tets).astype(np.int32),
+            "display_nodes": nodes.astype(np.int32), "display_weights": weights,
+            "physics_rest": model.x0}
 
 
 def framed_arrays(model, tag=""):

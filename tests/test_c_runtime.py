@@ -11,6 +11,7 @@ from anisofem.reduced import ReducedModel
 from export import native
 from export import reduced as writer
 from export.runtime import ReducedSimulator
+from test_framed_runtime import displayed  # noqa: F401 (a fixture)
 from test_reduced import cantilever
 
 pytestmark = pytest.mark.skipif(native.compiler() is None, reason="no C compiler")
@@ -182,6 +183,32 @@ def test_the_framed_models_constant_force_set_once_steps_like_passing_it_every_s
     bad[0, 0] = np.nan
     with pytest.raises(RuntimeError, match="bad input"):
         once.set_constant_force(bad)
+
+
+def test_c_steps_a_framed_display_file_like_the_numpy_runtime(displayed, built):
+    """The framed model written for a coarser mesh: gravity set once, a drag at the display's
+    tip, the base moving; positions within 1e-9 of the deflection, the same iterations."""
+    from export.framed_runtime import FramedSimulator
+    _, _, shown, path = displayed
+    py, c = FramedSimulator(path), native.CFramedSimulator(path, built[2])
+    assert c.n == shown.n_vertices
+    gravity = py.masses[:, None] * np.array([0.0, 0.0, -9.81])
+    c.set_constant_force(gravity)
+    drag = np.zeros((c.n, 3))
+    drag[np.argmax(shown.vertices[:, 0]), 1] = 0.3 * py.masses.sum() * 9.81
+    a = b = py.rest_state()
+    ca = cb = c.rest_state()
+    worst = size = 0.0
+    for k in range(60):
+        f = drag if k < 30 else None
+        base = np.hstack([np.eye(3), [[0.0], [0.002 * k], [0.0]]])
+        a, b = py.step(a, b, gravity + (drag if k < 30 else 0.0), 0.02, base=base), a
+        ca, cb = c.step(ca, cb, f, 0.02, base=base), ca
+        assert c.iterations == py.iterations
+        x = py.positions(a)
+        worst = max(worst, np.abs(c.positions(ca) - x).max())
+        size = max(size, np.abs(x - shown.vertices).max())
+    assert size > 0.02 and worst < 1e-9 * size
 
 
 def test_c_runtime_refuses_a_framed_file_for_the_linear_step_and_back(framed, built):

@@ -44,9 +44,16 @@ def locate(mesh, points):
     return found, weights
 
 
+def node_weights(mesh, points):
+    """(nodes (p, k) int64, weights (p, k)): each rest point (p, 3), m, as a weighted sum of
+    the k nodes of mesh's element holding it (the element's shape functions there), so that
+    any nodal field u interpolates there as sum_a weights[:, a] u[nodes[:, a]]."""
+    tets, weights = locate(mesh, points)
+    return mesh.cells[tets], mesh.element.shape(weights[:, 1:])    # shapes at xi = L_1..3
+
+
 def interpolate(mesh, basis, points):
     """The basis (3n, r) of a model on mesh, interpolated at rest points (p, 3): (p, 3, r)."""
-    tets, weights = locate(mesh, points)
-    shape = mesh.element.shape(weights[:, 1:])                     # (p, k) at xi = L_1..3
+    nodes, shape = node_weights(mesh, points)
     U = basis.reshape(mesh.n_vertices, 3, -1)
-    return np.einsum("pa,pakr->pkr", shape, U[mesh.cells[tets]])
+    return np.einsum("pa,pakr->pkr", shape, U[nodes])

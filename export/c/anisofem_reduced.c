@@ -560,6 +560,10 @@ int af_reduced_step(af_reduced *m, double *q, double *w, const double *force, do
 
 struct af_framed {
     int n, D, Q, Z, rmax, joints, points, k, nodes, pairs, links;
+    int nf, dk;                /* the model's nodes; model nodes per display vertex (0: none) */
+    int *display_nodes;        /* (n, dk): each vertex's model nodes, where a display mesh */
+    double *display_weights;   /* (n, dk): their weights */
+    double *x0, *spread;       /* the model nodes' rest positions; forces spread on them */
     double size;
     int *labels, *r, *q0, *z0, *b0, *parent, *order, *chain, *poly;
     int *joint_nodes, *joint_labels, *joint_tets, *pair_list, *pair_ptr, *element_pairs;
@@ -581,6 +585,8 @@ void af_framed_free(af_framed *m) {
     free(m->c0); free(m->c1); free(m->C2); free(m->S3); free(m->W4); free(m->arm_parent);
     free(m->arm_own); free(m->arms); free(m->grads); free(m->weights); free(m->mu);
     free(m->lam); free(m->kappa); free(m->fiber); free(m->constant); free(m->work);
+    free(m->display_nodes); free(m->display_weights); free(m->spread);
+    if (m->x0 != m->rest) free(m->x0);
     free(m);
 }
 
@@ -593,17 +599,17 @@ static int compare_longs(const void *x, const void *y) {
 static int plan_joints(af_framed *m, const int *tets) {
     long e, a, b, i, total = (long)m->joints * m->k, count = 0, unique = 0;
     long *keys = malloc((size_t)(total > 0 ? total : 1) * sizeof(long) * (size_t)m->k);
-    int *local = malloc((size_t)m->n * sizeof(int));
+    int *local = malloc((size_t)m->nf * sizeof(int));
     if (!keys || !local) { free(keys); free(local); return 0; }
-    for (i = 0; i < m->n; i++) local[i] = -1;
+    for (i = 0; i < m->nf; i++) local[i] = -1;
     for (e = 0; e < total; e++) local[tets[e]] = 0;
     m->nodes = 0;
-    for (i = 0; i < m->n; i++) if (local[i] == 0) local[i] = m->nodes++;
+    for (i = 0; i < m->nf; i++) if (local[i] == 0) local[i] = m->nodes++;
     m->joint_nodes = malloc((size_t)m->nodes * sizeof(int) + 1);
     m->joint_labels = malloc((size_t)m->nodes * sizeof(int) + 1);
     m->joint_tets = malloc((size_t)total * sizeof(int) + 1);
     if (!m->joint_nodes || !m->joint_labels || !m->joint_tets) { free(keys); free(local); return 0; }
-    for (i = 0; i < m->n; i++)
+    for (i = 0; i < m->nf; i++)
         if (local[i] >= 0) { m->joint_nodes[local[i]] = (int)i; m->joint_labels[local[i]] = m->labels[i]; }
     for (e = 0; e < total; e++) m->joint_tets[e] = local[tets[e]];
     for (e = 0; e < m->joints; e++)
@@ -643,6 +649,47 @@ static int plan_joints(af_framed *m, const int *tets) {
     if (!(m->field = load_typed(table, bin, bin_size, name, tag, "int32", 4, dims, &s, error, \
                                 error_size))) goto fail
 
+/* A display mesh's arrays where the file has them (display_nodes, display_weights,
+ * physics_rest: each of the n vertices a weighted sum of the model's nf nodes), else the
+ * vertices are the model's nodes. 0 with the reason in error where they do not fit. */
+static int load_display(af_framed *m, const char *table, const char *bin, long bin_size,
+                        char *error, size_t error_size) {
+    spec s;
+    long i;
+    m->x0 = m->rest;
+    if (!array_spec(table, "display_nodes", "int32", &s)) {
+        if (m->nf == m->n) return 1;
+        say(error, error_size, "labels: one per vertex expected, or a display mesh's "
+            "display_nodes%s%s", "", "");
+        return 0;
+    }
+    if (!(m->display_nodes = load_typed(table, bin, bin_size, "display_nodes", "", "int32", 4, 2,
+                                        &s, error, error_size))) return 0;
+    m->dk = (int)s.shape[1];
+    if (s.shape[0] != m->n) {
+        say(error, error_size, "display_nodes: one row per vertex expected%s%s", "", "");
+        return 0;
+    }
+    for (i = 0; i < (long)m->n * m->dk; i++)
+        if (m->display_nodes[i] < 0 || m->display_nodes[i] >= m->nf) {
+            say(error, error_size, "display_nodes: a node outside the model's labels%s%s", "", "");
+            return 0;
+        }
+    if (!(m->display_weights = load_typed(table, bin, bin_size, "display_weights", "", "float64",
+                                          8, 2, &s, error, error_size))) return 0;
+    if (!(m->x0 = load_typed(table, bin, bin_size, "physics_rest", "", "float64", 8, 2, &s,
+                             error, error_size))) return 0;
+    if (s.shape[0] != m->nf) {
+        say(error, error_size, "physics_rest: one row per model node expected%s%s", "", "");
+        return 0;
+    }
+    if (!(m->spread = malloc((size_t)(3L * m->nf) * sizeof(double)))) {
+        say(error, error_size, "no memory for a model%s%s", "", "");
+        return 0;
+    }
+    return 1;
+}
+
 af_framed *af_framed_load(const char *path, const char *angle, char *error, size_t error_size) {
     char tag[64];
     char *json, *bin;
@@ -667,6 +714,8 @@ af_framed *af_framed_load(const char *path, const char *angle, char *error, size
                                      error, error_size))) goto fail;
     }
     I32(labels, "labels", 1);
+    m->nf = (int)s.shape[0];
+    if (!load_display(m, table, bin, bin_size, error, error_size)) goto fail;
     I32(r, "r", 1);
     m->D = (int)s.shape[0];
     F64(Y, "Y", 2);
@@ -687,7 +736,12 @@ af_framed *af_framed_load(const char *path, const char *angle, char *error, size
     F64(kappa, "kappa", 1); F64(fiber, "fiber", 2);
     if (!(tets = load_typed(table, bin, bin_size, "joint_tets", tag, "int32", 4, 2, &s, error,
                             error_size))) goto fail;
-    if (m->D > 64 || m->k > 16) {
+    for (d = 0; d < (long)m->joints * m->k; d++)
+        if (tets[d] < 0 || tets[d] >= m->nf) {
+            say(error, error_size, "joint_tets: a node outside the model's labels%s%s", "", "");
+            goto fail;
+        }
+    if (m->D > 64 || m->k > 16 || m->dk > 16) {
         say(error, error_size, "path: this runtime steps at most 64 domains and 16 nodes an "
             "element%s%s", "", "");
         goto fail;
@@ -771,7 +825,7 @@ static void framed_positions(const af_framed *m, const double *st, const int *no
         int d = m->labels[i];
         double y[3];
         if (d < 0) {  /* held: carried by the base */
-            const double *x0 = m->rest + 3 * i;
+            const double *x0 = m->x0 + 3 * i;
             for (a = 0; a < 3; a++)
                 out[3 * k + a] = base[3 * a] * x0[0] + base[3 * a + 1] * x0[1]
                                  + base[3 * a + 2] * x0[2] + base[9 + a];
@@ -791,7 +845,21 @@ static void framed_positions(const af_framed *m, const double *st, const int *no
 }
 
 void af_framed_positions(const af_framed *m, const double *state, double *x) {
-    framed_positions(m, state, NULL, m->n, x);
+    long i, k, a;
+    double p[3 * 16];
+    if (!m->display_nodes) {
+        framed_positions(m, state, NULL, m->n, x);
+        return;
+    }
+    for (i = 0; i < m->n; i++) {  /* each display vertex from its model nodes */
+        const double *w = m->display_weights + i * m->dk;
+        framed_positions(m, state, m->display_nodes + i * m->dk, m->dk, p);
+        for (a = 0; a < 3; a++) {
+            double v = 0.0;
+            for (k = 0; k < m->dk; k++) v += w[k] * p[3 * k + a];
+            x[3 * i + a] = v;
+        }
+    }
 }
 
 /* out[0..9] += w R M for 3 x 3 R, M */
@@ -807,7 +875,17 @@ static void add_product(double w, const double *R, const double *M, double *out)
 static void framed_moments(const af_framed *m, const double *force, double *T0, double *T,
                            double *t) {
     long i, a, b, c, d;
-    for (i = 0; i < m->n; i++) {
+    if (m->display_nodes) {  /* each display vertex's force spread on its model nodes */
+        for (i = 0; i < 3L * m->nf; i++) m->spread[i] = 0.0;
+        for (i = 0; i < m->n; i++)
+            for (c = 0; c < m->dk; c++) {
+                long node = m->display_nodes[i * m->dk + c];
+                double w = m->display_weights[i * m->dk + c];
+                for (a = 0; a < 3; a++) m->spread[3 * node + a] += w * force[3 * i + a];
+            }
+        force = m->spread;
+    }
+    for (i = 0; i < m->nf; i++) {
         d = m->labels[i];
         if (d < 0) continue;
         for (a = 0; a < 3; a++) {

@@ -76,7 +76,8 @@ AF_API void af_reduced_positions(const af_reduced *model, const double *q, doubl
  * of export/framed_runtime.py's FramedSimulator. A state is af_framed_state_size doubles:
  * each domain's centre (3 D, m), rotation (9 D, row-major) and coordinates (Q), then the base
  * (12: a rotation R_g, row-major, and a translation c_g, m) that carries the held vertices,
- * x = R_g x0 + c_g.
+ * x = R_g x0 + c_g. A file written for a display mesh (`--display`) takes forces and gives
+ * positions on the display's vertices (af_framed_vertices of them).
  *
  *   af_framed *m = af_framed_load("t", NULL, err, sizeof err);
  *   int size = af_framed_state_size(m);
