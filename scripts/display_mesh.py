@@ -10,8 +10,10 @@ face, which both meshes share) at t = 0.2, 0.6, 1 and 2 s, its difference from t
 exact rollout over that rollout's static tip deflection, and the mean ms per step (the step
 and the display positions). The reduced rows: the library (numba) with the fine mesh's own
 projected gravity, and runtime.ReducedSimulator (numpy) with the file `python -m export
-reduced --display` writes, its gravity the display vertices' lumped masses times g. Run alone
-(about a minute).
+reduced --display` writes, its gravity the display vertices' lumped masses times g. The
+framed model of the fine mesh (anisofem.reduced.FramedModel) written likewise (`--framed
+--display`), stepped by framed_runtime.FramedSimulator (numpy) and, where a C compiler is, by
+the C runtime. Run alone (about two minutes).
 """
 import argparse
 import os
@@ -23,8 +25,10 @@ import numpy as np
 import anisofem as af
 from anisofem.files import publish, result_path
 from anisofem.convergence import cantilever
-from anisofem.reduced import ReducedModel
+from anisofem.reduced import FramedModel, ReducedModel
+from export import native
 from export import reduced as writer
+from export.framed_runtime import FramedSimulator
 from export.runtime import ReducedSimulator
 
 FINE, COARSE = (40, 8, 8), (10, 2, 2)
@@ -51,14 +55,14 @@ def exact(scene):
     return out, 1e3 * float(np.mean(seconds[1:]))
 
 
-def rollout(step, positions, rest, end, r):
-    """(tip z per checked step, ms per step) of a reduced rollout drawn at `rest` points."""
-    q, w = np.zeros(r), np.zeros(r)
+def rollout(step, positions, state, rest, end):
+    """(tip z per checked step, ms per step) of a reduced rollout from `state` drawn at `rest`
+    points: step(state) -> the next state, positions(state) -> (p, 3)."""
     out, seconds = [], []
     for k in range(1, STEPS + 1):
         t0 = time.perf_counter()
-        q, w = step(q, w)
-        x = positions(q)
+        state = step(state)
+        x = positions(state)
         seconds.append(time.perf_counter() - t0)
         if k in CHECKED:
             out.append(float((x[end] - rest[end])[:, 2].mean()))
@@ -81,27 +85,50 @@ def run(modes, out):
             model = ReducedModel(fine, modes=m, validate=False)
             U = model.basis_at(display.vertices)
 
-            def library(q, w):
-                q, w, report = model.step(q, w, DT)
+            def library(state):
+                q, w, report = model.step(*state, DT)
                 if not report.converged:
                     raise RuntimeError(report.message)
                 return q, w
-            tips, ms = rollout(library, lambda q: display.vertices + U @ q, display.vertices,
-                               end, model.r)
+            rest = (np.zeros(model.r), np.zeros(model.r))
+            tips, ms = rollout(library, lambda state: display.vertices + U @ state[0], rest,
+                               display.vertices, end)
             rows.append({"name": f"reduced m{m} (r = {model.r}) of {fine.mesh.n_tets} tets on "
                                  f"{display.n_tets}, library", "tip": tips, "ms": ms})
             path = os.path.join(folder, f"m{m}")
             writer.write(model, path, display=display)
             sim = ReducedSimulator(path, display.vertices, display.tets)
             force = sim.masses[:, None] * np.array([0.0, 0.0, -9.81])
-            tips, ms = rollout(lambda q, w: sim.step(q, w, force, DT), sim.positions,
-                               display.vertices, end, model.r)
+            tips, ms = rollout(lambda state: sim.step(*state, force, DT),
+                               lambda state: sim.positions(state[0]), rest, display.vertices,
+                               end)
             rows.append({"name": f"reduced m{m} (r = {model.r}) of {fine.mesh.n_tets} tets on "
                                  f"{display.n_tets}, runtime file", "tip": tips, "ms": ms})
+        rows += framed_rows(fine, display, end, folder)
     for row in rows:
         row["error"] = [abs(a - b) / deflection for a, b in zip(row["tip"], reference)]
     report = {"times": [k * DT for k in CHECKED], "static_deflection": deflection, "rows": rows}
     return publish(report, _print, out)
+
+
+def framed_rows(fine, display, end, folder):
+    """The framed model of the fine scene written for the display mesh, stepped by the numpy
+    runtime and (with a C compiler) the C runtime: rows as run() makes them."""
+    model = FramedModel(fine, validate=False)
+    path = os.path.join(folder, "framed")
+    writer.write_framed(model, path, display=display)
+    sims = [("runtime file", FramedSimulator(path, display.vertices, display.tets))]
+    if native.compiler():
+        sims.append(("C runtime", native.CFramedSimulator(path, native.build(folder))))
+    force = sims[0][1].masses[:, None] * np.array([0.0, 0.0, -9.81])
+    rows = []
+    for label, sim in sims:
+        tips, ms = rollout(lambda states: (sim.step(*states, force, DT), states[0]),
+                           lambda states: sim.positions(states[0]), (sim.rest_state(),) * 2,
+                           display.vertices, end)
+        rows.append({"name": f"framed (r = {model.r}) of {fine.mesh.n_tets} tets on "
+                             f"{display.n_tets}, {label}", "tip": tips, "ms": ms})
+    return rows
 
 
 def _print(report):
