@@ -95,8 +95,7 @@ class FramedSimulator:
         self._local = local.reshape(a["joint_tets"].shape)              # in joint_nodes
         rows = (3 * self._local[:, :, None] + np.arange(3)).reshape(self._local.shape[0], -1)
         self._grad_index = rows.ravel()               # each element entry's place in (3 k,)
-        self._hess_index = (rows[:, :, None] * 3 * self.joint_nodes.size
-                            + rows[:, None, :]).ravel()      # and in (3 k, 3 k)
+        self._plan_pairs()
         self.joint_grads, self.joint_weights = a["joint_grads"], a["joint_weights"]
         self.mu, self.lam, self.kappa = a["mu"], a["lam"], a["kappa"]
         self.fiber = a["fiber"]
@@ -106,6 +105,27 @@ class FramedSimulator:
         self.zq = np.concatenate([np.arange(z + 6, z + 6 + rd)
                                   for z, rd in zip(self.z0, self.r)]).astype(np.int64)
         self.iterations = 0
+
+    def _plan_pairs(self):
+        """The joint nodes' pairs that share an element: each element Hessian entry's place
+        among their 3 x 3 blocks (_pair_index), and the free pairs grouped by their nodes'
+        domains (_pair_groups: (d, e, first nodes, second nodes, pair rows))."""
+        m, n = self._local.shape
+        k = self.joint_nodes.size
+        keys = (self._local[:, :, None] * k + self._local[:, None, :]).ravel()
+        unique, inverse = np.unique(keys, return_inverse=True)
+        pair = inverse.reshape(m, n, 1, n, 1)
+        self._pair_index = (9 * pair + 3 * np.arange(3)[None, None, :, None, None]
+                            + np.arange(3)[None, None, None, None, :]).ravel()
+        self._pairs = unique.size
+        first, second = unique // k, unique % k
+        d = self.labels[self.joint_nodes]
+        self._pair_groups = []
+        for e in np.unique(d[d >= 0]):
+            for f in np.unique(d[d >= 0]):
+                rows = np.flatnonzero((d[first] == e) & (d[second] == f))
+                if rows.size:
+                    self._pair_groups.append((int(e), int(f), first[rows], second[rows], rows))
 
     # -- states ----------------------------------------------------------------------------
 
@@ -294,10 +314,11 @@ class FramedSimulator:
         c, R, q, _ = state
         nodes = self.joint_nodes
         x = self._positions(state, nodes)
-        E, gx, Hx = _elements(self, x, want=2)
+        E, gx, He = _elements(self, x, want=2)
+        blocks = np.bincount(self._pair_index, He.ravel(), 9 * self._pairs).reshape(-1, 3, 3)
         k = nodes.size
         d = self.labels[nodes]
-        Jn = np.zeros((k, 3, self.n_unknowns))
+        Jn = np.zeros((k, 3, 6 + self.r.max()))          # in each node's domain's unknowns
         for e in range(self.r.size):
             rows = np.flatnonzero(d == e)
             if rows.size == 0:
@@ -306,9 +327,9 @@ class FramedSimulator:
             w = x[rows] - c[e]                                         # (k_e, 3)
             G = gx[rows]
             V = np.einsum("ab,kbr->kar", R[e], self.U[nodes[rows], :, :rd])  # (k_e, 3, r)
-            Jn[rows, :, z:z + 3] = np.eye(3)
-            Jn[rows, :, z + 3:z + 6] = -np.einsum("kj,jab->kab", w, GEN)
-            Jn[rows, :, z + 6:z + 6 + rd] = V
+            Jn[rows, :, :3] = np.eye(3)
+            Jn[rows, :, 3:6] = -np.einsum("kj,jab->kab", w, GEN)
+            Jn[rows, :, 6:6 + rd] = V
             g[z:z + 3] += G.sum(axis=0)
             g[z + 3:z + 6] += np.cross(w, G).sum(axis=0)
             GW = G.T @ w
@@ -317,8 +338,11 @@ class FramedSimulator:
             cr = np.cross(V.transpose(0, 2, 1), G[:, None, :]).sum(axis=0).T  # (3, r)
             H[z + 3:z + 6, z + 6:z + 6 + rd] += cr
             H[z + 6:z + 6 + rd, z + 3:z + 6] += cr.T
-        J = Jn.reshape(3 * k, -1)
-        H += J.T @ Hx @ J
+        # the Gauss-Newton part: sum over node pairs of Jn_i^T hess_ij Jn_j, by domain pairs
+        for e, f, first, second, rows in self._pair_groups:
+            ze, zf, ne, nf = self.z0[e], self.z0[f], 6 + self.r[e], 6 + self.r[f]
+            right = (blocks[rows] @ Jn[second, :, :nf]).reshape(-1, nf)        # (3 p, nf)
+            H[ze:ze + ne, zf:zf + nf] += Jn[first, :, :ne].reshape(-1, ne).T @ right
         return E
 
     def _retract(self, state, dz, alpha):
@@ -373,7 +397,7 @@ def _quartic(P, q, derivatives=False):
 
 def _elements(sim, x, want):
     """The joint elements' StVK plus fiber energy (J) at their nodes' positions x (k, 3); with
-    want >= 1 the gradient (k, 3), with want 2 the exact Hessian (3k, 3k)."""
+    want >= 1 the gradient (k, 3), with want 2 the element Hessians (m, n, 3, n, 3)."""
     tets = sim._local
     G, w = sim.joint_grads, sim.joint_weights                       # (m, p, n, 3), (m, p)
     F = np.einsum("mna,mpnb->mpab", x[tets], G)
@@ -407,9 +431,7 @@ def _elements(sim, x, want):
           + lam[..., None, None, None, None] * np.einsum("mpni,mplk->mpnilk", Q, Q)
           + 8 * kappa[..., None, None, None, None]
           * np.einsum("mpi,mpk,mpn,mpl->mpnilk", Fd, Fd, s, s))
-    He = np.einsum("mp,mpnilk->mnilk", w, He)
-    Hx = np.bincount(sim._hess_index, He.ravel(), 9 * k * k).reshape(3 * k, 3 * k)
-    return energy, grad, Hx
+    return energy, grad, np.einsum("mp,mpnilk->mnilk", w, He)
 
 
 def _descent(H, g):
