@@ -62,7 +62,34 @@ def build(folder):
 
 
 class _CSimulator:
-    """What both C simulators share: nodal forces handed to C."""
+    """What both C simulators share, their functions named PREFIX_*: the model handle, nodal
+    forces handed to C, a constant force, iterations and positions."""
+    PREFIX = ""
+
+    def __init__(self, path, lib, angle, counts):
+        c, handle = _open(lib, self.PREFIX, path, angle,
+                          tuple(f"{self.PREFIX}_{name}" for name in ("vertices", "iterations")
+                                + counts))
+        self._c, self._handle = c, handle
+        double_p = ctypes.POINTER(ctypes.c_double)
+        self._function("positions").argtypes = [ctypes.c_void_p, double_p, double_p]
+        self._function("set_constant_force").argtypes = [ctypes.c_void_p, double_p]
+        self.n = self._function("vertices")(handle)
+
+    def _function(self, name):
+        return getattr(self._c, f"{self.PREFIX}_{name}")
+
+    def __del__(self):
+        if getattr(self, "_handle", None):
+            self._function("free")(self._handle)
+            self._handle = None
+
+    def _call(self, name, *args):
+        """PREFIX_name(handle, *args); RuntimeError naming the C runtime's code where it
+        fails."""
+        code = self._function(name)(self._handle, *args)
+        if code != 0:
+            raise RuntimeError(f"{self.PREFIX}_{name}: {CODES.get(code, code)}")
 
     def _forces(self, force):
         """A pointer to force as a contiguous float64 (n, 3) array (kept alive on self), or
@@ -72,58 +99,43 @@ class _CSimulator:
         self._force_buffer = _force_array(force, self.n)
         return _pointer(self._force_buffer)
 
+    def set_constant_force(self, force):
+        """A force (n, 3), N, added to every later step, projected once (None clears it)."""
+        self._call("set_constant_force", self._forces(force))
+
+    @property
+    def iterations(self):
+        """Newton iterations of the last step."""
+        return self._function("iterations")(self._handle)
+
+    def positions(self, state):
+        """Positions (n, 3), m, of a state (the reduced model's: its coordinates q)."""
+        x = np.empty((self.n, 3))
+        self._function("positions")(self._handle, _pointer(state), _pointer(x))
+        return x
+
 
 class CReducedSimulator(_CSimulator):
     """A reduced model's arrays files (path without extension) stepped by the C runtime at
     `lib` (build's path); angle: the fiber angle of a file of several, as its header writes it."""
+    PREFIX = "af_reduced"
 
     def __init__(self, path, lib, angle=None):
-        c, handle = _open(lib, "af_reduced", path, angle,
-                          ("af_reduced_vertices", "af_reduced_coordinates",
-                           "af_reduced_iterations"))
+        super().__init__(path, lib, angle, ("coordinates",))
         double_p = ctypes.POINTER(ctypes.c_double)
-        c.af_reduced_step.argtypes = [ctypes.c_void_p, double_p, double_p, double_p,
-                                      ctypes.c_double, ctypes.c_double, ctypes.c_int]
-        c.af_reduced_positions.argtypes = [ctypes.c_void_p, double_p, double_p]
-        c.af_reduced_set_constant_force.argtypes = [ctypes.c_void_p, double_p]
-        self._c, self._handle = c, handle
-        self.n = c.af_reduced_vertices(handle)
-        self.r = c.af_reduced_coordinates(handle)
-
-    def __del__(self):
-        if getattr(self, "_handle", None):
-            self._c.af_reduced_free(self._handle)
-            self._handle = None
+        self._c.af_reduced_step.argtypes = [ctypes.c_void_p, double_p, double_p, double_p,
+                                            ctypes.c_double, ctypes.c_double, ctypes.c_int]
+        self.r = self._c.af_reduced_coordinates(self._handle)
 
     def rest_state(self):
         """(q, w): zeros (r,), float64."""
         return np.zeros(self.r), np.zeros(self.r)
 
-    def set_constant_force(self, force):
-        """A force (n, 3), N, added to every later step, projected once (None clears it)."""
-        code = self._c.af_reduced_set_constant_force(self._handle, self._forces(force))
-        if code != 0:
-            raise RuntimeError(f"af_reduced_set_constant_force: {CODES.get(code, code)}")
-
     def step(self, q, w, force, dt, rtol=1e-8, max_iter=50):
         """One backward-Euler step of q, w (float64 (r,), contiguous) in place under the
         constant force plus nodal forces (n, 3), N (None: none); RuntimeError naming the C
         runtime's code where it fails."""
-        code = self._c.af_reduced_step(self._handle, _pointer(q), _pointer(w),
-                                       self._forces(force), dt, rtol, max_iter)
-        if code != 0:
-            raise RuntimeError(f"af_reduced_step: {CODES.get(code, code)}")
-
-    @property
-    def iterations(self):
-        """Newton iterations of the last step."""
-        return self._c.af_reduced_iterations(self._handle)
-
-    def positions(self, q):
-        """Positions (n, 3), m."""
-        x = np.empty((self.n, 3))
-        self._c.af_reduced_positions(self._handle, _pointer(q), _pointer(x))
-        return x
+        self._call("step", _pointer(q), _pointer(w), self._forces(force), dt, rtol, max_iter)
 
 
 def _open(lib, prefix, path, angle, counts):
@@ -162,36 +174,22 @@ class CFramedSimulator(_CSimulator):
     """A framed model's arrays files (path without extension) stepped by the C runtime at
     `lib`: framed_runtime.FramedSimulator's interface, a state flat (af_framed_state_size,):
     centres, rotations, coordinates, base."""
+    PREFIX = "af_framed"
 
     def __init__(self, path, lib, angle=None):
-        c, handle = _open(lib, "af_framed", path, angle,
-                          ("af_framed_vertices", "af_framed_state_size", "af_framed_iterations"))
+        super().__init__(path, lib, angle, ("state_size",))
         double_p = ctypes.POINTER(ctypes.c_double)
+        c = self._c
         c.af_framed_rest_state.argtypes = [ctypes.c_void_p, double_p]
         c.af_framed_step.argtypes = [ctypes.c_void_p, double_p, double_p, double_p, double_p,
                                      double_p, ctypes.c_double, ctypes.c_int]
-        c.af_framed_positions.argtypes = [ctypes.c_void_p, double_p, double_p]
-        c.af_framed_set_constant_force.argtypes = [ctypes.c_void_p, double_p]
-        self._c, self._handle = c, handle
-        self.n = c.af_framed_vertices(handle)
-        self.size = c.af_framed_state_size(handle)
+        self.size = c.af_framed_state_size(self._handle)
         self._rest = np.empty(self.size)
-        c.af_framed_rest_state(handle, _pointer(self._rest))
-
-    def __del__(self):
-        if getattr(self, "_handle", None):
-            self._c.af_framed_free(self._handle)
-            self._handle = None
+        c.af_framed_rest_state(self._handle, _pointer(self._rest))
 
     def rest_state(self):
         """The rest state, flat (af_framed_state_size,)."""
         return self._rest.copy()
-
-    def set_constant_force(self, force):
-        """A force (n, 3), N, added to every later step, projected once (None clears it)."""
-        code = self._c.af_framed_set_constant_force(self._handle, self._forces(force))
-        if code != 0:
-            raise RuntimeError(f"af_framed_set_constant_force: {CODES.get(code, code)}")
 
     def step(self, now, before, force, dt, base=None, max_iter=50):
         """The state after now (flat states; before a step earlier) under the constant force
@@ -201,20 +199,7 @@ class CFramedSimulator(_CSimulator):
         if base is not None:
             base = np.ascontiguousarray(np.concatenate([np.asarray(base, float)[:, :3].ravel(),
                                                         np.asarray(base, float)[:, 3]]))
-        code = self._c.af_framed_step(self._handle, _pointer(now), _pointer(before),
-                                      _pointer(after), self._forces(force),
-                                      None if base is None else _pointer(base), dt, max_iter)
-        if code != 0:
-            raise RuntimeError(f"af_framed_step: {CODES.get(code, code)}")
+        self._call("step", _pointer(now), _pointer(before), _pointer(after),
+                   self._forces(force), None if base is None else _pointer(base), dt,
+                   max_iter)
         return after
-
-    @property
-    def iterations(self):
-        """Newton iterations of the last step."""
-        return self._c.af_framed_iterations(self._handle)
-
-    def positions(self, state):
-        """Positions (n, 3), m."""
-        x = np.empty((self.n, 3))
-        self._c.af_framed_positions(self._handle, _pointer(state), _pointer(x))
-        return x
