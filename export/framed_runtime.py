@@ -120,9 +120,10 @@ class FramedSimulator:
         self._pairs = unique.size
         first, second = unique // k, unique % k
         d = self.labels[self.joint_nodes]
+        domains = np.unique(d[d >= 0])
         self._pair_groups = []
-        for e in np.unique(d[d >= 0]):
-            for f in np.unique(d[d >= 0]):
+        for e in domains:
+            for f in domains:
                 rows = np.flatnonzero((d[first] == e) & (d[second] == f))
                 if rows.size:
                     self._pair_groups.append((int(e), int(f), first[rows], second[rows], rows))

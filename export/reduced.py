@@ -159,10 +159,13 @@ def write_framed(model, path, title="", gravity=None, display=None):
     return header
 
 
-def _mesh_arrays(scene):
-    mesh = scene.mesh
-    return {"rest_positions": mesh.vertices, "masses": np.asarray(scene.masses, np.float64),
-            "held": scene.fixed_mask.astype(np.uint8), "tets": mesh.tets.astype(np.int32),
+def _mesh_arrays(scene, mesh=None, masses=None, held=None):
+    """The arrays of the mesh a file moves: the scene's, or a display `mesh` with its
+    `masses` (n,) kg and `held` (n, 3) flags."""
+    if mesh is None:
+        mesh, masses, held = scene.mesh, scene.masses, scene.fixed_mask
+    return {"rest_positions": mesh.vertices, "masses": np.asarray(masses, np.float64),
+            "held": held.astype(np.uint8), "tets": mesh.tets.astype(np.int32),
             "surface": runtime.surface_triangles(mesh.vertices, mesh.tets).astype(np.int32)}
 
 
@@ -174,11 +177,8 @@ def _framed_display(model, display):
     nodes, weights = node_weights(scene.mesh, display.vertices)
     weighs = np.abs(weights) > 1e-12
     held = np.all(~weighs | (model.labels[nodes] < 0), axis=1)
-    return {"rest_positions": display.vertices, "masses": _display_masses(scene, display),
-            "held": np.repeat(held[:, None], 3, axis=1).astype(np.uint8),
-            "tets": display.tets.astype(np.int32),
-            "surface": runtime.surface_triangles(display.vertices,
-                                                 display.tets).astype(np.int32),
+    return {**_mesh_arrays(scene, display, _display_masses(scene, display),
+                           np.repeat(held[:, None], 3, axis=1)),
             "display_nodes": nodes.astype(np.int32), "display_weights": weights,
             "physics_rest": model.x0}
 
