@@ -72,6 +72,7 @@ class FramedSimulator:
         self._x0 = a.get("physics_rest", self.rest_positions)   # the model's own nodes
         self._display = ((a["display_nodes"].astype(np.int64), a["display_weights"])
                          if "display_nodes" in a else None)
+        self._domain_nodes = [np.flatnonzero(self.labels == e) for e in range(a["r"].size)]
         self.r = a["r"].astype(np.int64)
         self.q0 = np.concatenate([[0], np.cumsum(self.r)[:-1]]).astype(np.int64)
         self.z0 = np.concatenate([[0], np.cumsum(6 + self.r)[:-1]]).astype(np.int64)
@@ -173,7 +174,7 @@ class FramedSimulator:
         F = np.zeros((int(self.r.sum()), 3, 3))
         Fs = np.zeros((self.r.size, 3))
         for e in range(self.r.size):
-            nodes = np.flatnonzero(self.labels == e)
+            nodes = self._domain_nodes[e]
             F0[e] = f[nodes].T @ self.Y[nodes]
             F[self.q0[e]:self.q0[e] + self.r[e]] = np.einsum(
                 "ka,kbr->rab", f[nodes], self.U[nodes, :, :self.r[e]])
