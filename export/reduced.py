@@ -148,7 +148,10 @@ def write_framed(model, path, title="", gravity=None, display=None):
               "m": mesh.n_tets, "physics_tets": scene.mesh.n_tets,
               "domains": len(model.domains),
               "r": [d.r for d in model.domains], "unknowns": model.r,
-              "joint_elements": int(joints.tets.shape[0]), "size": model.size,
+              "joint_elements": int(joints.tets.shape[0]),
+              "joint_layer": int(joints.tets.shape[0] if model.cubature is None
+                                 else model.cubature.of),
+              "size": model.size,
               "build_seconds": model.build_seconds,
               "validation": (None if model.validation is None
                              else dataclasses.asdict(model.validation)),

@@ -12,7 +12,7 @@ from export import reduced as writer
 from export.cli import main
 from export.framed_runtime import FRAMED_FORMAT, FramedSimulator
 from export.runtime import ReducedSimulator
-from test_framed_model import beam_scene, swung_base, t_scene
+from test_framed_model import beam_scene, cubature_model, swung_base, t_scene  # noqa: F401
 
 
 @pytest.fixture(scope="module")
@@ -86,6 +86,34 @@ def test_runtime_steps_quadratic_tets_with_fibers_like_the_library(tmp_path):
     drag[list(tip), 1] = 0.05 / len(tip)
     error, _ = rollouts(scene, model, FramedSimulator(str(tmp_path / "beam")), 20, drag)
     assert error < 1e-9
+
+
+@pytest.fixture(scope="module")
+def cubature_written(tmp_path_factory, cubature_model):
+    """The beam's framed model with a cubature of its joints (test_framed_model), written."""
+    model = cubature_model[0]
+    path = str(tmp_path_factory.mktemp("cubature") / "beam")
+    header = writer.write_framed(model, path, "beam", gravity=model.scene.gravity)
+    return model, path, header
+
+
+def tip_drag(scene, share=0.5):
+    """A sideways drag of `share` of the body's weight spread over the tip of a beam along x."""
+    tip = af.metrics.end_vertices(scene.mesh, 0, "max")
+    force = np.zeros((scene.mesh.n_vertices, 3))
+    force[tip, 1] = share * scene.masses.sum() * 9.81 / tip.size
+    return force
+
+
+def test_runtime_steps_a_joint_cubature_like_the_library(cubature_written):
+    """The cubature is written as its elements, their weights folded into their volumes: the
+    file holds those and says of how many, and the runtime steps it as the library does."""
+    model, path, header = cubature_written
+    assert header["joint_elements"] == len(model.cubature.elements) < header["joint_layer"]
+    error, iterations = rollouts(model.scene, model, FramedSimulator(path), 40,
+                                 tip_drag(model.scene))
+    assert error < 1e-9
+    assert all(a == b for a, b in iterations)
 
 
 def test_header_holds_the_model_and_its_validation(tmp_path):

@@ -21,7 +21,10 @@ exactly for these kinematics:
 - The inertia and the loads are quadratic in x, so their sums over a domain's nodes reduce to
   3 x 3 moments of its basis, precomputed (FramedModel._targets): no mesh data per step.
 - The joints, the elements whose nodes lie in more than one domain (or on held nodes), are
-  evaluated element by element: a layer one element thick at each cut.
+  evaluated element by element: a layer one element thick at each cut. Where the cut's
+  cross-section holds many elements, a cubature (anisofem.reduced.cubature) of a few of them,
+  weighted, fitted to the model's own rollouts under the declared loads, stands in for the
+  layer, so that the step's cost stops growing with the mesh.
 The domains form a kinematic tree from the held nodes (anisofem.reduced.domains.tree): a
 domain's centre is carried by its parent's turn and its own about a pivot on their interface,
 c_e = c_p + R_p a_e + R_e b_e + t_e, so that a turn swings the domains beyond it on their arcs
@@ -31,7 +34,7 @@ on the model's own energy, started from the extrapolated state.
 """
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.linalg as sla
@@ -41,12 +44,13 @@ from .. import kernels
 from .._validate import as_float_array
 from ..potential import Potential
 from . import basis as _basis
+from . import cubature as _cubature
 from . import framed_kernels as fk
 from .framed_kernels import GEN
 from .domains import split, tree
 from .loads import Loads, default_loads, unseen_cases
-from .model import (REDRAWS, VALIDATION_CASES, NewtonReport, _count, check_polynomial_scene,
-                    validate_rollouts)
+from .model import (HOLD_STEPS, REDRAWS, VALIDATION_CASES, VALIDATION_DT, NewtonReport, _count,
+                    check_polynomial_scene, validate_rollouts)
 from .polynomial import polynomial
 from .snapshots import principal_directions, static_states
 
@@ -58,6 +62,18 @@ BANDS = 4
 COORDINATES = 12
 #: Rest vibration modes whose restrictions join each domain's snapshots.
 MODES = 6
+
+#: The joints' cubature: a weighted few of the joint elements whose generalized forces match
+#: the whole layer's within this share on the model's own rollouts, kept where it takes at
+#: most CUBATURE_SHARE of the joint elements (else the layer is evaluated whole). Fitted on
+#: CUBATURE_CASES rollouts under load cases drawn from the declaration with CUBATURE_SEED (the
+#: validation draws with seed 0), each held HOLD_STEPS steps of VALIDATION_DT and released
+#: as many, every CUBATURE_EVERY-th state a pose (docs/experiments.md).
+CUBATURE_RESIDUAL = 0.01
+CUBATURE_SHARE = 0.5
+CUBATURE_CASES = 6
+CUBATURE_SEED = 1
+CUBATURE_EVERY = 2
 
 #: A Newton iteration is the last when no node moves more than this share of the body's size.
 STEP_TOLERANCE = 1e-8
@@ -118,18 +134,24 @@ class FramedModel:
     loads : a Loads, what the model must handle beyond the scene's own loads (default:
         default_loads, a drag of up to half the body's weight at each free end). Its static
         equilibria shape the local bases, and unseen cases drawn from it validate the model.
-    validate : run the validation (VALIDATION_CASES rollouts against the full FEM).
+    cubature : the share of the joints' generalized forces a cubature of the joint elements
+        may miss on the model's rollouts (default CUBATURE_RESIDUAL); 0 evaluates every joint
+        element. Kept only where it takes at most CUBATURE_SHARE of them.
+    validate : run the validation (VALIDATION_CASES rollouts against the full FEM), of the
+        model with its cubature.
 
     Attributes: domains (list of Domain); labels (n,) each node's domain, -1 held; parent
     (D,) each domain's parent in the kinematic tree (-1: the held nodes); joint_nodes, the
-    nodes of the joint elements; r, the
+    nodes of the joint elements evaluated; cubature (an anisofem.reduced.cubature.Cubature
+    over the joint layer's elements, or None where every one is evaluated); r, the
     Newton unknowns (6 per domain and its coordinates); x0 (n, 3) rest positions; loads;
-    snapshots (a SnapshotReport); build_seconds; validation (a Validation, or None).
+    snapshots (a SnapshotReport); build_seconds (the cubature's rollouts included);
+    validation (a Validation, or None).
     A NewtonReport's residual here is the last Newton step's largest node move bound, m.
     """
 
     def __init__(self, scene, bands=BANDS, coordinates=COORDINATES, modes=MODES, loads=None,
-                 validate=True):
+                 cubature=CUBATURE_RESIDUAL, validate=True):
         check_polynomial_scene(scene, "framed model")
         why = refusal(scene)
         if why:
@@ -141,6 +163,10 @@ class FramedModel:
         if modes >= scene.n_free:
             raise ValueError(f"modes: {modes} modes need more than the scene's {scene.n_free} "
                              f"unknowns")
+        if not (isinstance(cubature, (int, float, np.floating)) and not isinstance(cubature, bool)
+                and 0.0 <= cubature < 1.0):
+            raise ValueError(f"cubature: expected a share from 0 (every joint element) to below "
+                             f"1, got {cubature!r}")
         loads = default_loads(scene) if loads is None else loads
         if not isinstance(loads, Loads):
             raise TypeError(f"loads: expected an anisofem.reduced.Loads, got "
@@ -167,6 +193,7 @@ class FramedModel:
         self.size = float(np.ptp(self.x0, axis=0).max())
         self._set_joints(joints)
         self._own = self._project(scene.external_force)
+        self.cubature = self._fit_joints(joints, cubature) if cubature > 0 else None
         credit = max(self.snapshots.seconds - (time.perf_counter() - t0), 0.0)
         self.build_seconds = time.perf_counter() - t0 + credit
         self.validation = self.validate() if validate else None
@@ -180,14 +207,18 @@ class FramedModel:
                  for d in range(self.labels.max() + 1)]
         return inner, np.flatnonzero(~inner_mask & (owner >= 0).any(axis=1))
 
-    def _set_joints(self, rows):
-        """The joints, elements `rows`, over a compact numbering of their nodes: their
-        ElementData, the nodes' packed rows (labels, Y, U, x0) and the Hessian's node pairs."""
+    def _set_joints(self, rows, weights=None):
+        """The joints, elements `rows`, their energies times `weights` (len(rows),; default
+        1), over a compact numbering of their nodes: their ElementData, the nodes' packed rows
+        (labels, Y, U, x0) and the Hessian's node pairs."""
         elements = self.scene.elements
         nodes, local = np.unique(elements.tets[rows], return_inverse=True)
         tets = local.reshape(len(rows), -1)
         self.joint_nodes = nodes
         self._joint_elements = elements.subset(rows, tets)
+        if weights is not None:
+            self._joint_elements = replace(self._joint_elements, weights=(
+                self._joint_elements.weights * np.asarray(weights)[:, None]))
         self._joint_rows = (self._labels[nodes], self._Y[nodes], self._U[nodes],
                             self.x0[nodes].copy())
         k = tets.shape[1]
@@ -285,8 +316,13 @@ class FramedModel:
         """Positions (k + 1, n, 3) from rest through phases ((extra nodal force (n, 3) N or
         None, steps), ...) of dt s, the held nodes carried by base (t -> (3, 4), or None), and
         whether every step converged."""
+        states, ok = self._states(phases, dt, base)
+        return np.array([self.positions(s) for s in states]), ok
+
+    def _states(self, phases, dt, base=None):
+        """rollout()'s FramedStates (k + 1,), and whether every step converged."""
         now = before = self.rest()
-        xs, ok, k = [self.positions(now)], True, 0
+        states, ok, k = [now], True, 0
         for force, steps in phases:
             for _ in range(steps):
                 k += 1
@@ -294,8 +330,53 @@ class FramedModel:
                 after, report = self.step(now, before, dt, force=force, base=at)
                 ok &= report.converged
                 now, before = after, now
-                xs.append(self.positions(now))
-        return np.array(xs), ok
+                states.append(now)
+        return states, ok
+
+    def _fit_joints(self, rows, residual):
+        """A Cubature of the joint elements `rows` (its elements index rows), fitted on the
+        model's rollouts under CUBATURE_CASES drawn cases, and the joints set to it; None (the
+        joints left whole) where it would take more than CUBATURE_SHARE of them. Each pose
+        weighs alike: its generalized forces over their sum's norm, its energies over their
+        sum."""
+        most = int(CUBATURE_SHARE * len(rows))
+        if most < 1:
+            return None
+        t0 = time.perf_counter()
+        zero = np.zeros_like(self.x0)
+        blocks = []
+        for _, force, base in unseen_cases(self.scene, self.loads, CUBATURE_CASES,
+                                           CUBATURE_SEED):
+            states, _ = self._states(((force, HOLD_STEPS), (zero, HOLD_STEPS)), VALIDATION_DT,
+                                     base)
+            for state in states[CUBATURE_EVERY::CUBATURE_EVERY]:
+                forces, energies = self._joint_element_forces(state)
+                total = forces.sum(axis=0)
+                blocks.append(np.vstack([forces.T / max(np.linalg.norm(total), 1e-300),
+                                         energies / max(abs(energies.sum()), 1e-300)]))
+        chosen, weights, missed = _cubature.select(np.vstack(blocks), residual,
+                                                   most)
+        if missed > residual:
+            return None
+        self._set_joints(rows[chosen], weights)
+        return _cubature.Cubature(chosen, weights, len(rows), missed, time.perf_counter() - t0)
+
+    def _joint_element_forces(self, state):
+        """Each joint element's generalized force (m, r) in the domains' (c, theta, q) at
+        theta = 0, N, and its energy (m,), J, at a FramedState."""
+        elements = self._joint_elements
+        m, k = elements.tets.shape
+        own = elements.subset(np.arange(m), np.arange(m * k).reshape(m, k))
+        x = self._joint_positions(state)
+        e_iso, e_fib, grad = kernels.assemble(x[elements.tets].reshape(-1, 3), own,
+                                              want_grad=True)
+        dom, U = self._joint_rows[0], self._joint_rows[2]
+        Jn = np.zeros((dom.size, 3, 6 + self._r.max()))
+        fk.node_jacobians(x, state.c, state.R, dom, U, self._r, Jn)
+        forces = np.zeros((m, self.r))
+        fk.element_forces(elements.tets, grad.reshape(m, k, 3), Jn, dom, self._z0, self._r,
+                          forces)
+        return forces, e_iso + e_fib
 
     def validate(self, cases=None, seed=0):
         """The model against the full FEM on `cases` (default VALIDATION_CASES) short rollouts

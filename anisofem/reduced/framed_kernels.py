@@ -167,7 +167,7 @@ def node_positions(c, R, q, base, dom, Y, U, x0, q0, r, out):
 
 
 @njit(cache=True, fastmath=_SUMS)
-def _node_jacobians(x, c, R, dom, U, r, Jn):
+def node_jacobians(x, c, R, dom, U, r, Jn):
     """Jn[i] (3, 6 + r) = dx_i / d(c, theta, q) of each free joint node in its domain:
     [I | -[w]_x | R U_i], w = x_i - c."""
     for i in range(dom.size):
@@ -187,6 +187,22 @@ def _node_jacobians(x, c, R, dom, U, r, Jn):
 
 
 @njit(cache=True, fastmath=_SUMS)
+def element_forces(tets, grad, Jn, dom, z0, r, out):
+    """Add each element's generalized force to out (m, Z): sum over its nodes i = tets[e, a]
+    of Jn[i]^T grad[e, a] in node i's domain's unknowns (held nodes, dom -1: none); grad
+    (m, k, 3), N, the element's own gradient on each of its nodes; Jn (node_jacobians)."""
+    for e in range(tets.shape[0]):
+        for a in range(tets.shape[1]):
+            i = tets[e, a]
+            d = dom[i]
+            if d < 0:
+                continue
+            for v in range(6 + r[d]):
+                out[e, z0[d] + v] += (Jn[i, 0, v] * grad[e, a, 0] + Jn[i, 1, v] * grad[e, a, 1]
+                                      + Jn[i, 2, v] * grad[e, a, 2])
+
+
+@njit(cache=True, fastmath=_SUMS)
 def joint_derivatives(x, grad, blocks, pairs, pair_ptr, c, R, dom, U, r, z0, g, H):
     """Add the joints' gradient and Hessian, chained through each node's frame: grad (k, 3) and
     the Hessian's 3 x 3 blocks (p, 3, 3) in the positions of the node pairs (p, 2) that share
@@ -195,7 +211,7 @@ def joint_derivatives(x, grad, blocks, pairs, pair_ptr, c, R, dom, U, r, z0, g, 
     k = dom.size
     nz = g.size
     Jn = np.zeros((k, 3, 6 + r.max()))
-    _node_jacobians(x, c, R, dom, U, r, Jn)
+    node_jacobians(x, c, R, dom, U, r, Jn)
     K = np.zeros((3, nz))
     S = np.zeros((nz, nz))
     touched = np.zeros(r.size, np.bool_)
