@@ -344,29 +344,31 @@ class FramedModel:
             return None
         t0 = time.perf_counter()
         zero = np.zeros_like(self.x0)
+        m, k = self._joint_elements.tets.shape
+        own = self._joint_elements.subset(np.arange(m), np.arange(m * k).reshape(m, k))
         blocks = []
         for _, force, base in unseen_cases(self.scene, self.loads, CUBATURE_CASES,
                                            CUBATURE_SEED):
             states, _ = self._states(((force, HOLD_STEPS), (zero, HOLD_STEPS)), VALIDATION_DT,
                                      base)
             for state in states[CUBATURE_EVERY::CUBATURE_EVERY]:
-                forces, energies = self._joint_element_forces(state)
+                forces, energies = self._joint_element_forces(state, own)
                 total = forces.sum(axis=0)
                 blocks.append(np.vstack([forces.T / max(np.linalg.norm(total), 1e-300),
                                          energies / max(abs(energies.sum()), 1e-300)]))
-        chosen, weights, missed = _cubature.select(np.vstack(blocks), residual,
-                                                   most)
+        chosen, weights, missed = _cubature.select(np.vstack(blocks), residual, most)
         if missed > residual:
             return None
         self._set_joints(rows[chosen], weights)
         return _cubature.Cubature(chosen, weights, len(rows), missed, time.perf_counter() - t0)
 
-    def _joint_element_forces(self, state):
+    def _joint_element_forces(self, state, own):
         """Each joint element's generalized force (m, r) in the domains' (c, theta, q) at
-        theta = 0, N, and its energy (m,), J, at a FramedState."""
+        theta = 0, N, and its energy (m,), J, at a FramedState; own, the joint elements'
+        ElementData with nodes of their own (numbered element by element), so that the
+        assembled gradient is each element's."""
         elements = self._joint_elements
         m, k = elements.tets.shape
-        own = elements.subset(np.arange(m), np.arange(m * k).reshape(m, k))
         x = self._joint_positions(state)
         e_iso, e_fib, grad = kernels.assemble(x[elements.tets].reshape(-1, 3), own,
                                               want_grad=True)
