@@ -158,8 +158,14 @@ def _framed(args, scene, display):
                                   display=display)
     print(f"wrote {args.output}.json and .bin: {header['n']} vertices, {header['m']} tets, "
           f"{header['domains']} domains, {header['unknowns']} unknowns, "
-          f"{header['joint_elements']} joint elements, built in "
+          f"{header['joint_elements']} joint elements{_cubature(header)}, built in "
           f"{model.build_seconds:.2g} s{_checked(model.validation)}")
+
+
+def _cubature(header):
+    """Where a framed file's joints are a cubature, the clause that says of how many."""
+    layer = header["joint_layer"]
+    return "" if layer == header["joint_elements"] else f" (a cubature of its {layer})"
 
 
 def _checked(v):

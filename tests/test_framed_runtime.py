@@ -9,6 +9,7 @@ import pytest
 import anisofem as af
 from anisofem.reduced import Drag, FramedModel, Loads
 from export import reduced as writer
+from export import cli
 from export.cli import main
 from export.framed_runtime import FRAMED_FORMAT, FramedSimulator
 from export.runtime import ReducedSimulator
@@ -110,6 +111,7 @@ def test_runtime_steps_a_joint_cubature_like_the_library(cubature_written):
     file holds those and says of how many, and the runtime steps it as the library does."""
     model, path, header = cubature_written
     assert header["joint_elements"] == len(model.cubature.elements) < header["joint_layer"]
+    assert cli._cubature(header) == " (a cubature of its 320)"
     error, iterations = rollouts(model.scene, model, FramedSimulator(path), 40,
                                  tip_drag(model.scene))
     assert error < 1e-9
