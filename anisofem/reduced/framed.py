@@ -336,9 +336,9 @@ class FramedModel:
     def _fit_joints(self, rows, residual):
         """A Cubature of the joint elements `rows` (its elements index rows), fitted on the
         model's rollouts under CUBATURE_CASES drawn cases, and the joints set to it; None (the
-        joints left whole) where it would take more than CUBATURE_SHARE of them. Each pose
-        weighs alike: its generalized forces over their sum's norm, its energies over their
-        sum."""
+        joints left whole) where it would take more than CUBATURE_SHARE of them, or where no
+        pose loads the joints. Each pose weighs alike: its generalized forces over their sum's
+        norm, its energies over their sum."""
         most = int(CUBATURE_SHARE * len(rows))
         if most < 1:
             return None
@@ -353,9 +353,12 @@ class FramedModel:
                                      base)
             for state in states[CUBATURE_EVERY::CUBATURE_EVERY]:
                 forces, energies = self._joint_element_forces(state, own)
-                total = forces.sum(axis=0)
-                blocks.append(np.vstack([forces.T / max(np.linalg.norm(total), 1e-300),
-                                         energies / max(abs(energies.sum()), 1e-300)]))
+                size = np.linalg.norm(forces.sum(axis=0))
+                if size > 0 and np.isfinite(size) and np.isfinite(energies).all():
+                    blocks.append(np.vstack([forces.T / size,
+                                             energies / max(abs(energies.sum()), 1e-300)]))
+        if not blocks:
+            return None
         chosen, weights, missed = _cubature.select(np.vstack(blocks), residual, most)
         if missed > residual:
             return None
