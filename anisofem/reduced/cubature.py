@@ -15,9 +15,9 @@ from scipy.optimize import nnls
 @dataclass
 class Cubature:
     """A cubature: elements (k,) the chosen ones' indices among those fitted; weights (k,) > 0
-    their weights; of, how many elements it was fitted from; residual, the largest share of
-    the training forces the weighted sum misses (|A w - A 1| / |A 1|); seconds, its fit's
-    time with the training poses'."""
+    their weights; of, how many elements it was fitted from; residual, the share of the
+    training forces the weighted sum misses, |A w - A 1| / |A 1| over all poses stacked (A:
+    the elements' forces, a column each); seconds, its fit's time with the training poses'."""
     elements: np.ndarray
     weights: np.ndarray
     of: int
@@ -33,7 +33,8 @@ def select(forces, residual, most):
     share missed).
 
     Each round's non-negative least squares runs on the chosen columns' Gram matrix G = L L^T
-    (k x k): |A w - b|^2 = |L^T w - L^-1 A^T b|^2 + const, so a round costs p k, not p k^2."""
+    (k x k, grown a column a round): |A w - b|^2 = |L^T w - L^-1 A^T b|^2 + const, so it costs
+    k^3 rather than p k^2."""
     forces = np.asarray(forces, float)
     target = forces.sum(axis=1)
     size = np.linalg.norm(target)
