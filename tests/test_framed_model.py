@@ -108,8 +108,7 @@ def check_derivatives(model, inertia, seed=3, base=None, size=1e-3):
     """Every gradient component against central differences of the energy (in the Newton
     unknowns: t, theta turning R by exp([theta]), q), and 40 Hessian entries against mixed
     second differences, both Richardson-extrapolated, each Hessian entry within 1e-6 of
-    sqrt(H_ii H_jj), at a
-    state `size` away from rest (step_problem)."""
+    sqrt(H_ii H_jj), at a state `size` away from rest (step_problem)."""
     now, _, _, targets = step_problem(model, seed, inertia, base, size)
     E, g, H = model.derivatives(now, targets, inertia)
 
@@ -173,8 +172,8 @@ def test_joint_cubature_takes_a_weighted_few_of_the_joint_elements(cubature_mode
 
 @pytest.mark.parametrize("inertia", [0.0, 2500.0])
 def test_joint_cubature_derivatives_against_finite_differences(cubature_model, inertia):
-    """At a state 1e-4 from rest: this beam's coordinates move its nodes 8x farther per unit
-    than the T's, and at 1e-3 its energy (3e5 J) leaves the differences to round-off."""
+    """At a state 1e-4 from rest (its energy 50 J): at the T's 1e-3 this beam's energy is
+    3e5 J, and the differences drown in its round-off."""
     check_derivatives(cubature_model[0], inertia, seed=5, size=1e-4)
 
 
