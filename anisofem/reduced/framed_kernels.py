@@ -338,28 +338,37 @@ def tree_chain(R, chain, arms, zc, zt, g, H, N):
 @njit(cache=True)
 def rodrigues(theta, out):
     """out (D, 3, 3) = exp([theta_d]_x) of rotation vectors theta (D, 3), by Rodrigues'
-    formula (1 - cos a written 2 sin^2(a/2), which keeps its digits at small angles)."""
+    formula (1 - cos a written 2 sin^2(a/2), which keeps its digits at small angles), with
+    [t]_x^2 = t t^T - |t|^2 I."""
     for d in range(theta.shape[0]):
         t0, t1, t2 = theta[d, 0], theta[d, 1], theta[d, 2]
-        angle = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        square = t0 * t0 + t1 * t1 + t2 * t2
+        angle = np.sqrt(square)
         first = np.sin(angle) / angle if angle > 0 else 1.0
         half = np.sin(0.5 * angle) / (0.5 * angle) if angle > 0 else 1.0
-        K = np.array([[0.0, -t2, t1], [t2, 0.0, -t0], [-t1, t0, 0.0]])
-        KK = K @ K
+        second = 0.5 * half * half
+        t = (t0, t1, t2)
         for i in range(3):
             for j in range(3):
-                out[d, i, j] = (1.0 if i == j else 0.0) + first * K[i, j] + 0.5 * half * half * KK[i, j]
+                out[d, i, j] = second * t[i] * t[j]
+            out[d, i, i] += 1.0 - second * square
+        out[d, 0, 1] -= first * t2
+        out[d, 1, 0] += first * t2
+        out[d, 0, 2] += first * t1
+        out[d, 2, 0] -= first * t1
+        out[d, 1, 2] -= first * t0
+        out[d, 2, 1] += first * t0
 
 
 @njit(cache=True)
 def nearest_rotations(R):
     """Each R[d] (D, 3, 3), a rotation up to round-off, replaced in place by its nearest
     rotation: the polar factor by X <- (X + X^-T) / 2, until no entry changes by 1e-16."""
+    C = np.empty((3, 3))
     for d in range(R.shape[0]):
         X = R[d]
         for _ in range(20):
             # X^-T by cofactors: row i of the cofactor matrix over det
-            C = np.empty((3, 3))
             for i in range(3):
                 i1, i2 = (i + 1) % 3, (i + 2) % 3
                 for j in range(3):
