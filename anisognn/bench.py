@@ -8,8 +8,8 @@ import numpy as np
 import torch
 
 from anisofem import box_beam, default_scene
-from anisofem.files import publish, result_path
-from anisofem.timing import best_time
+from anisofem.io.output import publish, result_path
+from anisofem.studies.timing import best_time
 
 from .graph import from_scene
 from .model import GraphNet, ModelConfig

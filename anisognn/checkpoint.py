@@ -5,7 +5,7 @@ import os
 
 import torch
 
-from anisofem.files import atomic_path
+from anisofem.io.output import atomic_path
 
 from .model import GraphNet, ModelConfig
 

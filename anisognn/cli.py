@@ -4,7 +4,7 @@ import argparse
 import os
 import sys
 
-from anisofem.files import result_path
+from anisofem.io.output import result_path
 
 from . import bench, evaluate, shipped, train
 from .model import with_galerkin

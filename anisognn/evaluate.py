@@ -37,9 +37,10 @@ from dataclasses import dataclass
 import numpy as np
 
 import anisofem
-from anisofem import Material, Scene, box_beam, cylinder_beam, metrics
-from anisofem.files import result_path, write_json
-from anisofem.inversion import volume_change
+from anisofem import Material, Scene, box_beam, cylinder_beam
+from anisofem.physics import metrics
+from anisofem.io.output import result_path, write_json
+from anisofem.physics.inversion import volume_change
 
 from .sampler import DENSITY, POISSON, YOUNG
 

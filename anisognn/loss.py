@@ -30,8 +30,8 @@ decrease one Newton step promises there: every sample then weighs alike, whateve
 import numpy as np
 import torch
 
-from anisofem import linsolve
-from anisofem.potential import Potential
+from anisofem.solvers import linsolve
+from anisofem.physics.potential import Potential
 
 
 class BatchPotential:

@@ -7,8 +7,8 @@ import numpy as np
 import torch
 
 from anisofem import Material
-from anisofem.solve import Stepper
-from anisofem.ladder import Rung
+from anisofem.solvers.solve import Stepper
+from anisofem.studies.rungs import Rung
 
 from .galerkin import galerkin_acceleration
 from .graph import from_scene

@@ -31,7 +31,7 @@ import torch
 import torch.distributed as dist
 
 import anisofem
-from anisofem.files import atomic_path
+from anisofem.io.output import atomic_path
 
 from . import checkpoint
 from .graph import batch as batch_graphs

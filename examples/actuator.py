@@ -5,7 +5,7 @@ held base and pressure in a cavity.
     python examples/actuator.py twist    # bends and twists: one family, 88 -> 60 degrees
 
 Reads examples/scenes/actuator.toml (or actuator_twist.toml) and its mesh (examples/scenes/
-actuator.msh, made by anisofem.meshgen.actuator: an elastomer body of half-circular section
+actuator.msh, made by anisofem.physics.meshgen.actuator: an elastomer body of half-circular section
 around a cavity on a stiff strain-limiting layer). Ramps the cavity's pressure in static
 solves, prints the tip's bending and twist at each pressure, draws the actuator at four of them
 (out/actuator.png or out/actuator_twist.png) and writes the ramp as a ParaView collection
@@ -22,7 +22,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 import anisofem as af  # noqa: E402
-import anisofem.draw  # noqa: E402,F401
+import anisofem.io.draw  # noqa: E402,F401
 
 SCENES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "scenes")
 #: Shares of the scene file's pressure the ramp solves for, in order.
@@ -75,7 +75,7 @@ def draw(scene, states, pressure, path, kind):
     hi = np.max([states[k].max(0) for k in picks], axis=0)
     for i, k in enumerate(picks):
         ax = fig.add_subplot(1, len(picks), i + 1, projection="3d")
-        af.draw.deformed_surface(ax, scene.mesh, states[k], norm)
+        af.io.draw.deformed_surface(ax, scene.mesh, states[k], norm)
         ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]),
                box_aspect=tuple(hi - lo))
         ax.view_init(elev=8, azim=-35)

@@ -14,7 +14,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 import anisofem as af  # noqa: E402
-import anisofem.draw  # noqa: E402,F401
+import anisofem.io.draw  # noqa: E402,F401
 
 os.makedirs("out", exist_ok=True)
 mesh = af.box_beam(size=(0.1, 0.02, 0.02), cells=(20, 4, 4))
@@ -37,7 +37,7 @@ norm = matplotlib.colors.Normalize(0, 1e3 * u_max)
 fig = plt.figure(figsize=(12, 3.4))
 for k, (name, (x, sag)) in enumerate(results.items()):
     ax = fig.add_subplot(1, 3, k + 1, projection="3d")
-    af.draw.deformed_surface(ax, mesh, x, norm)
+    af.io.draw.deformed_surface(ax, mesh, x, norm)
     ax.set(xlim=(0, 0.1), ylim=(-0.02, 0.02), zlim=(-0.035, 0.012), box_aspect=(10, 4, 4.7))
     ax.view_init(elev=14, azim=-62)
     ax.set_axis_off()

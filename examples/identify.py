@@ -19,8 +19,8 @@ import numpy as np
 
 import anisofem as af
 from anisofem.cli import main as command
-from anisofem.fit import Markers
-from anisofem.sensitivity import fiber_direction
+from anisofem.inverse.fit import Markers
+from anisofem.inverse.sensitivity import fiber_direction
 
 SIZE = (0.1, 0.02, 0.02)                # m
 TRUE_ANGLE, TRUE_KAPPA = 10.0, 2e5      # degrees from x toward z; Pa

@@ -24,7 +24,7 @@ loads = [1, 10, 100, 1000, 10000]  # g
 print(f"{'material':<11} {'load':>8} {'converged':>9} {'its':>4} {'inverted':>8} "
       f"{'min det F':>9} {'tip sag mm':>10}")
 sags = {}
-for model in af.material.MODELS:
+for model in af.physics.material.MODELS:
     material = af.Material(1e5, 0.48, 1000.0, (1, 0, 0), 1e5, model=model)
     sags[model] = []
     for g in loads:
@@ -39,7 +39,7 @@ for model in af.material.MODELS:
               f"{inv.inverted:>8} {inv.min_volume_ratio:>9.3f} {sag:>10.1f}")
 
 fig, ax = plt.subplots(figsize=(6, 4))
-for model, marker in zip(af.material.MODELS, "os"):
+for model, marker in zip(af.physics.material.MODELS, "os"):
     ax.plot(loads, sags[model], marker=marker, label=model)
 ax.set_xscale("log")
 ax.set_xlabel("gravity (g)")

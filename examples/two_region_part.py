@@ -17,7 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 import anisofem as af  # noqa: E402
-import anisofem.draw  # noqa: E402,F401
+import anisofem.io.draw  # noqa: E402,F401
 
 SCENE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "scenes", "part.toml")
 STEPS, DT = 40, 0.02
@@ -42,7 +42,7 @@ def main():
     fig = plt.figure(figsize=(12, 3.6))
     for i, k in enumerate(picks):
         ax = fig.add_subplot(1, len(picks), i + 1, projection="3d")
-        af.draw.deformed_surface(ax, scene.mesh, rollout.positions[k], norm)
+        af.io.draw.deformed_surface(ax, scene.mesh, rollout.positions[k], norm)
         ax.set(xlim=(0, 0.095), ylim=(-0.02, 0.02), zlim=(-0.02, 0.02), box_aspect=(9.5, 4, 4))
         ax.view_init(elev=18, azim=-70)
         ax.set_axis_off()

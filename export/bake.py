@@ -16,9 +16,9 @@ import os
 import numpy as np
 
 import anisofem
-from anisofem import metrics
-from anisofem.files import atomic_path
-from anisofem.scene import GRAVITY
+from anisofem.physics import metrics
+from anisofem.io.output import atomic_path
+from anisofem.physics.scene import GRAVITY
 
 from . import runtime
 

@@ -11,8 +11,8 @@ import onnxruntime
 import torch
 
 from anisofem import box_beam, default_scene
-from anisofem.files import publish, result_path
-from anisofem.timing import best_time
+from anisofem.io.output import publish, result_path
+from anisofem.studies.timing import best_time
 from anisognn import shipped
 from anisognn.bench import MESHES
 from anisognn.model import GraphNet, ModelConfig, with_galerkin

@@ -16,8 +16,8 @@ import time
 
 import numpy as np
 
-from anisofem.convergence import cantilever
-from anisofem.files import publish
+from anisofem.studies.convergence import cantilever
+from anisofem.io.output import publish
 from anisofem.reduced import FramedModel, ReducedModel
 
 from . import native, reduced

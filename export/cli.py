@@ -7,7 +7,7 @@ import argparse
 import sys
 
 from anisofem.cli import BAD_INPUT, Parser
-from anisofem.files import check_folder, result_path
+from anisofem.io.output import check_folder, result_path
 
 from . import bake, model_path
 

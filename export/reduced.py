@@ -29,7 +29,7 @@ import numpy as np
 from anisofem import Material, Scene, TetMesh
 from anisofem.reduced import FramedModel, ReducedModel
 from anisofem.reduced.display import node_weights
-from anisofem.scene import GRAVITY
+from anisofem.physics.scene import GRAVITY
 
 from . import runtime
 from .framed_runtime import FRAMED_FORMAT

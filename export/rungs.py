@@ -7,7 +7,7 @@ import os
 import numpy as np
 import onnxruntime
 
-from anisofem.ladder import Rung
+from anisofem.studies.rungs import Rung
 
 from . import model_path
 from .runtime import OnnxSimulator, _lame

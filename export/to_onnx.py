@@ -18,7 +18,7 @@ import onnx
 import torch
 from torch import nn
 
-from anisofem.files import atomic_path
+from anisofem.io.output import atomic_path
 
 from anisognn.graph import Graph
 from anisognn.model import GraphNet, integrate

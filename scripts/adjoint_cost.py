@@ -1,7 +1,7 @@
 """What one gradient costs next to the computation it differentiates, in one run, on the
 trade's cantilever (fibers at 40 degrees, kappa = E, gravity) on 1,600 and 12,800 tets (or
 --cells), J the tip's height:
-- statics: the static solve by anisofem.solve, then anisofem.sensitivity.static_sensitivity
+- statics: the static solve by anisofem.solve, then anisofem.inverse.sensitivity.static_sensitivity
   (one Hessian assembly, one factorization with its definiteness check, one back-substitution,
   the parameter derivatives of every element);
 - a 20-step rollout: anisofem.simulate, then sensitivity.rollout_sensitivity (one
@@ -22,10 +22,10 @@ import time
 import numpy as np
 
 import anisofem as af
-from anisofem.files import publish
+from anisofem.io.output import publish
 from anisofem.reduced import ReducedModel
 from anisofem.reduced.sensitivity import rollout_sensitivity as reduced_rollout_sensitivity
-from anisofem.sensitivity import rollout_sensitivity, static_sensitivity
+from anisofem.inverse.sensitivity import rollout_sensitivity, static_sensitivity
 
 #: the rollout: backward-Euler steps of DT s from rest
 STEPS, DT = 20, 0.02

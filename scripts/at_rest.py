@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 import anisofem
-from anisofem.potential import Potential
+from anisofem.physics.potential import Potential
 from anisognn import evaluate, shipped
 from anisognn import train as T
 from anisognn.elastic import elastic_force

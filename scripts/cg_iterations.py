@@ -19,7 +19,7 @@ import argparse
 import numpy as np
 
 import anisofem
-from anisofem.files import result_path, write_json
+from anisofem.io.output import result_path, write_json
 from anisognn import evaluate, shipped
 from anisognn.model import with_galerkin
 from anisognn.rollout import rollout

@@ -23,8 +23,8 @@ import numpy as np
 import torch
 
 import anisofem
-from anisofem.files import result_path, write_json
-from anisofem.solve import Stepper
+from anisofem.io.output import result_path, write_json
+from anisofem.solvers.solve import Stepper
 from anisognn import pretrained
 from anisognn.rollout import network_step
 
@@ -45,7 +45,7 @@ def scene_of(refinement):
     mesh = anisofem.box_beam(size=(0.1, 0.02, 0.02), cells=(10 * refinement, 2 * refinement,
                                                              2 * refinement))
     material = anisofem.Material(1e5, 0.48, 1000.0, FIBER, 1e5)
-    return anisofem.Scene(mesh, material, fixed=anisofem.metrics.end_vertices(mesh, 0, "min"),
+    return anisofem.Scene(mesh, material, fixed=anisofem.physics.metrics.end_vertices(mesh, 0, "min"),
                           gravity=(0, 0, -9.81))
 
 

@@ -23,8 +23,8 @@ import time
 import numpy as np
 
 import anisofem as af
-from anisofem.files import publish, result_path
-from anisofem.convergence import cantilever
+from anisofem.io.output import publish, result_path
+from anisofem.studies.convergence import cantilever
 from anisofem.reduced import FramedModel, ReducedModel
 from export import native
 from export import reduced as writer

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 import anisofem as af
-from anisofem.files import publish, result_path
+from anisofem.io.output import publish, result_path
 from anisofem.reduced import FramedModel, ReducedModel
 
 FIBER = np.array([0.766, 0.0, 0.643]) / np.linalg.norm([0.766, 0.0, 0.643])

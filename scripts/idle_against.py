@@ -27,20 +27,20 @@ SCENES = {"200": ((10, 2, 2), 20), "12800": ((40, 8, 8), 5)}
 
 def worker(tree, scene_name, names):
     """Time the rungs of the anisofem in `tree` on one scene: {rung: ms per step}. It builds
-    the trade cantilever itself (as anisofem.bench_load does) from the API every version has:
+    the trade cantilever itself (as anisofem.studies.bench_load does) from the API every version has:
     an older tree may have no bench_load to import."""
     sys.path.insert(0, tree)
     import anisofem as af
-    from anisofem import ladder
+    from anisofem.studies import rungs as ladder_rungs
     cells, steps = SCENES[scene_name]
     mesh = af.box_beam((0.1, 0.02, 0.02), cells)
     fiber = (np.cos(np.radians(40)), 0.0, np.sin(np.radians(40)))
     scene = af.Scene(mesh, af.Material(1e5, 0.48, 1000.0, fiber, 1e5),
                      fixed=af.metrics.end_vertices(mesh, 0, "min"), gravity=(0, 0, -9.81))
     assert os.path.dirname(os.path.dirname(af.__file__)) == tree, af.__file__
-    rungs = ladder.fem_rungs() + ladder.registered_rungs(scene, 0.02, [])
+    rungs = ladder_rungs.fem_rungs() + ladder_rungs.registered_rungs(scene, 0.02, [])
     if names:
-        rungs = ladder.select_rungs(rungs, names)
+        rungs = ladder_rungs.select_rungs(rungs, names)
     out = {}
     for rung in rungs:
         advance = rung.make(scene, 0.02 * rung.dt_factor)
@@ -103,7 +103,7 @@ def main():
     for r in rows:
         print(f"{r['tets']:>6} {r['rung']:<30} {r['this_ms']:9.3g} {r['other_ms']:9.3g} "
               f"{r['ratio']:7.2f}")
-    from anisofem.files import write_json
+    from anisofem.io.output import write_json
     write_json(args.json, {"other": rev, "rounds": args.rounds, "rows": rows})
     print(f"-> {args.json}")
 

@@ -23,8 +23,8 @@ def measure(cells, candidate):
     import scipy.sparse.linalg as spla
 
     import anisofem as af
-    from anisofem import linsolve, multigrid
-    from anisofem.potential import Potential
+    from anisofem.solvers import linsolve, multigrid
+    from anisofem.physics.potential import Potential
 
     scene = af.default_scene(af.box_beam(cells=cells))
     layout = scene.layout("csr")

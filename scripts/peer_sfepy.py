@@ -81,8 +81,8 @@ def _conf(options):
 def anisofem_solve(cells, path, order):
     """anisofem's static solve of the same cantilever: (row dict, displacements (n, 3) of the
     linear mesh's vertices)."""
-    from anisofem.bench_large import measure
-    from anisofem.meshgen import box_beam
+    from anisofem.studies.bench_large import measure
+    from anisofem.physics.meshgen import box_beam
     linear = box_beam(cells=cells)
     if order == 1:
         row, x = measure(cells, path)
@@ -139,7 +139,7 @@ def main():
             row["difference_to_anisofem"] = float(np.abs(row.pop("u") - reference).max()) / scale
     report = {"cells": list(cells), "tets": 5 * int(np.prod(cells)), "order": args.order,
               "rows": rows}
-    from anisofem.files import publish
+    from anisofem.io.output import publish
     publish(report, print_report, args.out)
 
 
@@ -155,10 +155,10 @@ def _write_problem(cells, folder, order):
     `order`; the spec's path."""
     import meshio
 
-    from anisofem.meshgen import box_beam
-    from anisofem.methods import Method, gradient_tolerance
-    from anisofem.potential import Potential
-    from anisofem.scene import GRAVITY, default_scene
+    from anisofem.physics.meshgen import box_beam
+    from anisofem.solvers.methods import Method, gradient_tolerance
+    from anisofem.physics.potential import Potential
+    from anisofem.physics.scene import GRAVITY, default_scene
     mesh = box_beam(cells=cells)
     scene = default_scene(box_beam(cells=cells, order=order))
     mesh_file = os.path.join(folder, "beam.vtk")

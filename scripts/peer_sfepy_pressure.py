@@ -81,7 +81,7 @@ def anisofem_scene(pressure):
     """The actuator's scene without fibers in StVK, its groups' Young's moduli, held at the
     base, `pressure` Pa in the cavity; with its cavity faces and groups."""
     import anisofem as af
-    from anisofem.io import read_tagged_mesh
+    from anisofem.io.meshes import read_tagged_mesh
     mesh, tags = read_tagged_mesh(MESH)
     names = {n: tag for n, (tag, _) in tags.names.items()}
     young = np.vectorize(YOUNG.get)(tags.volumes)
@@ -122,8 +122,8 @@ def main():
     import meshio
 
     import anisofem as af
-    from anisofem.methods import Method, gradient_tolerance
-    from anisofem.potential import Potential
+    from anisofem.solvers.methods import Method, gradient_tolerance
+    from anisofem.physics.potential import Potential
     scene, cavity, groups = anisofem_scene(args.pressure)
     result = af.solve(scene)
     ours = result.x - scene.mesh.vertices
@@ -163,7 +163,7 @@ def main():
                   float(np.abs(theirs - ours).max()) / scale,
               "angle_difference": rows[1]["tip_angle_degrees"] / rows[0]["tip_angle_degrees"]
               - 1.0}
-    from anisofem.files import publish
+    from anisofem.io.output import publish
     publish(report, print_report, args.out)
 
 

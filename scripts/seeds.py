@@ -40,8 +40,9 @@ import time
 import numpy as np
 
 import anisofem
-from anisofem import Material, Scene, metrics
-from anisofem.files import result_path, write_json
+from anisofem import Material, Scene
+from anisofem.physics import metrics
+from anisofem.io.output import result_path, write_json
 from anisognn import evaluate, shipped
 from anisognn.model import with_galerkin
 from anisognn.rollout import rollout

@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 import anisofem as af
-from anisofem.files import publish, result_path
+from anisofem.io.output import publish, result_path
 from anisofem.reduced import FramedModel, ReducedModel
 from anisofem.reduced.model import full_rollout
 

@@ -171,8 +171,8 @@ def test_petsc_engine_without_petsc4py_says_what_to_install(folder):
 
 @pytest.mark.parametrize("shape, axis", [("box", 0), ("cylinder", 0), ("t", 2), ("y", 2)])
 def test_each_shape_holds_the_end_it_stands_on(shape, axis):
-    from anisofem.cli import _parser, scene_of
-    args = _parser().parse_args(["trade", shape])
+    from anisofem.cli import build_parser, scene_of
+    args = build_parser().parse_args(["trade", shape])
     scene = scene_of(args)
     X = scene.mesh.vertices
     held = scene.fixed_mask.all(axis=1)

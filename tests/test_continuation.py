@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem import continuation
+from anisofem.solvers import continuation
 
 
 @pytest.fixture(scope="module")

@@ -73,7 +73,7 @@ CASES = list(itertools.product(
 ))
 
 
-@pytest.mark.parametrize("model", af.material.MODELS)
+@pytest.mark.parametrize("model", af.physics.material.MODELS)
 @pytest.mark.parametrize("kappa,nu,stretches", CASES)
 def test_gradient_and_hessian_match_finite_differences(kappa, nu, stretches, model):
     rng = np.random.default_rng(hash((kappa, nu, stretches)) % 2**32)
@@ -90,7 +90,7 @@ def test_gradient_and_hessian_match_finite_differences(kappa, nu, stretches, mod
     assert np.abs(H - H.T).max() <= 1e-12 * np.abs(H).max()
 
 
-@pytest.mark.parametrize("model", af.material.MODELS)
+@pytest.mark.parametrize("model", af.physics.material.MODELS)
 @pytest.mark.parametrize("flatness", [1e-2, 1e-3])
 @pytest.mark.parametrize("kappa", [0.0, E, 100 * E])
 def test_derivatives_on_nearly_flat_elements(flatness, kappa, model):
@@ -166,7 +166,7 @@ def test_projected_hessian_is_psd_and_exact_in_tension():
 
 
 def test_closed_form_eigen_decomposition_holds_for_nearly_repeated_eigenvalues():
-    from anisofem.sym3 import eigen
+    from anisofem.physics.sym3 import eigen
     rng = np.random.default_rng(12)
     w, V = np.empty(3), np.empty((3, 3))
     worst = 0.0

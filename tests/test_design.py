@@ -1,4 +1,4 @@
-"""Design (anisofem.design): winding angles per segment of the bending-and-twisting actuator
+"""Design (anisofem.inverse.design): winding angles per segment of the bending-and-twisting actuator
 that bring its tip to where a known layout brings it, from a uniform start; the command; the
 refusals."""
 import os
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem.design import Helix, design, tip_at
-from anisofem.scenefile import SceneFile, load_scene
+from anisofem.inverse.design import Helix, design, tip_at
+from anisofem.io.scenefile import SceneFile, load_scene
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TWIST = os.path.join(ROOT, "examples", "scenes", "actuator_twist.toml")

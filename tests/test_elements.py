@@ -1,4 +1,4 @@
-"""Element types (anisofem.elements) and the element loop on quadratic tets: quadrature
+"""Element types (anisofem.physics.elements) and the element loop on quadratic tets: quadrature
 exactness, shape functions, raising a mesh to quadratic, and the quadratic element's energy,
 gradient and Hessian against an independent quadrature and finite differences at ordinary and
 extreme parameters, for both base laws."""
@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem import kernels
-from anisofem.assembly import DenseLayout
-from anisofem.elements.tet4 import TET4
-from anisofem.elements.tet10 import TET10, quadratic_nodes
-from anisofem.scene import element_data
+from anisofem.physics import kernels
+from anisofem.physics.assembly import DenseLayout
+from anisofem.physics.elements.tet4 import TET4
+from anisofem.physics.elements.tet10 import TET10, quadratic_nodes
+from anisofem.physics.scene import element_data
 from test_derivatives import random_tet, rotation
 
 E = 1e5
@@ -129,7 +129,7 @@ CASES = list(itertools.product(
 ))
 
 
-@pytest.mark.parametrize("model", af.material.MODELS)
+@pytest.mark.parametrize("model", af.physics.material.MODELS)
 @pytest.mark.parametrize("kappa,nu,stretches", CASES)
 def test_quadratic_element_matches_finite_differences(kappa, nu, stretches, model):
     rng = np.random.default_rng(hash((kappa, nu, stretches)) % 2**32)
@@ -142,7 +142,7 @@ def test_quadratic_element_matches_finite_differences(kappa, nu, stretches, mode
     assert grad_err < 1e-6 and hess_err < 1e-6 and asym < 1e-12
 
 
-@pytest.mark.parametrize("model", af.material.MODELS)
+@pytest.mark.parametrize("model", af.physics.material.MODELS)
 @pytest.mark.parametrize("flatness", [1e-2, 1e-3])
 def test_quadratic_element_derivatives_on_nearly_flat_elements(flatness, model):
     rng = np.random.default_rng(int(flatness * 1e4))
@@ -189,7 +189,7 @@ def test_quadratic_stvk_energy_equals_an_independent_integral():
     assert abs(q.energy(x) - expected) < 1e-12 * expected
 
 
-@pytest.mark.parametrize("model", af.material.MODELS)
+@pytest.mark.parametrize("model", af.physics.material.MODELS)
 def test_quadratic_element_under_a_homogeneous_deformation_equals_the_linear_one(model):
     rng = np.random.default_rng(9)
     mesh = af.box_beam(cells=(2, 1, 1))
@@ -200,7 +200,7 @@ def test_quadratic_element_under_a_homogeneous_deformation_equals_the_linear_one
     assert abs(q.energy(q.nodes @ F.T) - linear) < 1e-12 * linear
 
 
-@pytest.mark.parametrize("model", af.material.MODELS)
+@pytest.mark.parametrize("model", af.physics.material.MODELS)
 def test_quadratic_projected_hessian_is_psd(model):
     rng = np.random.default_rng(13)
     mesh = af.box_beam(cells=(2, 1, 1))

@@ -1,9 +1,9 @@
-"""anisofem.files.atomic_path: all or nothing, no temporary left behind."""
+"""anisofem.io.output.atomic_path: all or nothing, no temporary left behind."""
 import os
 
 import pytest
 
-from anisofem.files import atomic_path
+from anisofem.io.output import atomic_path
 
 
 def test_atomic_path_replaces_on_success(tmp_path):

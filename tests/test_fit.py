@@ -1,4 +1,4 @@
-"""Identification (anisofem.fit) on data its own mesh did not make: markers from full solves of
+"""Identification (anisofem.inverse.fit) on data its own mesh did not make: markers from full solves of
 a finer quadratic mesh at a true fiber angle and stiffness, 1% noise, a start 30 degrees and 3x
 away; and the refusals."""
 import os
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem.fit import Markers, fit
+from anisofem.inverse.fit import Markers, fit
 
 # the scenario of examples/identify.py: its cantilever, load cases, markers and truth
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),

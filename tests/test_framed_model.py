@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem.potential import Potential
+from anisofem.physics.potential import Potential
 from anisofem.reduced import Carry, Drag, Loads, ReducedModel
 from anisofem.reduced.domains import split
 from anisofem.reduced.framed import FramedModel, FramedState, rotations
@@ -270,7 +270,7 @@ def test_trade_rung_and_where_it_is_left_out():
     it out with a note, the other reduced rungs kept."""
     scene = t_scene()
     result = af.trade(scene, steps=10, progress=False,
-                      rungs=af.ladder.fem_rungs()[:1] + [af.ladder.framed_rung(4, 12)])
+                      rungs=af.studies.rungs.fem_rungs()[:1] + [af.studies.rungs.framed_rung(4, 12)])
     row = result["rungs"][1]
     assert row["name"] == "reduced framed b4 c12" and row["kind"] == "reduced"
     assert row["stable"] and row["max_error"] < 0.01
@@ -279,8 +279,8 @@ def test_trade_rung_and_where_it_is_left_out():
     roller[mesh.vertices[:, 2] < 1e-9] = True
     roller[mesh.vertices[:, 2] > 0.08 - 1e-9, 0] = True
     notes = []
-    rungs = [af.ladder.framed_rung(4, 12), af.ladder.reduced_rung(4, 16)]
-    kept = af.ladder._representable(rungs, af.Scene(mesh, scene.material, fixed=roller), notes)
+    rungs = [af.studies.rungs.framed_rung(4, 12), af.studies.rungs.reduced_rung(4, 16)]
+    kept = af.studies.rungs.representable(rungs, af.Scene(mesh, scene.material, fixed=roller), notes)
     assert [r.name for r in kept] == ["reduced m4 s16"]
     partial = int((roller.any(axis=1) & ~roller.all(axis=1)).sum())
     assert partial == 33 and notes == [
@@ -294,7 +294,7 @@ def test_element_subset_colors_its_own_blocks():
     assembly blocks 0, 5 and 1 in that order, so its first and third blocks touch, where the
     whole mesh's coloring gives blocks 0 and 2 one color (and two threads would scatter into
     the same nodes)."""
-    from anisofem.mesh import ASSEMBLY_BLOCK as B
+    from anisofem.physics.mesh import ASSEMBLY_BLOCK as B
     elements = af.Scene(af.box_beam((0.2, 0.02, 0.02), (20, 8, 8)),
                         af.Material(1e5, 0.48, 1000.0), fixed=[0]).elements
     rows = np.concatenate([np.arange(k * B, (k + 1) * B) for k in (0, 5, 1)])

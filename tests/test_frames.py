@@ -1,12 +1,12 @@
-"""Vertex rotations and the multigrid hierarchy carried by them (anisofem.frames)."""
+"""Vertex rotations and the multigrid hierarchy carried by them (anisofem.solvers.frames)."""
 import numpy as np
 import pytest
 import scipy.sparse.linalg as spla
 
 import anisofem as af
-from anisofem import multigrid
-from anisofem.frames import VertexFrames
-from anisofem.potential import Potential
+from anisofem.solvers import multigrid
+from anisofem.solvers.frames import VertexFrames
+from anisofem.physics.potential import Potential
 
 
 def rotation(axis, angle):

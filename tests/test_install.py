@@ -27,7 +27,7 @@ assert af.solve(scene).converged
 assert af.simulate(scene, 3).converged
 result = af.trade(scene, steps=10, progress=False)
 assert {r["kind"] for r in result["rungs"]} == {"fem", "reduced"}
-assert len(result["rungs"]) == len(af.ladder.fem_rungs())
+assert len(result["rungs"]) == len(af.studies.rungs.fem_rungs())
 print("\\n".join(result["notes"]))
 assert not {"torch", "onnxruntime", "matplotlib"} & set(sys.modules)
 """
@@ -49,10 +49,10 @@ for module in (anisofem, anisognn, export):
 anisognn.pretrained("directional")
 mesh = anisofem.box_beam(cells=(4, 2, 2))
 scene = anisofem.Scene(mesh, anisofem.Material.paper((1, 0, 0), 1e5),
-                       fixed=anisofem.metrics.end_vertices(mesh, 0, "min"), gravity=(0, 0, -9.81))
+                       fixed=anisofem.physics.metrics.end_vertices(mesh, 0, "min"), gravity=(0, 0, -9.81))
 notes = []
-rungs = anisofem.ladder.registered_rungs(scene, 0.02, notes)
-result = anisofem.trade(scene, steps=10, rungs=[anisofem.ladder.fem_rung("exact")] + rungs,
+rungs = anisofem.studies.rungs.registered_rungs(scene, 0.02, notes)
+result = anisofem.trade(scene, steps=10, rungs=[anisofem.studies.rungs.fem_rung("exact")] + rungs,
                         progress=False)
 for row in result["rungs"]:
     print(row["name"], row["max_error"])

@@ -6,8 +6,8 @@ import numpy as np
 import scipy.sparse as sp
 
 import anisofem as af
-from anisofem import bench_large
-from anisofem.assembly import CsrLayout, element_dofs
+from anisofem.studies import bench_large
+from anisofem.physics.assembly import CsrLayout, element_dofs
 
 
 def test_csr_pattern_holds_every_element_entry_once_and_nothing_else():

@@ -5,7 +5,7 @@ import pytest
 from conftest import mirror_partner
 
 import anisofem as af
-from anisofem import mesh as mesh_module
+from anisofem.physics import mesh as mesh_module
 
 
 @pytest.mark.parametrize("make,volume", [

@@ -8,10 +8,10 @@ import scipy.sparse as sp
 import pytest
 
 import anisofem as af
-from anisofem import methods, multigrid
-from anisofem.sparse import SparseOperator
-from anisofem.potential import Potential
-from anisofem.ladder import fem_rungs
+from anisofem.solvers import methods, multigrid
+from anisofem.physics.sparse import SparseOperator
+from anisofem.physics.potential import Potential
+from anisofem.studies.rungs import fem_rungs
 
 TO_TOLERANCE = [("newton", {}), ("reuse", {}), ("lbfgs", {}), ("cg", {}),
                 ("cg", {"preconditioner": "factor"}), ("cg", {"preconditioner": "amg"})]

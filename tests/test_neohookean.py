@@ -7,7 +7,7 @@ import pytest
 from test_derivatives import deformed, random_tet
 
 import anisofem as af
-from anisofem.potential import Potential
+from anisofem.physics.potential import Potential
 
 E = 1e5
 
@@ -36,7 +36,7 @@ def test_small_strain_limit_is_stvk():
     mesh = random_tet(rng)
     d = rng.standard_normal(3)
     scenes = [af.Scene(mesh, af.Material(E, 0.45, 1000.0, d / np.linalg.norm(d), 2 * E,
-                                         model=m)) for m in af.material.MODELS]
+                                         model=m)) for m in af.physics.material.MODELS]
     rest = mesh.vertices
     H = [af.hessian(s, rest).toarray() for s in scenes]
     assert np.abs(H[1] - H[0]).max() <= 1e-12 * np.abs(H[0]).max()
@@ -98,7 +98,7 @@ def test_projection_with_fibers_is_psd_and_exact_where_nothing_is_negative():
 def test_growing_gravity_inverts_stvk_and_not_neohookean():
     gravities = [9.81, 98.1, 981.0, 9810.0, 98100.0]
     inverted, sags = {}, {}
-    for model in af.material.MODELS:
+    for model in af.physics.material.MODELS:
         inverted[model], sags[model] = [], []
         for g in gravities:
             scene = cantilever(model, g)
@@ -189,7 +189,7 @@ def test_model_choice_per_element():
     rng = np.random.default_rng(2)
     x = mesh.vertices + 2e-3 * rng.standard_normal(mesh.vertices.shape)
     per_model = {name: af.element_energy(af.Scene(mesh, af.Material(model=name)), x)
-                 for name in af.material.MODELS}
+                 for name in af.physics.material.MODELS}
     names = np.where(np.arange(m) % 3 == 0, "neohookean", "stvk")
     mixed = af.element_energy(af.Scene(mesh, af.Material(model=list(names))), x)
     expected = np.where(names == "neohookean", per_model["neohookean"], per_model["stvk"])

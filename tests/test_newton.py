@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem import linsolve
-from anisofem.potential import Potential
+from anisofem.solvers import linsolve
+from anisofem.physics.potential import Potential
 
 
 def test_quadratic_convergence_near_the_solution(beam):

@@ -8,8 +8,9 @@ import pytest
 from conftest import mirror_partner
 
 import anisofem as af
-from anisofem import metrics
-from anisofem.inversion import volume_change
+from anisofem.physics import metrics
+from anisofem.studies import uniaxial
+from anisofem.physics.inversion import volume_change
 
 E = 1e5
 
@@ -25,8 +26,8 @@ E = 1e5
 def test_uniaxial_bar_matches_homogeneous_solution(direction, kappa, stress):
     mat = af.Material(E, 0.48, 1000.0, direction, kappa)
     mesh = af.box_beam(cells=(6, 2, 2))
-    exact = metrics.uniaxial_analytic(stress, E, 0.48, direction, kappa)
-    result = af.solve(metrics.uniaxial_bar_scene(mesh, mat, stress), rtol=1e-10)
+    exact = uniaxial.uniaxial_analytic(stress, E, 0.48, direction, kappa)
+    result = af.solve(uniaxial.uniaxial_bar_scene(mesh, mat, stress), rtol=1e-10)
     assert result.converged
     A = mesh.vertices.min(axis=0)
     expected = A + (mesh.vertices - A) @ exact.F.T
@@ -39,15 +40,15 @@ def test_uniaxial_closed_form_limits():
     # across the load change nothing and fibers along it add 8 kappa
     for nu, kappa, d, modulus in [(0.3, 0.0, (1, 0, 0), E), (0.0, E, (0, 1, 0), E),
                                   (0.0, E, (1, 0, 0), 9 * E)]:
-        st = metrics.uniaxial_analytic(1.0, E, nu, d, kappa)
+        st = uniaxial.uniaxial_analytic(1.0, E, nu, d, kappa)
         assert abs((st.stretch - 1) * modulus - 1.0) < 1e-4
 
 
 def test_uniaxial_curve_follows_closed_form():
     mat = af.Material(E, 0.48, 1000.0, (1, 0, 0), 5 * E)
     stresses = np.linspace(0, 5e4, 6)
-    stretch, _ = metrics.uniaxial_curve(mat, stresses, af.box_beam(cells=(4, 2, 2)), rtol=1e-12)
-    exact = [metrics.uniaxial_analytic(s, E, 0.48, (1, 0, 0), 5 * E).stretch for s in stresses]
+    stretch, _ = uniaxial.uniaxial_curve(mat, stresses, af.box_beam(cells=(4, 2, 2)), rtol=1e-12)
+    exact = [uniaxial.uniaxial_analytic(s, E, 0.48, (1, 0, 0), 5 * E).stretch for s in stresses]
     assert np.allclose(stretch, exact, rtol=1e-9)
     assert np.all(np.diff(stretch) > 0)
 

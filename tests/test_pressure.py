@@ -1,13 +1,13 @@
-"""Pressure on a cavity (anisofem.pressure): its volume against the body's, its gradient and
+"""Pressure on a cavity (anisofem.physics.pressure): its volume against the body's, its gradient and
 Hessian against central finite differences on linear and quadratic tets, Lame's thick-walled
 tube, the energy balance of a static pressure ramp, and the refusals."""
 import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem.inversion import volume_change
-from anisofem.meshgen import box_beam, tube
-from anisofem.potential import Potential
+from anisofem.physics.inversion import volume_change
+from anisofem.physics.meshgen import box_beam, tube
+from anisofem.physics.potential import Potential
 
 A, B = 0.01, 0.02       # the tube's radii, m
 E, NU = 1e5, 0.3
@@ -186,9 +186,9 @@ def test_trade_on_a_pressure_scene():
     are left out."""
     scene = tube_scene(1, (2, 4, 1), 1e3)
     result = af.trade(scene, steps=4, dt=0.01, progress=False,
-                      rungs=af.ladder.fem_rungs()[:1] + [af.ladder.reduced_rung(4)])
+                      rungs=af.studies.rungs.fem_rungs()[:1] + [af.studies.rungs.reduced_rung(4)])
     assert [r["name"] for r in result["rungs"]][1:] == ["reduced m4"]
     notes = []
-    kept = af.ladder._representable([af.ladder.Rung("net", "surrogate", None)], scene, notes)
+    kept = af.studies.rungs.representable([af.studies.rungs.Rung("net", "surrogate", None)], scene, notes)
     assert kept == [] and notes == ["surrogate rungs not run: the surrogates take nodal "
                                     "forces, not pressure"]

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem import convergence
-from anisofem.inversion import volume_change
+from anisofem.studies import convergence
+from anisofem.physics.inversion import volume_change
 from test_derivatives import random_tet
 
 E = 1e5

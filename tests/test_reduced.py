@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem import ladder
+from anisofem.studies import rungs as ladder_rungs
 from anisofem.reduced import ReducedModel
 from anisofem.reduced.polynomial import polynomial
 from test_elements import Quadratic
@@ -184,7 +184,7 @@ def test_failure_is_reported_not_hidden(model):
 
 def test_trade_lists_reduced_rungs_beside_the_exact_one():
     scene = cantilever()
-    result = af.trade(scene, steps=10, rungs=[ladder.fem_rung("exact"), ladder.reduced_rung(5)],
+    result = af.trade(scene, steps=10, rungs=[ladder_rungs.fem_rung("exact"), ladder_rungs.reduced_rung(5)],
                       progress=False)
     row = result["rungs"][1]
     assert row["name"] == "reduced m5" and row["kind"] == "reduced" and row["stable"]
@@ -193,18 +193,18 @@ def test_trade_lists_reduced_rungs_beside_the_exact_one():
 
 def test_trade_leaves_reduced_rungs_out_of_neo_hookean_scenes():
     scene = cantilever(model="neohookean")
-    result = af.trade(scene, steps=2, rungs=[ladder.fem_rung("exact"), ladder.reduced_rung(4)],
+    result = af.trade(scene, steps=2, rungs=[ladder_rungs.fem_rung("exact"), ladder_rungs.reduced_rung(4)],
                       progress=False)
     assert [r["name"] for r in result["rungs"]] == ["exact"]
     assert any("StVK" in note for note in result["notes"])
 
 
 def test_select_rungs_keeps_exact_and_refuses_unknown_names():
-    rungs = ladder.fem_rungs()
-    assert [r.name for r in ladder.select_rungs(rungs, ["reduced m5"])] == ["exact",
+    rungs = ladder_rungs.fem_rungs()
+    assert [r.name for r in ladder_rungs.select_rungs(rungs, ["reduced m5"])] == ["exact",
                                                                             "reduced m5"]
     with pytest.raises(ValueError, match="no rung named 'reduced m7'"):
-        ladder.select_rungs(rungs, ["reduced m7"])
+        ladder_rungs.select_rungs(rungs, ["reduced m7"])
 
 
 def test_basis_at_points_of_the_same_body_interpolates_it(model):

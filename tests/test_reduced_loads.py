@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem import ladder, meshgen
+from anisofem.studies import rungs as ladder_rungs
+from anisofem.physics import meshgen
 from anisofem.reduced import Carry, Drag, Loads, ReducedModel, default_loads
 from anisofem.reduced import loads as loads_module
 from anisofem.reduced.snapshots import principal_directions
@@ -151,7 +152,7 @@ def test_fitted_model_derivatives_match_finite_differences(long_beam):
 
 
 def test_the_trade_lists_the_fitted_rungs():
-    names = [r.name for r in ladder.fem_rungs()]
+    names = [r.name for r in ladder_rungs.fem_rungs()]
     assert "reduced m4 s16" in names and "reduced m8 s20" in names
 
 

@@ -7,7 +7,7 @@ import pytest
 import anisofem as af
 from anisofem.reduced import ReducedModel
 from anisofem.reduced.sensitivity import rollout_sensitivity
-from anisofem.sensitivity import rollout_sensitivity as full_rollout_sensitivity
+from anisofem.inverse.sensitivity import rollout_sensitivity as full_rollout_sensitivity
 
 STEPS, DT = 20, 0.02
 FIBER = np.array([0.766, 0.0, 0.643]) / np.linalg.norm([0.766, 0.0, 0.643])

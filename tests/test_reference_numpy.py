@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem import reference_numpy as ref
+from anisofem.physics import reference_numpy as ref
 
 
 def test_numba_and_numpy_agree_with_per_element_fibers():

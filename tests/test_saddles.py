@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem import robustness
-from anisofem.potential import Potential
-from anisofem.stability import stability
+from anisofem.studies import robustness
+from anisofem.physics.potential import Potential
+from anisofem.solvers.stability import stability
 
 #: (length m, base, g): 20 x 4 x 4 cells, fibers along x, kappa = E; each ended "max_iter
 #: reached" or "the line search stalled" with the projected-Hessian fallback alone
@@ -114,7 +114,7 @@ def test_robustness_report_counts_minima_and_lists_the_rest(capsys):
 def test_a_lanczos_that_does_not_converge_says_unknown_not_minimum(monkeypatch):
     scene = robustness.scene(0.1, (20, 4, 4), "x", "stvk", 5)
     x = af.solve(scene, projection="always", max_iter=20, continuation="never", warn=False).x
-    monkeypatch.setattr("anisofem.stability.MAX_LANCZOS", 1)
+    monkeypatch.setattr("anisofem.solvers.stability.MAX_LANCZOS", 1)
     unknown = stability(Potential(scene), x)
     # the factorization already refused the Hessian: unknown eigenvalue, but not a minimum
     assert np.isnan(unknown.smallest) and not unknown.minimum and unknown.vector is None

@@ -1,4 +1,4 @@
-"""Scene files (anisofem.scenefile): regions and their materials, fiber fields, boundary
+"""Scene files (anisofem.io.scenefile): regions and their materials, fiber fields, boundary
 conditions on named surfaces, sides and boxes, pressure, load curves in time, the example
 scenes, the schema's page and the refusals (each one line, CLI exit 2)."""
 import os
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem import scenefile
-from anisofem.io import write_tagged_mesh
-from anisofem.meshgen import box_beam, tube
+from anisofem.io import scene_schema
+from anisofem.io.meshes import write_tagged_mesh
+from anisofem.physics.meshgen import box_beam, tube
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = os.path.join(ROOT, "examples", "scenes")
@@ -278,7 +278,7 @@ def test_example_meshes_are_what_the_generator_writes(tmp_path):
 def test_schema_page_is_generated_from_the_code():
     with open(os.path.join(ROOT, "docs", "scenes.md")) as f:
         page = f.read()
-    assert scenefile.schema_markdown() in page
+    assert scene_schema.schema_markdown() in page
 
 
 def test_readme_scene_file_loads(tmp_path):

@@ -1,4 +1,4 @@
-"""Adjoint derivatives of a static equilibrium (anisofem.sensitivity) against central finite
+"""Adjoint derivatives of a static equilibrium (anisofem.inverse.sensitivity) against central finite
 differences of full solves, for every parameter kind, both base laws and both element orders,
 at ordinary and extreme parameters; and the refusals."""
 import types
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import anisofem as af
-import anisofem.sensitivity  # noqa: F401
-from anisofem.sensitivity import fiber_angles, fiber_direction, static_sensitivity
+import anisofem.inverse.sensitivity  # noqa: F401
+from anisofem.inverse.sensitivity import fiber_angles, fiber_direction, static_sensitivity
 
 LENGTH = 0.06
 
@@ -160,7 +160,7 @@ def test_rollout_derivatives_against_finite_differences(order, law):
     gradients = np.zeros((STEPS + 1,) + X.shape)
     for k in (10, 20):
         gradients[k, tip, 2] = 1.0 / tip.size
-    S = af.sensitivity.rollout_sensitivity(scene, result, gradients, DT)
+    S = af.inverse.sensitivity.rollout_sensitivity(scene, result, gradients, DT)
     cases = {"young": ("E", rng.standard_normal(m) * 1e5, S.young, 1e-4),
              "poisson": ("nu", rng.standard_normal(m) * 1e-3, S.poisson, 1e-3),
              "kappa": ("kappa", rng.standard_normal(m) * 1e5, S.kappa, 1e-4),
@@ -188,7 +188,7 @@ def test_rollout_pressure_derivative(order):
     for k in (10, 20):  # the wall moves radially: its rest radial direction is J's gradient
         gradients[k, inner, :2] = X[inner, :2] / 0.01 / inner.size
     result = af.simulate(scene, steps, dt, rtol=1e-12, warn=False)
-    S = af.sensitivity.rollout_sensitivity(scene, result, gradients, dt)
+    S = af.inverse.sensitivity.rollout_sensitivity(scene, result, gradients, dt)
     h = 1.0
     fd = (J(af.simulate(scene.loaded(1 + h / 2e3), steps, dt, rtol=1e-12, warn=False))
           - J(af.simulate(scene.loaded(1 - h / 2e3), steps, dt, rtol=1e-12, warn=False))) / (2 * h)

@@ -13,9 +13,12 @@ import pytest
 import scipy.sparse as sp
 
 import anisofem as af
-from anisofem import ladder, threads
-from anisofem.bench_load import Busy
-from anisofem.sparse import PARALLEL_MIN_ENTRIES, SparseOperator
+from anisofem.studies import trade as ladder
+from anisofem.studies import rungs as ladder_rungs
+from anisofem.studies import trade_report
+from anisofem import threads
+from anisofem.studies.bench_load import Busy
+from anisofem.physics.sparse import PARALLEL_MIN_ENTRIES, SparseOperator
 
 CORES = len(threads.cores())
 
@@ -123,7 +126,7 @@ def test_torch_inference_steps_down_beside_busy_processes():
 def test_trade_records_the_machine_and_warns_when_it_was_busy():
     scene = af.default_scene(af.box_beam(cells=(6, 2, 2)),
                              af.Material.paper(fiber_direction=(1, 0, 0), fiber_stiffness=1e5))
-    rungs = ladder.select_rungs(ladder.fem_rungs(), ["reduced m5"])
+    rungs = ladder_rungs.select_rungs(ladder_rungs.fem_rungs(), ["reduced m5"])
     calm = ladder.trade(scene, steps=10, rungs=rungs, progress=False)
     machine = calm["machine"]
     assert machine["cores"] == CORES and len(machine["load_average_start"]) == 3
@@ -133,14 +136,14 @@ def test_trade_records_the_machine_and_warns_when_it_was_busy():
     assert busy["machine"]["busy_cores"] >= ladder.BUSY_CORES
     assert not any("busy" in n for n in busy["notes"])  # said in the table, not a note
     assert any(r["timed_twice"] for r in busy["rungs"])
-    table = ladder.trade_table(busy)
+    table = trade_report.trade_table(busy)
     assert "warning: the machine was busy" in table
     marked = [line[:27].strip() for line in table.splitlines()[2:] if line[27:28] == "*"]
     assert marked and set(marked) <= {"exact", "reduced m5"}
 
 
 def test_bench_under_load_times_each_rung_idle_and_beside_the_busy_processes(tmp_path, capsys):
-    from anisofem import bench_load
+    from anisofem.studies import bench_load
     out = tmp_path / "load" / "bench.json"
     report = bench_load.run(busy=1, scenes=("200",), rungs=["reduced m5"], out=str(out),
                             progress=False)

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem import ladder
+from anisofem.studies import trade as ladder
+from anisofem.studies import rungs as ladder_rungs
+from anisofem.studies import trade_report
 
 
 @pytest.fixture(scope="module")
@@ -16,7 +18,7 @@ def result(beam):
     d = np.array([np.cos(np.radians(40)), 0.0, np.sin(np.radians(40))])
     scene = af.Scene(beam, af.Material(1e5, 0.48, 1000.0, d, 1e5),
                      fixed=af.metrics.end_vertices(beam, 0, "min"), gravity=(0, 0, -9.81))
-    return ladder.trade(scene, steps=20, rungs=ladder.fem_rungs(), progress=False)
+    return ladder.trade(scene, steps=20, rungs=ladder_rungs.fem_rungs(), progress=False)
 
 
 def test_exact_is_the_reference_and_capped_rungs_are_not(result):
@@ -46,11 +48,11 @@ def test_the_front_holds_the_rungs_no_other_beats_at_every_time():
 def test_rungs_must_start_with_exact_and_land_on_the_checked_times(beam):
     scene = af.default_scene(beam)
     with pytest.raises(ValueError, match="rungs: the first rung must be the exact one"):
-        ladder.trade(scene, rungs=[ladder.fem_rung("newton x1", iterations=1)])
+        ladder.trade(scene, rungs=[ladder_rungs.fem_rung("newton x1", iterations=1)])
     with pytest.raises(ValueError, match="steps: must be a multiple of 10"):
         ladder.trade(scene, steps=15)
     with pytest.raises(TypeError, match="bogus: not an option"):
-        ladder.fem_rung("x", bogus=1)
+        ladder_rungs.fem_rung("x", bogus=1)
 
 
 def run(*args, cwd):
@@ -110,7 +112,7 @@ def test_surrogate_rungs_at_the_extremes_report_instead_of_returning_nan(beam, m
     scene = af.Scene(beam, material, fixed=af.metrics.end_vertices(beam, 0, "min"),
                      gravity=(0, 0, -9.81))
     notes = []
-    rungs = [ladder.fem_rung("exact")] + ladder.registered_rungs(scene, 0.02, notes)
+    rungs = [ladder_rungs.fem_rung("exact")] + ladder_rungs.registered_rungs(scene, 0.02, notes)
     out = ladder.trade(scene, steps=10, rungs=rungs, progress=False)
     assert len(out["rungs"]) >= 6 and out["rungs"][0]["stable"]
     print([(r["name"], r["max_error"], r["stable"]) for r in out["rungs"]], notes)
@@ -127,9 +129,9 @@ def test_surrogates_are_not_scored_against_an_inverted_or_foreign_reference():
         return af.Scene(mesh, af.Material(1e5, 0.48, 1000.0, (1, 0, 0), 1e5, model=model),
                         fixed=np.flatnonzero(x <= 1e-9), gravity=(0, 0, -98.1))
 
-    still = ladder.Rung("still", "surrogate",
+    still = ladder_rungs.Rung("still", "surrogate",
                         lambda scene, dt: lambda x, v: (x, v, {"failed": False}))
-    rungs = [ladder.fem_rung("exact"), ladder.fem_rung("newton x1", iterations=1), still]
+    rungs = [ladder_rungs.fem_rung("exact"), ladder_rungs.fem_rung("newton x1", iterations=1), still]
     stvk = ladder.trade(scene("stvk"), steps=10, rungs=list(rungs), progress=False)
     assert [r["name"] for r in stvk["rungs"]] == ["exact", "newton x1"]
     assert stvk["rungs"][0]["inverted"] > 0
@@ -138,11 +140,11 @@ def test_surrogates_are_not_scored_against_an_inverted_or_foreign_reference():
     assert [r["name"] for r in nh["rungs"]] == ["exact", "newton x1", "still"]
     assert all(r["inverted"] == 0 for r in nh["rungs"]) and not nh["notes"]
     notes = []
-    assert ladder.registered_rungs(scene("neohookean"), 0.02, notes) == []
+    assert ladder_rungs.registered_rungs(scene("neohookean"), 0.02, notes) == []
     assert "trained on the StVK base material" in notes[0]
     assert notes[1].startswith("ONNX rung skipped: runtime.py steps the trained material (StVK")
     notes = []
-    assert ladder.registered_rungs(scene("stvk"), 0.01, notes) == []
+    assert ladder_rungs.registered_rungs(scene("stvk"), 0.01, notes) == []
     assert notes == ["surrogate rungs skipped: the shipped models step dt = 0.02 s, the trade "
                      "runs dt = 0.01 s",
                      "ONNX rung skipped: the model steps dt = 0.02 s, the trade runs dt = 0.01 s"]
@@ -159,7 +161,7 @@ def test_plot_labels_of_crowded_rungs_stack_up_inside_the_axes():
     xlim, ylim = (1.0, 100.0), (1e-3, 2.0)
     ax.set_xlim(*xlim)
     ax.set_ylim(*ylim)
-    labels, top = ladder._label_positions(ax, rows, lambda r: r["max_error"], xlim, ylim)
+    labels, top = trade_report._label_positions(ax, rows, lambda r: r["max_error"], xlim, ylim)
     ys = [xytext[1] for _, _, xytext, _ in labels]
     plt.close(fig)
     assert all(b > a for a, b in zip(ys, ys[1:]))  # each moved above the one before
@@ -177,8 +179,8 @@ def test_bodies_measure_every_rung_against_the_finest_mesh_of_the_body():
     scene = cantilever(mesh)
     bodies = [("order 2", cantilever(mesh.raised())),
               ("refined, order 2", cantilever(mesh.refined().raised()))]
-    result = af.trade(scene, steps=10, rungs=[ladder.fem_rung("exact"),
-                                              ladder.fem_rung("newton x1", "newton",
+    result = af.trade(scene, steps=10, rungs=[ladder_rungs.fem_rung("exact"),
+                                              ladder_rungs.fem_rung("newton x1", "newton",
                                                               iterations=1)],
                       progress=False, bodies=bodies, tolerance=0.05)
     rows = {r["name"]: r for r in result["rungs"]}
@@ -195,7 +197,7 @@ def test_bodies_measure_every_rung_against_the_finest_mesh_of_the_body():
     assert reduced["stable"] and reduced["max_error"] > 0.3
     assert reduced["max_continuum_error"] < 0.02
     assert result["recommended_continuum"] == "reduced m4 s16 of the body"
-    assert "vs body" in ladder.trade_table(result)
+    assert "vs body" in trade_report.trade_table(result)
     with pytest.raises(ValueError, match="bodies"):
-        af.trade(scene, steps=10, rungs=[ladder.fem_rung("exact")], progress=False,
+        af.trade(scene, steps=10, rungs=[ladder_rungs.fem_rung("exact")], progress=False,
                  bodies=[("other", cantilever(af.box_beam(cells=(5, 2, 2))))])

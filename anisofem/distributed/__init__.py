@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..potential import check_positions
-from ..scene import check_scene
+from ..physics.potential import check_positions
+from ..physics.scene import check_scene
 from .newton import METHODS, RankResult, Solver, minimize
 from .partition import partition
 from .system import RankSystem

@@ -4,16 +4,16 @@ and its result written, by every rank into an XDMF file over HDF5 where the outp
 rank (MPI_Abort), so that no rank is left waiting in a collective call."""
 import sys
 
-from .. import methods
-from ..inversion import inversion
-from ..io import write_mesh
-from ..metrics import tip_displacement
+from ..solvers import methods
+from ..physics.inversion import inversion
+from ..io.meshes import write_mesh
+from ..physics.metrics import tip_displacement
 from .output import write_xdmf
 
 
 def method_of(name, n_free):
     """The distributed method for the CLI's --method name ("auto": exact Newton up to
-    anisofem.methods.AUTO_MULTIGRID_MIN unknowns, CG + multigrid above, as the serial default)."""
+    anisofem.solvers.methods.AUTO_MULTIGRID_MIN unknowns, CG + multigrid above, as the serial default)."""
     if name == "auto":
         return "newton" if n_free < methods.AUTO_MULTIGRID_MIN else "cg"
     if name not in ("newton", "cg"):

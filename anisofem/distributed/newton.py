@@ -1,4 +1,4 @@
-"""Newton's method over MPI ranks: the serial loop's test and line search (anisofem.newton),
+"""Newton's method over MPI ranks: the serial loop's test and line search (anisofem.solvers.newton),
 with energies and norms summed over ranks and the linear systems solved by PETSc's KSP.
 
 method "newton": exact Newton. The true Hessian is factored by MUMPS (Cholesky, LDL^T); it is
@@ -9,16 +9,16 @@ through PETSc where PETSc has it, else PETSc's GAMG) with the rigid-body modes a
 space, stopped at the serial method's forcing tolerance; the hierarchy of an earlier Hessian is
 kept while CG converges with it in at most RENEW_AFTER iterations (a set-up, its Galerkin
 products above all, costs several CG solves) and applied in each vertex's frame turned since
-it was built, as the serial "amg" method does (anisofem.frames); a direction of negative
+it was built, as the serial "amg" method does (anisofem.solvers.frames); a direction of negative
 curvature of the true Hessian sends the iteration to the projected one.
 """
 import math
 import time
 from dataclasses import dataclass
 
-from ..frames import VertexFrames
-from ..methods import forcing_tolerance
-from ..newton import ARMIJO, ENERGY_NOISE, MIN_STEP, NOISE_PROGRESS
+from ..solvers.frames import VertexFrames
+from ..solvers.methods import forcing_tolerance
+from ..solvers.newton import ARMIJO, ENERGY_NOISE, MIN_STEP, NOISE_PROGRESS
 
 METHODS = ("newton", "cg")
 #: "cg" keeps the multigrid hierarchy of an earlier Hessian (as the serial "amg" method does)
@@ -245,7 +245,7 @@ class _Turned:
 
 def _line_search(system, x, energy, g, gnorm, p):
     """Backtracking to the Armijo condition on G from x along p (spread already), the serial
-    loop's rules (anisofem.newton): a trial with G = +inf or NaN is rejected, and a trial whose
+    loop's rules (anisofem.solvers.newton): a trial with G = +inf or NaN is rejected, and a trial whose
     energy change is round-off is taken where the gradient norm falls to NOISE_PROGRESS of its
     value. Returns (x_new, G, gradient, its norm, step length t), or None below MIN_STEP."""
     slope = p.dot(g)

@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 
-from ..files import atomic_path
+from ..io.output import atomic_path
 
 XDMF = """<?xml version="1.0"?>
 <Xdmf Version="3.0">

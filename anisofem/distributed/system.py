@@ -11,9 +11,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .. import kernels
-from ..assembly import CsrLayout
-from ..mesh import block_coloring
+from ..physics import kernels
+from ..physics.assembly import CsrLayout
+from ..physics.mesh import block_coloring
 
 
 class RankSystem:
@@ -158,7 +158,7 @@ class RankSystem:
         return self.PETSc.NullSpace().createRigidBody(coordinates)
 
     def force_scale(self, x_start):
-        """Newton's force scale (anisofem.potential.Potential.force_scale) at x_start, N:
+        """Newton's force scale (anisofem.physics.potential.Potential.force_scale) at x_start, N:
         the norms over free DOFs of the external, elastic and inertial forces, summed."""
         _, _, elastic = kernels.assemble(x_start, self.elements, want_grad=True)
         parts = [self.f_ext, elastic[self.owned]]

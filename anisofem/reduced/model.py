@@ -20,12 +20,12 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 from .._validate import as_float_array
-from ..densities import STVK
-from ..inversion import volume_change
-from ..metrics import moving_tip
-from ..solve import Stepper, solve
-from ..potential import Potential
-from ..scene import check_scene
+from ..physics.densities import STVK
+from ..physics.inversion import volume_change
+from ..physics.metrics import moving_tip
+from ..solvers.solve import Stepper, solve
+from ..physics.potential import Potential
+from ..physics.scene import check_scene
 from . import basis as _basis
 from . import kernels
 from .display import interpolate
@@ -59,7 +59,7 @@ class Validation:
     rest, each of `cases` unseen loads drawn from the declaration held for HOLD_STEPS steps of
     VALIDATION_DT and released for as many. tip_error: the largest |mean displacement
     difference over the tip| over the largest |full tip displacement| of its case (the tip: the
-    drag's vertices, else anisofem.metrics.moving_tip of the full answer); field_error: the
+    drag's vertices, else anisofem.physics.metrics.moving_tip of the full answer); field_error: the
     largest vertex displacement difference over the largest full one; full_seconds, the full
     FEM's time; converged, whether every solve of both converged; cases, how many load cases
     (0: the static check); inverted, how many drawn cases were left out (and drawn again)

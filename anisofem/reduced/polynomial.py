@@ -12,7 +12,7 @@ so the energy V(q) = sum_p w_p psi(E_p(q)) over every element's quadrature point
     V(q) = c0 + c1 . q + 1/2 q^T C2 q + S3[q, q, q] + S4[q, q, q, q],
 
 S3 and S4 fully symmetric tensors. The coefficients are summed once per quadrature point of
-any element type (anisofem.scene.ElementData), whatever the mesh; afterwards an evaluation
+any element type (anisofem.physics.scene.ElementData), whatever the mesh; afterwards an evaluation
 costs O(r^4 / 6) and no mesh data. With Y = S3[q] and X = S4[q, q] (r, r):
 
     V = c0 + c1 . q + q^T (C2 / 2 + Y + X) q,   dV/dq = c1 + (C2 + 3 Y + 4 X) q,
@@ -21,7 +21,7 @@ costs O(r^4 / 6) and no mesh data. With Y = S3[q] and X = S4[q, q] (r, r):
 S4 is stored as W4 (T, r), T = r (r + 1) (r + 2) / 6: row t holds S4[a, b, c, :] for the t-th
 sorted triple a <= b <= c, so X costs one pass over W4 (anisofem.reduced.kernels).
 
-A pressure on a cavity (anisofem.pressure) adds -p times the cavity's volume, a cubic of the
+A pressure on a cavity (anisofem.physics.pressure) adds -p times the cavity's volume, a cubic of the
 positions: its part is summed into c0 to S3 (with_pressure), exact too.
 """
 import itertools

@@ -9,7 +9,7 @@ Young's modulus scales mu and lam together; Poisson's ratio moves them by the ch
 
 The reduced step k solves g_k = (q_k+1 - 2 q_k + q_k-1) / dt^2 + dV/dq(q_k+1) - f = 0 (the
 basis is mass-orthonormal), so the adjoint runs backward as the full FEM's does
-(anisofem.sensitivity.rollout_sensitivity):
+(anisofem.inverse.sensitivity.rollout_sensitivity):
 
     H_k+1 mu_k = dj_k+1/dq + (2 mu_k+1 - mu_k+2) / dt^2,    dJ/dp = -sum_k mu_k . dV_p/dq(q_k+1),
 
@@ -20,7 +20,7 @@ import dataclasses
 import numpy as np
 
 from .._validate import as_float_array
-from ..material import lame_slopes
+from ..physics.material import lame_slopes
 from .polynomial import polynomial
 
 #: The whole-body stiffnesses a reduced rollout's gradient is taken for.

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..inversion import volume_change
-from ..solve import solve
+from ..physics.inversion import volume_change
+from ..solvers.solve import solve
 from .loads import build_cases
 
 

@@ -1,5 +1,5 @@
 """Write the example scene files' meshes next to them, as Gmsh files with named physical groups
-(what Gmsh's own Python API would write): actuator.msh (anisofem.meshgen.actuator) and
+(what Gmsh's own Python API would write): actuator.msh (anisofem.physics.meshgen.actuator) and
 part.msh (a 0.08 m beam in two halves, "left" and "right", with its ends named "base" and
 "end").
 
@@ -9,8 +9,8 @@ import os
 
 import numpy as np
 
-from anisofem.io import write_tagged_mesh
-from anisofem.meshgen import actuator, box_beam
+from anisofem.io.meshes import write_tagged_mesh
+from anisofem.physics.meshgen import actuator, box_beam
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 

@@ -6,7 +6,7 @@ import meshio
 import numpy as np
 
 import anisofem as af
-from anisofem.convergence import cantilever
+from anisofem.studies.convergence import cantilever
 
 FIBER = (math.cos(math.radians(40)), 0.0, math.sin(math.radians(40)))
 

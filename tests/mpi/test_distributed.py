@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import anisofem as af
-from anisofem.distributed.bench import MPIRUN
+from anisofem.studies.bench_distributed import MPIRUN
 from cases import scene
 
 pytest.importorskip("petsc4py")
