@@ -9,7 +9,7 @@ PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
 TEST_WORKERS ?= 2
 
-.PHONY: demo test bench pretrained clean web web-assets test-web install-mpi test-mpi
+.PHONY: demo test bench pretrained clean web web-assets test-web install-mpi test-mpi install-csharp
 
 $(VENV)/.fem: setup.cfg setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -42,6 +42,14 @@ install-mpi: $(VENV)/.mpi
 
 test-mpi: $(VENV)/.mpi
 	$(PY) -m pytest -q $(PYTEST_ARGS) tests/mpi
+
+# Mono's C# compiler and runtime from the distribution's packages (about 25 MB), so that the
+# test of the C runtime's C# example runs (it skips itself without them).
+install-csharp:
+	@command -v mcs > /dev/null && command -v mono > /dev/null || { \
+	  SUDO=$$([ "$$(id -u)" = 0 ] || echo sudo); $$SUDO apt-get update -q && \
+	  DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q --no-install-recommends \
+	  mono-mcs mono-runtime; }
 
 bench: $(VENV)/.installed
 	$(PY) -m anisofem bench

@@ -1,26 +1,36 @@
-"""The C runtime of the reduced models (export/c/anisofem_reduced.c: the linear model and the
-framed one), built with the system C compiler and called through ctypes: how the tests check
-it against runtime.ReducedSimulator and framed_runtime.FramedSimulator and how `python -m
-export bench-reduced` times it. An engine links the C file pair itself
-(export/README.md).
+"""Python through the C runtime (export/c: anisofem.h, the deployed implementation of both
+kinds of model), built with the system C compiler and called through ctypes. It steps a file
+like runtime.ReducedSimulator and framed_runtime.FramedSimulator (the numpy references the
+tests hold it against) at C's speed (`python -m export bench-reduced`).
 
-    lib = build("build/c")                  # compiles once; returns the shared library's path
-    sim = CReducedSimulator("cantilever", lib)
+    sim = CReducedSimulator("cantilever")   # compiles the library on first use (build())
     q, w = sim.rest_state()
     sim.step(q, w, force, 0.02)             # in place; force (n, 3) N
     x = sim.positions(q)
+
+    sim = CFramedSimulator("t")             # the same interface as FramedSimulator
+    now = before = sim.rest_state()
+    now, before = sim.step(now, before, force, 0.02), now
 """
 import ctypes
+import hashlib
 import os
 import shutil
 import subprocess
 
 import numpy as np
 
-SOURCE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "c", "anisofem_reduced.c")
+FOLDER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "c")
+#: The runtime's sources, in build order, and its headers.
+SOURCES = tuple(os.path.join(FOLDER, f"{name}.c")
+                for name in ("arrays", "linalg", "reduced", "framed", "model"))
+HEADERS = (os.path.join(FOLDER, "anisofem.h"), os.path.join(FOLDER, "af_internal.h"))
+#: The kinds af_kind returns (anisofem.h).
+REDUCED, FRAMED = 1, 2
 
-#: The C runtime's return codes (anisofem_reduced.h).
-CODES = {-1: "bad file", -2: "bad input", -3: "not converged", -4: "no memory"}
+#: Compiler flags, best first: for this machine's processor (vector units, fused multiply-add:
+#: the framed step 1.7-1.9x faster than at -O2), and what any C99 compiler takes.
+FLAGS = (["-O3", "-march=native"], ["-O2"])
 
 
 def compiler():
@@ -32,174 +42,237 @@ def compiler():
     return None
 
 
-#: Compiler flags, best first: for this machine's processor (vector units, fused multiply-add:
-#: the framed step 1.7-1.9x faster than at -O2), and what any C99 compiler takes.
-FLAGS = (["-O3", "-march=native"], ["-O2"])
-
-
-def build(folder):
-    """Compile the C runtime into folder/libanisofem_reduced.so (C99, the first of FLAGS the
-    compiler takes) unless it is newer than its source; returns its path. RuntimeError without
-    a C compiler or where it fails."""
+def build(folder=None):
+    """Compile the C runtime into folder/libanisofem.so (C99, the first of FLAGS the compiler
+    takes) unless it is there for these sources; returns its path. folder: by default a cache
+    folder named by the sources' hash ($ANISOFEM_CACHE, else ~/.cache/anisofem). RuntimeError
+    without a C compiler or where it fails."""
+    digest = hashlib.sha256()
+    for path in SOURCES + HEADERS:
+        with open(path, "rb") as f:
+            digest.update(f.read())
+    tag = digest.hexdigest()[:16]
+    if folder is None:
+        cache = os.environ.get("ANISOFEM_CACHE") or os.path.join(
+            os.path.expanduser("~"), ".cache", "anisofem")
+        folder = os.path.join(cache, f"c-{tag}")
+    lib = os.path.join(folder, "libanisofem.so")
+    stamp = lib + ".sources"
+    if os.path.exists(lib) and os.path.exists(stamp):
+        with open(stamp) as f:
+            if f.read() == tag:
+                return lib
     cc = compiler()
     if cc is None:
-        raise RuntimeError("no C compiler (cc, gcc or clang) on the PATH")
+        raise RuntimeError("the C runtime needs a C compiler (cc, gcc or clang) on the PATH, "
+                           "and none is there; the numpy runtimes (export/runtime.py, "
+                           "export/framed_runtime.py) step the same files without one")
     os.makedirs(folder, exist_ok=True)
-    lib = os.path.join(folder, "libanisofem_reduced.so")
-    newest = max(os.path.getmtime(SOURCE), os.path.getmtime(SOURCE[:-1] + "h"))
-    if os.path.exists(lib) and os.path.getmtime(lib) >= newest:
-        return lib
     tmp = lib + f".{os.getpid()}.tmp"
     for flags in FLAGS:
-        done = subprocess.run([cc, "-std=c99", *flags, "-shared", "-fPIC", "-o", tmp, SOURCE,
+        done = subprocess.run([cc, "-std=c99", *flags, "-shared", "-fPIC", "-o", tmp, *SOURCES,
                                "-lm"], capture_output=True, text=True)
         if done.returncode == 0:
             break
     if done.returncode != 0:
-        raise RuntimeError(f"compiling {SOURCE} failed:\n{done.stderr}")
+        raise RuntimeError(f"compiling the C runtime in {FOLDER} failed:\n{done.stderr}")
     os.replace(tmp, lib)
+    with open(stamp + f".{os.getpid()}.tmp", "w") as f:
+        f.write(tag)
+    os.replace(stamp + f".{os.getpid()}.tmp", stamp)
     return lib
 
 
-class _CSimulator:
-    """What both C simulators share, their functions named PREFIX_*: the model handle, nodal
-    forces handed to C, a constant force, iterations and positions."""
-    PREFIX = ""
+_DOUBLE_P = ctypes.POINTER(ctypes.c_double)
+_LIBRARIES = {}
 
-    def __init__(self, path, lib, angle, counts):
-        c, handle = _open(lib, self.PREFIX, path, angle,
-                          tuple(f"{self.PREFIX}_{name}" for name in ("vertices", "iterations")
-                                + counts))
-        self._c, self._handle = c, handle
-        double_p = ctypes.POINTER(ctypes.c_double)
-        self._function("positions").argtypes = [ctypes.c_void_p, double_p, double_p]
-        self._function("set_constant_force").argtypes = [ctypes.c_void_p, double_p]
-        self.n = self._function("vertices")(handle)
 
-    def _function(self, name):
-        return getattr(self._c, f"{self.PREFIX}_{name}")
+def library(lib=None):
+    """The ctypes library at lib (build()'s path; None: build() it), its functions typed."""
+    lib = lib or build()
+    if lib not in _LIBRARIES:
+        c = ctypes.CDLL(lib)
+        handle, char_p = ctypes.c_void_p, ctypes.c_char_p
+        types = {
+            "af_load": (handle, [char_p, char_p, char_p, ctypes.c_size_t]),
+            "af_free": (None, [handle]),
+            "af_kind": (ctypes.c_int, [handle]),
+            "af_vertices": (ctypes.c_int, [handle]),
+            "af_state_size": (ctypes.c_int, [handle]),
+            "af_rest_state": (None, [handle, _DOUBLE_P]),
+            "af_set_constant_force": (ctypes.c_int, [handle, _DOUBLE_P]),
+            "af_set_solver": (ctypes.c_int, [handle, ctypes.c_double, ctypes.c_int]),
+            "af_step": (ctypes.c_int, [handle, _DOUBLE_P, _DOUBLE_P, _DOUBLE_P,
+                                       ctypes.c_double]),
+            "af_iterations": (ctypes.c_int, [handle]),
+            "af_error": (char_p, [handle]),
+            "af_positions": (None, [handle, _DOUBLE_P, _DOUBLE_P]),
+            "af_masses": (_DOUBLE_P, [handle]),
+            "af_rest_positions": (_DOUBLE_P, [handle]),
+            "af_held": (ctypes.POINTER(ctypes.c_ubyte), [handle]),
+            "af_surface": (ctypes.POINTER(ctypes.c_int), [handle, ctypes.POINTER(ctypes.c_int)]),
+            "af_tets": (ctypes.POINTER(ctypes.c_int), [handle, ctypes.POINTER(ctypes.c_int),
+                                                       ctypes.POINTER(ctypes.c_int)]),
+            "af_gravity": (ctypes.c_int, [handle, _DOUBLE_P]),
+            "af_time_step": (ctypes.c_double, [handle]),
+        }
+        for name, (restype, argtypes) in types.items():
+            function = getattr(c, name)
+            function.restype, function.argtypes = restype, argtypes
+        _LIBRARIES[lib] = c
+    return _LIBRARIES[lib]
+
+
+class CModel:
+    """A model file (path without extension: path.json + path.bin) loaded by the C runtime:
+    its body's arrays, and one step of a flat state (af_state_size doubles) in place. lib: the
+    library's path (None: build() it); angle: the fiber angle of a file of several, as its
+    header writes it. ValueError with the runtime's message where the file cannot be stepped."""
+
+    def __init__(self, path, lib=None, angle=None):
+        self._c = library(lib)
+        error = ctypes.create_string_buffer(512)
+        self._handle = self._c.af_load(str(path).encode(),
+                                       None if angle is None else str(angle).encode(),
+                                       error, len(error))
+        if not self._handle:
+            raise ValueError(error.value.decode())
+        c, h = self._c, self._handle
+        self.kind = c.af_kind(h)
+        self.n = c.af_vertices(h)
+        self.state_size = c.af_state_size(h)
+        self.masses = np.ctypeslib.as_array(c.af_masses(h), (self.n,)).copy()
+        self.rest_positions = np.ctypeslib.as_array(c.af_rest_positions(h), (self.n, 3)).copy()
+        self.held = np.ctypeslib.as_array(c.af_held(h), (self.n, 3)).astype(bool)
+        count, nodes = ctypes.c_int(), ctypes.c_int()
+        surface = c.af_surface(h, ctypes.byref(count))
+        self.surface = np.ctypeslib.as_array(surface, (count.value, 3)).copy()
+        tets = c.af_tets(h, ctypes.byref(count), ctypes.byref(nodes))
+        self.tets = np.ctypeslib.as_array(tets, (count.value, nodes.value)).copy()
+        g = np.zeros(3)
+        self.gravity = g if c.af_gravity(h, _pointer(g)) else None
+        self.time_step = c.af_time_step(h) or None
+        self._solver = (1e-8, 50)
+        self._force_buffer = None
 
     def __del__(self):
         if getattr(self, "_handle", None):
-            self._function("free")(self._handle)
+            self._c.af_free(self._handle)
             self._handle = None
 
-    def _call(self, name, *args):
-        """PREFIX_name(handle, *args); RuntimeError naming the C runtime's code where it
-        fails."""
-        code = self._function(name)(self._handle, *args)
+    def _check(self, code, name):
         if code != 0:
-            raise RuntimeError(f"{self.PREFIX}_{name}: {CODES.get(code, code)}")
+            raise RuntimeError(f"{name}: {self._c.af_error(self._handle).decode()}")
 
     def _forces(self, force):
         """A pointer to force as a contiguous float64 (n, 3) array (kept alive on self), or
         None."""
         if force is None:
             return None
-        self._force_buffer = _force_array(force, self.n)
-        return _pointer(self._force_buffer)
+        force = np.ascontiguousarray(force, dtype=np.float64)
+        if force.shape != (self.n, 3):
+            raise ValueError(f"force: expected shape ({self.n}, 3), got {force.shape}")
+        self._force_buffer = force
+        return _pointer(force)
 
     def set_constant_force(self, force):
         """A force (n, 3), N, added to every later step, projected once (None clears it)."""
-        self._call("set_constant_force", self._forces(force))
+        self._check(self._c.af_set_constant_force(self._handle, self._forces(force)),
+                    "af_set_constant_force")
+
+    def set_solver(self, tolerance, max_iter):
+        """Newton's relative tolerance and iteration budget (af_set_solver)."""
+        if (tolerance, max_iter) != self._solver:
+            self._check(self._c.af_set_solver(self._handle, tolerance, max_iter),
+                        "af_set_solver")
+            self._solver = (tolerance, max_iter)
+
+    def advance(self, state, force, dt, base=None):
+        """One step of the flat state (float64 (state_size,), contiguous) in place; base (3, 4)
+        [R_g | c_g] or None. RuntimeError with the runtime's message where it fails."""
+        if base is not None:
+            base = np.asarray(base, float)
+            base = np.ascontiguousarray(np.concatenate([base[:, :3].ravel(), base[:, 3]]))
+        self._check(self._c.af_step(self._handle, _pointer(state), self._forces(force),
+                                    None if base is None else _pointer(base), dt), "af_step")
 
     @property
     def iterations(self):
         """Newton iterations of the last step."""
-        return self._function("iterations")(self._handle)
+        return self._c.af_iterations(self._handle)
 
-    def positions(self, state):
-        """Positions (n, 3), m, of a state (the reduced model's: its coordinates q)."""
+    def _positions(self, state):
         x = np.empty((self.n, 3))
-        self._function("positions")(self._handle, _pointer(state), _pointer(x))
+        self._c.af_positions(self._handle, _pointer(np.ascontiguousarray(state, float)),
+                             _pointer(x))
         return x
 
 
-class CReducedSimulator(_CSimulator):
-    """A reduced model's arrays files (path without extension) stepped by the C runtime at
-    `lib` (build's path); angle: the fiber angle of a file of several, as its header writes it."""
-    PREFIX = "af_reduced"
+class CReducedSimulator(CModel):
+    """A reduced model's file stepped by the C runtime with runtime.ReducedSimulator's
+    interface: a state (q, w), r numbers each."""
 
-    def __init__(self, path, lib, angle=None):
-        super().__init__(path, lib, angle, ("coordinates",))
-        double_p = ctypes.POINTER(ctypes.c_double)
-        self._c.af_reduced_step.argtypes = [ctypes.c_void_p, double_p, double_p, double_p,
-                                            ctypes.c_double, ctypes.c_double, ctypes.c_int]
-        self.r = self._c.af_reduced_coordinates(self._handle)
+    def __init__(self, path, lib=None, angle=None):
+        super().__init__(path, lib, angle)
+        if self.kind != REDUCED:
+            raise ValueError(f"{path}: a framed model: step it with CFramedSimulator")
+        self.r = self.state_size // 2
+        self._state = np.empty(self.state_size)
 
     def rest_state(self):
         """(q, w): zeros (r,), float64."""
         return np.zeros(self.r), np.zeros(self.r)
 
     def step(self, q, w, force, dt, rtol=1e-8, max_iter=50):
-        """One backward-Euler step of q, w (float64 (r,), contiguous) in place under the
-        constant force plus nodal forces (n, 3), N (None: none); RuntimeError naming the C
-        runtime's code where it fails."""
-        self._call("step", _pointer(q), _pointer(w), self._forces(force), dt, rtol, max_iter)
+        """One backward-Euler step of q, w (float64 (r,)) in place under the constant force plus
+        nodal forces (n, 3), N (None: none); RuntimeError with the runtime's message where it
+        fails (q and w unchanged)."""
+        self.set_solver(rtol, max_iter)
+        state = self._state
+        state[:self.r], state[self.r:] = q, w
+        self.advance(state, force, dt)
+        q[:], w[:] = state[:self.r], state[self.r:]
+
+    def positions(self, q):
+        """Positions (n, 3), m, of coordinates q (r,)."""
+        return self._positions(q)  # af_positions reads a state's first half: q
 
 
-def _open(lib, prefix, path, angle, counts):
-    """(ctypes library, model handle) of PREFIX_load(path, angle) in the shared library lib,
-    PREFIX_free and the functions `counts` (of the handle alone) typed; ValueError with the C
-    runtime's message where the file cannot be stepped."""
-    c = ctypes.CDLL(lib)
-    load = getattr(c, prefix + "_load")
-    load.restype = ctypes.c_void_p
-    load.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p, ctypes.c_size_t]
-    for name in (prefix + "_free",) + tuple(counts):
-        getattr(c, name).argtypes = [ctypes.c_void_p]
-    error = ctypes.create_string_buffer(512)
-    handle = load(str(path).encode(), None if angle is None else str(angle).encode(), error,
-                  len(error))
-    if not handle:
-        raise ValueError(error.value.decode())
-    return c, handle
+class CFramedSimulator(CModel):
+    """A framed model's file stepped by the C runtime with framed_runtime.FramedSimulator's
+    interface: a state flat (size,): the domains' centres and rotations, the coordinates, the
+    base."""
 
+    def __init__(self, path, lib=None, angle=None):
+        super().__init__(path, lib, angle)
+        if self.kind != FRAMED:
+            raise ValueError(f"{path}: a reduced model, not a framed one: step it with "
+                             f"CReducedSimulator")
+        self.size = self.state_size // 2
+        self._state = np.empty(self.state_size)
+        self._c.af_rest_state(self._handle, _pointer(self._state))
+        self._rest = self._state[:self.size].copy()
 
-def _force_array(force, n):
-    """force as a contiguous float64 (n, 3) array; ValueError naming its shape otherwise."""
-    force = np.ascontiguousarray(force, dtype=np.float64)
-    if force.shape != (n, 3):
-        raise ValueError(f"force: expected shape ({n}, 3), got {force.shape}")
-    return force
+    def rest_state(self):
+        """The rest state, flat (size,)."""
+        return self._rest.copy()
+
+    def step(self, now, before, force, dt, base=None, max_iter=50):
+        """The state after now (before: a step earlier) under the constant force plus nodal
+        forces (n, 3), N (None: none), the held nodes carried by base (3, 4) [R_g | c_g] (None:
+        now's); RuntimeError with the runtime's message where it fails."""
+        self.set_solver(1e-8, max_iter)
+        state = self._state
+        state[:self.size], state[self.size:] = now, before
+        self.advance(state, force, dt, base)
+        return state[:self.size].copy()
+
+    def positions(self, state):
+        """Positions (n, 3), m, of a state (size,)."""
+        return self._positions(state)  # af_positions reads a state's first half: now
 
 
 def _pointer(a):
     if a.dtype != np.float64 or not a.flags.c_contiguous:
         raise TypeError("expected a contiguous float64 array")
-    return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-
-
-class CFramedSimulator(_CSimulator):
-    """A framed model's arrays files (path without extension) stepped by the C runtime at
-    `lib`: framed_runtime.FramedSimulator's interface, a state flat (af_framed_state_size,):
-    centres, rotations, coordinates, base."""
-    PREFIX = "af_framed"
-
-    def __init__(self, path, lib, angle=None):
-        super().__init__(path, lib, angle, ("state_size",))
-        double_p = ctypes.POINTER(ctypes.c_double)
-        c = self._c
-        c.af_framed_rest_state.argtypes = [ctypes.c_void_p, double_p]
-        c.af_framed_step.argtypes = [ctypes.c_void_p, double_p, double_p, double_p, double_p,
-                                     double_p, ctypes.c_double, ctypes.c_int]
-        self.size = c.af_framed_state_size(self._handle)
-        self._rest = np.empty(self.size)
-        c.af_framed_rest_state(self._handle, _pointer(self._rest))
-
-    def rest_state(self):
-        """The rest state, flat (af_framed_state_size,)."""
-        return self._rest.copy()
-
-    def step(self, now, before, force, dt, base=None, max_iter=50):
-        """The state after now (flat states; before a step earlier) under the constant force
-        plus nodal forces (n, 3), N (None: none), the held nodes carried by base (3, 4)
-        [R_g | c_g] (None: now's); RuntimeError naming the C runtime's code where it fails."""
-        after = np.empty(self.size)
-        if base is not None:
-            base = np.ascontiguousarray(np.concatenate([np.asarray(base, float)[:, :3].ravel(),
-                                                        np.asarray(base, float)[:, 3]]))
-        self._call("step", _pointer(now), _pointer(before), _pointer(after),
-                   self._forces(force), None if base is None else _pointer(base), dt,
-                   max_iter)
-        return after
+    return a.ctypes.data_as(_DOUBLE_P)

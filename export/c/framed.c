@@ -1,561 +1,15 @@
-/* The reduced model's backward-Euler step in C99 (see anisofem_reduced.h): positions x = x0 +
- * basis q and the exact elastic energy V(q) = c0 + c1.q + q^T C2 q / 2 + S3[q,q,q] +
- * S4[q,q,q,q], W4 holding S4[a,b,c,:] for the sorted triples a <= b <= c. A step minimizes
- * |q - q_hat|^2 / (2 dt^2) + V(q) - f.q (q_hat = q + dt w, f = basis^T force, the basis
- * mass-orthonormal) by Newton with the Hessian's negative eigenvalues clamped and an Armijo
- * search on the exact quartic along the step, as export/runtime.py's ReducedSimulator does.
- *
- * The arrays file: PATH.json, a JSON header whose "arrays" table gives each array's dtype,
- * shape and byte offset in PATH.bin (raw little-endian). Only what the step needs is read.
- */
-#include "anisofem_reduced.h"
-
-#include <errno.h>
-#include <math.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-
-#define ARRAYS_FORMAT "anisognn-arrays-1"
-#define REDUCED_FORMAT "anisofem-reduced-1"
-#define FLOOR 1.0
-#define ARMIJO 1e-4
-#define SMALLEST_STEP 1e-12
-#define CLAMP 1e-8
-
-struct af_reduced {
-    int n, r;
-    long triples;                /* T = r (r + 1) (r + 2) / 6 */
-    double *rest, *basis, *masses, *c1, *C2, *S3, *W4;
-    double *constant;            /* (r,) the projected constant force */
-    double *work;                /* scratch for a step */
-    int iterations;
-};
-
-static void say(char *error, size_t size, const char *fmt, const char *a, const char *b) {
-    if (error && size) snprintf(error, size, fmt, a, b);
-}
-
-static char *read_file(const char *path, long *length) {
-    FILE *f = fopen(path, "rb");
-    char *data;
-    long size;
-    if (!f) return NULL;
-    if (fseek(f, 0, SEEK_END) != 0 || (size = ftell(f)) < 0 || fseek(f, 0, SEEK_SET) != 0) {
-        fclose(f);
-        return NULL;
-    }
-    data = malloc((size_t)size + 1);
-    if (data && fread(data, 1, (size_t)size, f) != (size_t)size) {
-        free(data);
-        data = NULL;
-    }
-    fclose(f);
-    if (data) data[size] = '\0';
-    if (length) *length = size;
-    return data;
-}
-
-/* The text after `"key"` and its colon, searching from start; NULL if absent. */
-static const char *value_of(const char *start, const char *key) {
-    size_t k = strlen(key);
-    const char *p = start;
-    while ((p = strchr(p, '"')) != NULL) {
-        if (strncmp(p + 1, key, k) == 0 && p[k + 1] == '"') {
-            const char *c = p + k + 2;
-            while (*c == ' ' || *c == '\n' || *c == '\r' || *c == '\t') c++;
-            if (*c == ':') {
-                c++;
-                while (*c == ' ' || *c == '\n' || *c == '\r' || *c == '\t') c++;
-                return c;
-            }
-        }
-        p++;
-    }
-    return NULL;
-}
-
-/* Copy a JSON string value (at its opening quote) into out; 0 if it is not one. */
-static int string_value(const char *v, char *out, size_t size) {
-    size_t i = 0;
-    if (!v || *v != '"') return 0;
-    for (v++; *v && *v != '"' && i + 1 < size; v++) out[i++] = *v;
-    out[i] = '\0';
-    return *v == '"';
-}
-
-typedef struct { long shape[4]; int dims; long offset; } spec;
-
-/* The spec of array `name` in the header's arrays table (from `table`); 0 if missing or not
- * of dtype `type`. */
-static int array_spec(const char *table, const char *name, const char *type, spec *s) {
-    const char *obj = value_of(table, name), *end, *v;
-    char dtype[16];
-    if (!obj || *obj != '{' || !(end = strchr(obj, '}'))) return 0;
-    v = value_of(obj, "dtype");
-    if (!v || v > end || !string_value(v, dtype, sizeof dtype) || strcmp(dtype, type))
-        return 0;
-    v = value_of(obj, "offset");
-    if (!v || v > end) return 0;
-    s->offset = strtol(v, NULL, 10);
-    v = value_of(obj, "shape");
-    if (!v || v > end || *v != '[') return 0;
-    s->dims = 0;
-    v++;
-    while (*v && *v != ']' && s->dims < 4) {
-        char *next;
-        s->shape[s->dims++] = strtol(v, &next, 10);
-        v = next;
-        while (*v == ',' || *v == ' ' || *v == '\n' || *v == '\r' || *v == '\t') v++;
-    }
-    return *v == ']';
-}
-
-static long count(const spec *s) {
-    long c = 1;
-    int i;
-    for (i = 0; i < s->dims; i++) c *= s->shape[i];
-    return c;
-}
-
-/* Read array `name` (+ tag) of dtype `type` ("float64" or "int32", `width` bytes an entry)
- * and the expected dims into a new buffer; NULL with a message. */
-static void *load_typed(const char *table, const char *bin, long bin_size, const char *name,
-                        const char *tag, const char *type, long width, int dims, spec *s,
-                        char *error, size_t size) {
-    char key[96];
-    void *out;
-    snprintf(key, sizeof key, "%s%s", name, tag);
-    if (!array_spec(table, key, type, s) || s->dims != dims) {
-        say(error, size, "the arrays file has no %s array %s of the expected rank", type, key);
-        return NULL;
-    }
-    if (s->offset < 0 || s->offset + count(s) * width > bin_size) {
-        say(error, size, "array %s runs past the end of the .bin file%s", key, "");
-        return NULL;
-    }
-    out = malloc((size_t)(count(s) * width) + 1);
-    if (out) memcpy(out, bin + s->offset, (size_t)(count(s) * width));
-    else say(error, size, "no memory for array %s%s", key, "");
-    return out;
-}
-
-static double *load_array(const char *table, const char *bin, long bin_size, const char *name,
-                          const char *tag, int dims, spec *s, char *error, size_t size) {
-    return load_typed(table, bin, bin_size, name, tag, "float64", 8, dims, s, error, size);
-}
-
-void af_reduced_free(af_reduced *m) {
-    if (!m) return;
-    free(m->rest); free(m->basis); free(m->masses); free(m->c1); free(m->C2); free(m->S3);
-    free(m->W4); free(m->work); free(m->constant);
-    free(m);
-}
-
-/* Read PATH.json and the .bin it names into *json and *bin (bin_size bytes), checking the
- * arrays format and the model format `format` (`command` rebuilds a file of another); the
- * tag "@angle" (or "") into tag; a zeroed model of model_size bytes into *model; 0 with a
- * message, nothing left allocated. */
-static int open_model(const char *path, const char *angle, const char *format,
-                      const char *command, char **json, char **bin, long *bin_size, char *tag,
-                      size_t tag_size, size_t model_size, void **model, char *error,
-                      size_t error_size) {
-    char name[4096], text[128], hint[256];
-    const char *v;
-    snprintf(name, sizeof name, "%s.json", path);
-    *bin = NULL;
-    *json = read_file(name, NULL);
-    if (!*json) {
-        say(error, error_size, "path: cannot read %s (%s)", name, strerror(errno));
-        return 0;
-    }
-    if (!string_value(value_of(*json, "format"), text, sizeof text)
-        || strcmp(text, ARRAYS_FORMAT) != 0) {
-        say(error, error_size, "path: %s is not an arrays header (format %s)", name, text);
-        goto fail;
-    }
-    if (!string_value(value_of(*json, "model_format"), text, sizeof text)
-        || strcmp(text, format) != 0) {
-        snprintf(hint, sizeof hint, "', and this runtime reads '%s'; rebuild the file with this "
-                 "version's %s", format, command);
-        say(error, error_size, "path: %s holds model_format '%s", name, text);
-        if (error && error_size > strlen(error))
-            strncat(error, hint, error_size - strlen(error) - 1);
-        goto fail;
-    }
-    tag[0] = '\0';
-    if (angle) snprintf(tag, tag_size, "@%s", angle);
-    v = value_of(*json, "bin");
-    if (!value_of(*json, "arrays") || !string_value(v, text, sizeof text)) {
-        say(error, error_size, "path: %s has no arrays table or bin file name%s", name, "");
-        goto fail;
-    }
-    {   /* the .bin next to the .json */
-        const char *slash = strrchr(path, '/');
-        int dir = slash ? (int)(slash - path + 1) : 0;
-        snprintf(name, sizeof name, "%.*s%s", dir, path, text);
-    }
-    *bin = read_file(name, bin_size);
-    if (!*bin) {
-        say(error, error_size, "path: cannot read %s (%s)", name, strerror(errno));
-        goto fail;
-    }
-    *model = calloc(1, model_size);
-    if (*model) return 1;
-    say(error, error_size, "no memory for a model%s%s", "", "");
-    free(*bin);
-    *bin = NULL;
-fail:
-    free(*json);
-    *json = NULL;
-    return 0;
-}
-
-af_reduced *af_reduced_load(const char *path, const char *angle, char *error,
-                            size_t error_size) {
-    char tag[64];
-    char *json, *bin;
-    const char *table;
-    long bin_size = 0, r;
-    spec s;
-    af_reduced *m;
-    if (!open_model(path, angle, REDUCED_FORMAT, "python -m export reduced", &json, &bin,
-                    &bin_size, tag, sizeof tag, sizeof *m, (void **)&m, error, error_size))
-        return NULL;
-    table = value_of(json, "arrays");
-    if (!(m->rest = load_array(table, bin, bin_size, "rest_positions", "", 2, &s, error, error_size)))
-        goto fail;
-    m->n = (int)s.shape[0];
-    if (!(m->masses = load_array(table, bin, bin_size, "masses", "", 1, &s, error, error_size)))
-        goto fail;
-    if (!(m->basis = load_array(table, bin, bin_size, "basis", tag, 3, &s, error, error_size)))
-        goto fail;
-    r = m->r = (int)s.shape[2];
-    if (s.shape[0] != m->n || s.shape[1] != 3) {
-        say(error, error_size, "basis%s: shape is not (n, 3, r)%s", tag, "");
-        goto fail;
-    }
-    if (!(m->c1 = load_array(table, bin, bin_size, "c1", tag, 1, &s, error, error_size)))
-        goto fail;
-    if (!(m->C2 = load_array(table, bin, bin_size, "C2", tag, 2, &s, error, error_size)))
-        goto fail;
-    if (!(m->S3 = load_array(table, bin, bin_size, "S3", tag, 3, &s, error, error_size)))
-        goto fail;
-    if (!(m->W4 = load_array(table, bin, bin_size, "W4", tag, 2, &s, error, error_size)))
-        goto fail;
-    m->triples = r * (r + 1) * (r + 2) / 6;
-    if (s.shape[0] != m->triples || s.shape[1] != r) {
-        say(error, error_size, "W4%s: shape is not (r (r + 1) (r + 2) / 6, r)%s", tag, "");
-        goto fail;
-    }
-    /* work: A, Ap (T each); X, Y, H, L, V, J (r^2 each); g, p, x, load, terms, t1, lam (r
-       each) */
-    m->work = malloc((size_t)(2 * m->triples + 6 * r * r + 7 * r) * sizeof(double));
-    m->constant = calloc((size_t)r, sizeof(double));
-    if (!m->work || !m->constant) {
-        say(error, error_size, "no memory for a model of r = %s%s", "", "");
-        goto fail;
-    }
-    free(json);
-    free(bin);
-    return m;
-fail:
-    free(json);
-    free(bin);
-    af_reduced_free(m);
-    return NULL;
-}
-
-int af_reduced_vertices(const af_reduced *m) { return m->n; }
-int af_reduced_coordinates(const af_reduced *m) { return m->r; }
-const double *af_reduced_masses(const af_reduced *m) { return m->masses; }
-const double *af_reduced_rest_positions(const af_reduced *m) { return m->rest; }
-int af_reduced_iterations(const af_reduced *m) { return m->iterations; }
-
-void af_reduced_positions(const af_reduced *m, const double *q, double *x) {
-    long i, k, r = m->r;
-    for (i = 0; i < 3L * m->n; i++) {
-        double s = 0.0;
-        const double *row = m->basis + i * r;
-        for (k = 0; k < r; k++) s += row[k] * q[k];
-        x[i] = m->rest[i] + s;
-    }
-}
-
-/* a . b over r numbers, in four interleaved partial sums (independent chains the compiler
- * can pipeline and vectorize without reassociating), added pairwise at the end. */
-static double dot(const double *a, const double *b, long r) {
-    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
-    long i = 0;
-    for (; i + 4 <= r; i += 4) {
-        s0 += a[i] * b[i];
-        s1 += a[i + 1] * b[i + 1];
-        s2 += a[i + 2] * b[i + 2];
-        s3 += a[i + 3] * b[i + 3];
-    }
-    for (; i < r; i++) s0 += a[i] * b[i];
-    return (s0 + s1) + (s2 + s3);
-}
-
-/* out (T,) = W4 v */
-static void w4_times(const af_reduced *m, const double *v, double *out) {
-    long t, r = m->r;
-    for (t = 0; t < m->triples; t++) out[t] = dot(m->W4 + t * r, v, r);
-}
-
-/* X[a, b] = sum_c T[a, b, c] u_c (r x r) for the symmetric T whose sorted triples a <= b <= c
- * are A (T,) in W4's row order: each sorted triple adds to the upper triangle once for each
- * distinct index it can give up to u; the lower triangle is mirrored. */
-static void contract(const double *A, const double *u, double *X, long r) {
-    long a, b, c, t = 0;
-    for (a = 0; a < r * r; a++) X[a] = 0.0;
-    for (a = 0; a < r; a++)
-        for (b = a; b < r; b++) {
-            double v = A[t++], acc = v * u[b];   /* c = b */
-            if (a != b) X[b * r + b] += v * u[a];
-            for (c = b + 1; c < r; c++) {
-                v = A[t++];
-                acc += v * u[c];
-                X[a * r + c] += v * u[b];
-                if (a != b) X[b * r + c] += v * u[a];
-            }
-            X[a * r + b] += acc;
-        }
-    for (a = 0; a < r; a++)
-        for (b = 0; b < a; b++) X[a * r + b] = X[b * r + a];
-}
-
-/* The cubic forms T[p, p, p] of A and of Ap (sorted triples as in contract): each sorted
- * triple weighted by its number of orderings. */
-static void cubic_forms(const double *A, const double *Ap, const double *p, long r,
-                        double *mixed, double *pure) {
-    long a, b, c, t = 0;
-    double m = 0.0, q = 0.0;
-    for (a = 0; a < r; a++)
-        for (b = a; b < r; b++) {
-            double pab = p[a] * p[b], w = pab * p[b] * (a == b ? 1.0 : 3.0);  /* c = b */
-            m += w * A[t];
-            q += w * Ap[t];
-            t++;
-            w = (a == b ? 3.0 : 6.0) * pab;                                   /* c > b */
-            for (c = b + 1; c < r; c++) {
-                m += w * p[c] * A[t];
-                q += w * p[c] * Ap[t];
-                t++;
-            }
-        }
-    *mixed = m;
-    *pure = q;
-}
-
-/* Y[a, b] = S3[a, b, :] . u */
-static void s3_times(const af_reduced *m, const double *u, double *Y) {
-    long ab, r = m->r;
-    for (ab = 0; ab < r * r; ab++) Y[ab] = dot(m->S3 + ab * r, u, r);
-}
-
-/* u^T M u for an r x r matrix M */
-static double form(const double *M, const double *u, long r) {
-    double s = 0.0;
-    long a;
-    for (a = 0; a < r; a++) s += u[a] * dot(M + a * r, u, r);
-    return s;
-}
-
-/* Cholesky of H (r x r) into L (lower); 0 where H is not positive definite. */
-static int cholesky(const double *H, double *L, long r) {
-    long i, j;
-    for (i = 0; i < r; i++)
-        for (j = 0; j <= i; j++) {
-            double s = H[i * r + j] - dot(L + i * r, L + j * r, j);
-            if (i == j) {
-                if (!(s > 0.0)) return 0;
-                L[i * r + i] = sqrt(s);
-            } else {
-                L[i * r + j] = s / L[j * r + j];
-            }
-        }
-    return 1;
-}
-
-/* Eigenvalues lam and eigenvectors (columns of V) of the symmetric H by cyclic Jacobi. */
-static void jacobi(const double *H, double *V, double *lam, double *B, long r) {
-    long i, j, k, sweep;
-    memcpy(B, H, (size_t)(r * r) * sizeof(double));
-    for (i = 0; i < r * r; i++) V[i] = 0.0;
-    for (i = 0; i < r; i++) V[i * r + i] = 1.0;
-    for (sweep = 0; sweep < 100; sweep++) {
-        double off = 0.0, total = 0.0;
-        for (i = 0; i < r; i++)
-            for (j = 0; j < r; j++) {
-                total += B[i * r + j] * B[i * r + j];
-                if (i != j) off += B[i * r + j] * B[i * r + j];
-            }
-        if (off <= 1e-30 * total) break;
-        for (i = 0; i < r - 1; i++)
-            for (j = i + 1; j < r; j++) {
-                double apq = B[i * r + j], theta, t, cs, sn;
-                if (apq == 0.0) continue;
-                theta = (B[j * r + j] - B[i * r + i]) / (2.0 * apq);
-                t = (theta >= 0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
-                cs = 1.0 / sqrt(t * t + 1.0);
-                sn = t * cs;
-                for (k = 0; k < r; k++) {  /* columns i, j */
-                    double bi = B[k * r + i], bj = B[k * r + j];
-                    B[k * r + i] = cs * bi - sn * bj;
-                    B[k * r + j] = sn * bi + cs * bj;
-                }
-                for (k = 0; k < r; k++) {  /* rows i, j */
-                    double bi = B[i * r + k], bj = B[j * r + k];
-                    B[i * r + k] = cs * bi - sn * bj;
-                    B[j * r + k] = sn * bi + cs * bj;
-                }
-                for (k = 0; k < r; k++) {
-                    double vi = V[k * r + i], vj = V[k * r + j];
-                    V[k * r + i] = cs * vi - sn * vj;
-                    V[k * r + j] = sn * vi + cs * vj;
-                }
-            }
-    }
-    for (i = 0; i < r; i++) lam[i] = B[i * r + i];
-}
-
-/* p = -H^-1 g by Cholesky, or where H is not positive definite with its eigenvalues clamped
- * to floor_share of the largest (mirror: their absolute values so clamped). */
-static void newton_direction(const double *H, const double *g, double *p, double *L,
-                             double *V, double *lam, double *B, double *t1, long r,
-                             double floor_share, int mirror) {
-    long i, k;
-    if (cholesky(H, L, r)) {
-        for (i = 0; i < r; i++) {  /* L y = g */
-            double s = g[i];
-            for (k = 0; k < i; k++) s -= L[i * r + k] * t1[k];
-            t1[i] = s / L[i * r + i];
-        }
-        for (i = r - 1; i >= 0; i--) {  /* L^T z = y */
-            double s = t1[i];
-            for (k = i + 1; k < r; k++) s -= L[k * r + i] * p[k];
-            p[i] = s / L[i * r + i];
-        }
-    } else {
-        double largest = 0.0;
-        jacobi(H, V, lam, B, r);
-        for (i = 0; i < r; i++) if (fabs(lam[i]) > largest) largest = fabs(lam[i]);
-        for (i = 0; i < r; i++) {
-            double s = 0.0, floor_ = floor_share * largest, l = mirror ? fabs(lam[i]) : lam[i];
-            for (k = 0; k < r; k++) s += V[k * r + i] * g[k];
-            t1[i] = s / (l > floor_ ? l : floor_);
-        }
-        for (i = 0; i < r; i++) {
-            double s = 0.0;
-            for (k = 0; k < r; k++) s += V[i * r + k] * t1[k];
-            p[i] = s;
-        }
-    }
-    for (i = 0; i < r; i++) p[i] = -p[i];
-}
-
-/* load (r,) += basis^T force (n x 3) */
-static void project(const af_reduced *m, const double *force, double *load) {
-    long i, k, r = m->r;
-    for (i = 0; i < 3L * m->n; i++) {
-        const double *row = m->basis + i * r;
-        double f = force[i];
-        if (f != 0.0) for (k = 0; k < r; k++) load[k] += f * row[k];
-    }
-}
-
-static int finite_forces(const af_reduced *m, const double *force) {
-    long i;
-    for (i = 0; i < 3L * m->n; i++) if (!isfinite(force[i])) return 0;
-    return 1;
-}
-
-int af_reduced_set_constant_force(af_reduced *m, const double *force) {
-    long k;
-    if (force && !finite_forces(m, force)) return AF_BAD_INPUT;
-    for (k = 0; k < m->r; k++) m->constant[k] = 0.0;
-    if (force) project(m, force, m->constant);
-    return AF_OK;
-}
-
-int af_reduced_step(af_reduced *m, double *q, double *w, const double *force, double dt,
-                    double rtol, int max_iter) {
-    long r = m->r, rr = r * r, i, k, it;
-    double *A = m->work, *Ap = A + m->triples, *X = Ap + m->triples, *Y = X + rr,
-           *H = Y + rr, *L = H + rr, *V = L + rr, *J = V + rr, *g = J + rr, *p = g + r,
-           *x = p + r, *load = x + r, *terms = load + r, *t1 = terms + r, *lam = t1 + r;
-    double inertia, tolerance, residual = 0.0, eps = 2.220446049250313e-16;
-    if (!(dt > 0.0) || !(rtol >= 0.0)) return AF_BAD_INPUT;
-    if (force && !finite_forces(m, force)) return AF_BAD_INPUT;
-    for (k = 0; k < r; k++) if (!isfinite(q[k]) || !isfinite(w[k])) return AF_BAD_INPUT;
-    for (k = 0; k < r; k++) load[k] = m->constant[k];
-    if (force) project(m, force, load);
-    inertia = 1.0 / (dt * dt);
-    tolerance = rtol * (sqrt(dot(load, load, r)) + sqrt(dot(w, w, r)) / dt);
-    for (k = 0; k < r; k++) x[k] = q[k] + dt * w[k];
-    w4_times(m, x, A);
-    for (it = 0; it <= max_iter; it++) {
-        double a1, a2, a3, pure, mixed, step = 1.0, floor_;
-        contract(A, x, X, r);
-        s3_times(m, x, Y);
-        for (i = 0; i < r; i++) {
-            double s = m->c1[i];
-            for (k = 0; k < r; k++)
-                s += (m->C2[i * r + k] + 3.0 * Y[i * r + k] + 4.0 * X[i * r + k]) * x[k];
-            g[i] = s;
-        }
-        if (it == 0) tolerance += rtol * sqrt(dot(g, g, r));
-        for (i = 0; i < r; i++) {
-            g[i] += inertia * (x[i] - (q[i] + dt * w[i])) - load[i];
-            for (k = 0; k < r; k++)
-                H[i * r + k] = m->C2[i * r + k] + 6.0 * Y[i * r + k] + 12.0 * X[i * r + k]
-                               + (i == k ? inertia : 0.0);
-        }
-        residual = sqrt(dot(g, g, r));
-        if (!isfinite(residual)) return AF_NOT_CONVERGED;
-        for (i = 0; i < r; i++) {
-            double s = 0.0;
-            for (k = 0; k < r; k++) s += fabs(H[i * r + k]) * fabs(x[k]);
-            terms[i] = s + fabs(load[i]) + fabs(m->c1[i]);
-        }
-        floor_ = FLOOR * eps * (double)r * sqrt(dot(terms, terms, r));
-        if (residual <= (tolerance > floor_ ? tolerance : floor_)) {
-            for (k = 0; k < r; k++) {
-                w[k] = (x[k] - q[k]) / dt;
-                q[k] = x[k];
-            }
-            m->iterations = (int)it;
-            return AF_OK;
-        }
-        if (it == max_iter) break;
-        newton_direction(H, g, p, L, V, lam, J, t1, r, CLAMP, 0);
-        a1 = dot(g, p, r);
-        if (!(a1 < 0.0)) break;
-        a2 = 0.5 * form(H, p, r);
-        w4_times(m, p, Ap);
-        cubic_forms(A, Ap, p, r, &mixed, &pure);
-        s3_times(m, p, Y);
-        a3 = form(Y, p, r) + 4.0 * mixed;
-        while (step * (a2 + step * (a3 + step * pure)) > -(1.0 - ARMIJO) * a1
-               && step >= SMALLEST_STEP)
-            step *= 0.5;
-        if (step < SMALLEST_STEP) break;
-        for (k = 0; k < r; k++) x[k] += step * p[k];
-        for (k = 0; k < m->triples; k++) A[k] += step * Ap[k];
-    }
-    m->iterations = (int)it;
-    return AF_NOT_CONVERGED;
-}
-
-/* ---------------------------------------------------------------------------------------
- * The framed model (`python -m export reduced --framed`): export/framed_runtime.py's
+/* The framed model (`python -m export reduced --framed`): export/framed_runtime.py's
  * FramedSimulator, the same step in the same order. Domain d's node i sits at
  * R_d (y_i + U_i q_d) + c_d; a step is Newton over each domain's own move t, turn theta and
  * coordinates q, the centres carried along the domains' kinematic tree.
  */
-#define FRAMED_FORMAT "anisofem-framed-1"
-#define STEP_TOLERANCE 1e-8
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "af_internal.h"
+
 #define MIRROR_FLOOR 1e-10
 
 struct af_framed {
@@ -563,30 +17,31 @@ struct af_framed {
     int nf, dk;                /* the model's nodes; model nodes per display vertex (0: none) */
     int *display_nodes;        /* (n, dk): each vertex's model nodes, where a display mesh */
     double *display_weights;   /* (n, dk): their weights */
-    double *x0, *spread;       /* the model nodes' rest positions; forces spread on them */
+    const double *x0;          /* the model nodes' rest positions */
+    double *physics_rest, *spread; /* x0 where a display mesh's; forces spread on the nodes */
     double size;
     int *labels, *r, *q0, *z0, *b0, *parent, *order, *chain, *poly;
     int *joint_nodes, *joint_labels, *joint_tets, *pair_list, *pair_ptr, *element_pairs;
-    double *rest, *masses, *Y, *U, *centre, *mass, *a, *J, *A, *B, *radius, *reach;
+    const double *rest, *masses;   /* (n, 3) and (n,), the model's */
+    double *Y, *U, *centre, *mass, *a, *J, *A, *B, *radius, *reach;
     double *c0, *c1, *C2, *S3, *W4, *arm_parent, *arm_own, *arms;
     double *grads, *weights, *mu, *lam, *kappa, *fiber;
     double *constant;          /* the constant force's moments: T0 (9 D), T (9 Q), t (3 D) */
     double *work;
-    int iterations;
 };
 
-void af_framed_free(af_framed *m) {
+void af_framed_close(af_framed *m) {
     if (!m) return;
     free(m->labels); free(m->r); free(m->q0); free(m->z0); free(m->b0); free(m->parent);
     free(m->order); free(m->chain); free(m->poly); free(m->joint_nodes); free(m->joint_labels);
     free(m->joint_tets); free(m->pair_list); free(m->pair_ptr); free(m->element_pairs);
-    free(m->rest); free(m->masses); free(m->Y); free(m->U); free(m->centre); free(m->mass);
+    free(m->Y); free(m->U); free(m->centre); free(m->mass);
     free(m->a); free(m->J); free(m->A); free(m->B); free(m->radius); free(m->reach);
     free(m->c0); free(m->c1); free(m->C2); free(m->S3); free(m->W4); free(m->arm_parent);
     free(m->arm_own); free(m->arms); free(m->grads); free(m->weights); free(m->mu);
     free(m->lam); free(m->kappa); free(m->fiber); free(m->constant); free(m->work);
     free(m->display_nodes); free(m->display_weights); free(m->spread);
-    if (m->x0 != m->rest) free(m->x0);
+    free(m->physics_rest);
     free(m);
 }
 
@@ -598,16 +53,16 @@ static int compare_longs(const void *x, const void *y) {
 /* The joints' compact node numbering, their node pairs and each element's pairs. */
 static int plan_joints(af_framed *m, const int *tets) {
     long e, a, b, i, total = (long)m->joints * m->k, count = 0, unique = 0;
-    long *keys = malloc((size_t)(total > 0 ? total : 1) * sizeof(long) * (size_t)m->k);
-    int *local = malloc((size_t)m->nf * sizeof(int));
+    long *keys = (long *)malloc((size_t)(total > 0 ? total : 1) * sizeof(long) * (size_t)m->k);
+    int *local = (int *)malloc((size_t)m->nf * sizeof(int));
     if (!keys || !local) { free(keys); free(local); return 0; }
     for (i = 0; i < m->nf; i++) local[i] = -1;
     for (e = 0; e < total; e++) local[tets[e]] = 0;
     m->nodes = 0;
     for (i = 0; i < m->nf; i++) if (local[i] == 0) local[i] = m->nodes++;
-    m->joint_nodes = malloc((size_t)m->nodes * sizeof(int) + 1);
-    m->joint_labels = malloc((size_t)m->nodes * sizeof(int) + 1);
-    m->joint_tets = malloc((size_t)total * sizeof(int) + 1);
+    m->joint_nodes = (int *)malloc((size_t)m->nodes * sizeof(int) + 1);
+    m->joint_labels = (int *)malloc((size_t)m->nodes * sizeof(int) + 1);
+    m->joint_tets = (int *)malloc((size_t)total * sizeof(int) + 1);
     if (!m->joint_nodes || !m->joint_labels || !m->joint_tets) { free(keys); free(local); return 0; }
     for (i = 0; i < m->nf; i++)
         if (local[i] >= 0) { m->joint_nodes[local[i]] = (int)i; m->joint_labels[local[i]] = m->labels[i]; }
@@ -620,9 +75,9 @@ static int plan_joints(af_framed *m, const int *tets) {
     qsort(keys, (size_t)count, sizeof(long), compare_longs);
     for (i = 0; i < count; i++) if (i == 0 || keys[i] != keys[i - 1]) keys[unique++] = keys[i];
     m->pairs = (int)unique;
-    m->pair_list = malloc((size_t)(2 * unique) * sizeof(int) + 1);
-    m->pair_ptr = calloc((size_t)m->nodes + 1, sizeof(int));
-    m->element_pairs = malloc((size_t)(count > 0 ? count : 1) * sizeof(int));
+    m->pair_list = (int *)malloc((size_t)(2 * unique) * sizeof(int) + 1);
+    m->pair_ptr = (int *)calloc((size_t)m->nodes + 1, sizeof(int));
+    m->element_pairs = (int *)malloc((size_t)(count > 0 ? count : 1) * sizeof(int));
     if (!m->pair_list || !m->pair_ptr || !m->element_pairs) { free(keys); free(local); return 0; }
     for (i = 0; i < unique; i++) {
         m->pair_list[2 * i] = (int)(keys[i] / m->nodes);
@@ -634,7 +89,7 @@ static int plan_joints(af_framed *m, const int *tets) {
         for (a = 0; a < m->k; a++)
             for (b = 0; b < m->k; b++) {
                 long key = (long)m->joint_tets[e * m->k + a] * m->nodes + m->joint_tets[e * m->k + b];
-                long *hit = bsearch(&key, keys, (size_t)unique, sizeof(long), compare_longs);
+                long *hit = (long *)bsearch(&key, keys, (size_t)unique, sizeof(long), compare_longs);
                 m->element_pairs[(e * m->k + a) * m->k + b] = (int)(hit - keys);
             }
     free(keys);
@@ -643,114 +98,151 @@ static int plan_joints(af_framed *m, const int *tets) {
 }
 
 #define F64(field, name, dims) \
-    if (!(m->field = load_typed(table, bin, bin_size, name, tag, "float64", 8, dims, &s, error, \
-                                error_size))) goto fail
+    if (!(m->field = (double *)af_array(f, name, 1, "float64", dims, shape))) goto fail
 #define I32(field, name, dims) \
-    if (!(m->field = load_typed(table, bin, bin_size, name, tag, "int32", 4, dims, &s, error, \
-                                error_size))) goto fail
+    if (!(m->field = (int *)af_array(f, name, 1, "int32", dims, shape))) goto fail
 
 /* A display mesh's arrays where the file has them (display_nodes, display_weights,
  * physics_rest: each of the n vertices a weighted sum of the model's nf nodes), else the
- * vertices are the model's nodes. 0 with the reason in error where they do not fit. */
-static int load_display(af_framed *m, const char *table, const char *bin, long bin_size,
-                        char *error, size_t error_size) {
-    spec s;
-    long i;
+ * vertices are the model's nodes. 0 with the reason in the file's error where they do not fit. */
+static int load_display(af_framed *m, const af_file *f) {
+    long shape[4], i;
     m->x0 = m->rest;
-    if (!array_spec(table, "display_nodes", "int32", &s)) {
+    if (!af_has_array(f, "display_nodes", 0)) {
         if (m->nf == m->n) return 1;
-        say(error, error_size, "labels: one per vertex expected, or a display mesh's "
-            "display_nodes%s%s", "", "");
+        af_say(f->error, f->error_size, "%s: array labels has %d entries for %d vertices, and "
+               "no display_nodes maps a display mesh's vertices on them", f->name, m->nf, m->n);
         return 0;
     }
-    if (!(m->display_nodes = load_typed(table, bin, bin_size, "display_nodes", "", "int32", 4, 2,
-                                        &s, error, error_size))) return 0;
-    m->dk = (int)s.shape[1];
-    if (s.shape[0] != m->n) {
-        say(error, error_size, "display_nodes: one row per vertex expected%s%s", "", "");
+    if (!(m->display_nodes = (int *)af_array(f, "display_nodes", 0, "int32", 2, shape)))
+        return 0;
+    m->dk = (int)shape[1];
+    if (shape[0] != m->n) {
+        af_say(f->error, f->error_size, "%s: array display_nodes has %ld rows for %d vertices",
+               f->name, shape[0], m->n);
         return 0;
     }
     for (i = 0; i < (long)m->n * m->dk; i++)
         if (m->display_nodes[i] < 0 || m->display_nodes[i] >= m->nf) {
-            say(error, error_size, "display_nodes: a node outside the model's labels%s%s", "", "");
+            af_say(f->error, f->error_size, "%s: array display_nodes names node %d, outside the "
+                   "model's %d", f->name, m->display_nodes[i], m->nf);
             return 0;
         }
-    if (!(m->display_weights = load_typed(table, bin, bin_size, "display_weights", "", "float64",
-                                          8, 2, &s, error, error_size))) return 0;
-    if (!(m->x0 = load_typed(table, bin, bin_size, "physics_rest", "", "float64", 8, 2, &s,
-                             error, error_size))) return 0;
-    if (s.shape[0] != m->nf) {
-        say(error, error_size, "physics_rest: one row per model node expected%s%s", "", "");
+    if (!(m->display_weights = (double *)af_array(f, "display_weights", 0, "float64", 2, shape)))
+        return 0;
+    if (shape[0] != m->n || shape[1] != m->dk) {
+        af_say(f->error, f->error_size, "%s: array display_weights is not shaped as "
+               "display_nodes", f->name);
         return 0;
     }
-    if (!(m->spread = malloc((size_t)(3L * m->nf) * sizeof(double)))) {
-        say(error, error_size, "no memory for a model%s%s", "", "");
+    if (!(m->physics_rest = (double *)af_array(f, "physics_rest", 0, "float64", 2, shape)))
+        return 0;
+    m->x0 = m->physics_rest;
+    if (shape[0] != m->nf || shape[1] != 3) {
+        af_say(f->error, f->error_size, "%s: array physics_rest has %ld rows for the model's %d "
+               "nodes", f->name, shape[0], m->nf);
+        return 0;
+    }
+    if (!(m->spread = (double *)malloc((size_t)(3L * m->nf) * sizeof(double)))) {
+        af_say(f->error, f->error_size, "no memory for a model");
         return 0;
     }
     return 1;
 }
 
-af_framed *af_framed_load(const char *path, const char *angle, char *error, size_t error_size) {
-    char tag[64];
-    char *json, *bin;
-    const char *table, *v;
-    long bin_size = 0, d, q = 0, z = 0, b = 0, P, width;
+/* each domain-indexed array's length against D (or D x rows), naming the first that is off */
+static int domain_shape(const af_file *f, const char *name, long got, long expected) {
+    if (got == expected) return 1;
+    af_say(f->error, f->error_size, "%s: array %s%s has %ld rows, expected %ld (one per domain "
+           "or per coordinate)", f->name, name, f->tag, got, expected);
+    return 0;
+}
+
+af_framed *af_framed_open(const af_file *f, int n, const double *rest, const double *masses) {
+    const char *v;
+    long shape[4], d, q = 0, z = 0, b = 0, P, width;
     int *tets = NULL;
-    spec s;
-    af_framed *m;
-    if (!open_model(path, angle, FRAMED_FORMAT, "python -m export reduced --framed", &json,
-                    &bin, &bin_size, tag, sizeof tag, sizeof *m, (void **)&m, error,
-                    error_size))
+    af_framed *m = (af_framed *)calloc(1, sizeof *m);
+    if (!m) {
+        af_say(f->error, f->error_size, "no memory for a model");
         return NULL;
-    table = value_of(json, "arrays");
-    v = value_of(json, "size");
+    }
+    m->n = n;
+    m->rest = rest;
+    m->masses = masses;
+    v = af_value_of(f->json, "size");
     m->size = v ? strtod(v, NULL) : 0.0;
-    {   /* the mesh arrays carry no tag */
-        const char *none = "";
-        if (!(m->rest = load_typed(table, bin, bin_size, "rest_positions", none, "float64", 8, 2,
-                                   &s, error, error_size))) goto fail;
-        m->n = (int)s.shape[0];
-        if (!(m->masses = load_typed(table, bin, bin_size, "masses", none, "float64", 8, 1, &s,
-                                     error, error_size))) goto fail;
+    if (!(m->size > 0.0) || !isfinite(m->size)) {
+        af_say(f->error, f->error_size, "%s: the header's \"size\" (the body's size, m) is "
+               "missing or not a positive number", f->name);
+        goto fail;
     }
     I32(labels, "labels", 1);
-    m->nf = (int)s.shape[0];
-    if (!load_display(m, table, bin, bin_size, error, error_size)) goto fail;
+    m->nf = (int)shape[0];
+    if (!load_display(m, f)) goto fail;
     I32(r, "r", 1);
-    m->D = (int)s.shape[0];
+    m->D = (int)shape[0];
     F64(Y, "Y", 2);
+    if (!domain_shape(f, "Y", shape[0], m->nf)) goto fail;
     F64(U, "U", 3);
-    m->rmax = (int)s.shape[2];
-    F64(centre, "centre", 2); F64(mass, "mass", 1); F64(a, "a", 1); F64(J, "J", 3);
+    if (!domain_shape(f, "U", shape[0], m->nf)) goto fail;
+    m->rmax = (int)shape[2];
+    for (d = 0; d < m->nf; d++)
+        if (m->labels[d] < -1 || m->labels[d] >= m->D) {
+            af_say(f->error, f->error_size, "%s: array labels%s names domain %d of %d", f->name,
+                   f->tag, m->labels[d], m->D);
+            goto fail;
+        }
+    for (d = 0; d < m->D; d++)
+        if (m->r[d] < 0 || m->r[d] > m->rmax) {
+            af_say(f->error, f->error_size, "%s: array r%s gives domain %ld %d coordinates, "
+                   "outside 0-%d", f->name, f->tag, d, m->r[d], m->rmax);
+            goto fail;
+        }
+    F64(centre, "centre", 2);
+    if (!domain_shape(f, "centre", shape[0], m->D)) goto fail;
+    F64(mass, "mass", 1);
+    if (!domain_shape(f, "mass", shape[0], m->D)) goto fail;
+    F64(a, "a", 1); F64(J, "J", 3);
+    if (!domain_shape(f, "J", shape[0], m->D)) goto fail;
     F64(A, "A", 3); F64(B, "B", 3); F64(radius, "radius", 1); F64(reach, "reach", 1);
-    F64(c0, "c0", 1); F64(c1, "c1", 1); F64(C2, "C2", 1); F64(S3, "S3", 1); F64(W4, "W4", 1);
+    F64(c0, "c0", 1);
+    if (!domain_shape(f, "c0", shape[0], m->D)) goto fail;
+    F64(c1, "c1", 1); F64(C2, "C2", 1); F64(S3, "S3", 1); F64(W4, "W4", 1);
     I32(poly, "poly_offsets", 2);
+    if (!domain_shape(f, "poly_offsets", shape[0], m->D)) goto fail;
     I32(parent, "parent", 1); I32(order, "order", 1);
     F64(arm_parent, "arm_parent", 2); F64(arm_own, "arm_own", 2);
     I32(chain, "chain", 2);
-    P = s.shape[0];
+    P = shape[0];
     F64(arms, "arms", 2);
     F64(grads, "joint_grads", 4);
-    m->joints = (int)s.shape[0]; m->points = (int)s.shape[1]; m->k = (int)s.shape[2];
+    m->joints = (int)shape[0]; m->points = (int)shape[1]; m->k = (int)shape[2];
     F64(weights, "joint_weights", 2); F64(mu, "mu", 1); F64(lam, "lam", 1);
     F64(kappa, "kappa", 1); F64(fiber, "fiber", 2);
-    if (!(tets = load_typed(table, bin, bin_size, "joint_tets", tag, "int32", 4, 2, &s, error,
-                            error_size))) goto fail;
+    if (!(tets = (int *)af_array(f, "joint_tets", 1, "int32", 2, shape))) goto fail;
+    if (shape[0] != m->joints || shape[1] != m->k) {
+        af_say(f->error, f->error_size, "%s: array joint_tets%s is not shaped as joint_grads' "
+               "elements and nodes", f->name, f->tag);
+        goto fail;
+    }
     for (d = 0; d < (long)m->joints * m->k; d++)
         if (tets[d] < 0 || tets[d] >= m->nf) {
-            say(error, error_size, "joint_tets: a node outside the model's labels%s%s", "", "");
+            af_say(f->error, f->error_size, "%s: array joint_tets%s names node %d, outside the "
+                   "model's %d", f->name, f->tag, tets[d], m->nf);
             goto fail;
         }
     if (m->D > 64 || m->k > 16 || m->dk > 16) {
-        say(error, error_size, "path: this runtime steps at most 64 domains and 16 nodes an "
-            "element%s%s", "", "");
+        af_say(f->error, f->error_size, "%s: this runtime steps at most 64 domains and 16 nodes "
+               "an element", f->name);
         goto fail;
     }
     m->links = (int)P;
-    m->q0 = malloc((size_t)m->D * sizeof(int)); m->z0 = malloc((size_t)m->D * sizeof(int));
-    m->b0 = malloc((size_t)m->D * sizeof(int));
+    m->q0 = (int *)malloc((size_t)m->D * sizeof(int) + 1);
+    m->z0 = (int *)malloc((size_t)m->D * sizeof(int) + 1);
+    m->b0 = (int *)malloc((size_t)m->D * sizeof(int) + 1);
     if (!m->q0 || !m->z0 || !m->b0 || !plan_joints(m, tets)) {
-        say(error, error_size, "no memory for a model%s%s", "", "");
+        af_say(f->error, f->error_size, "no memory for a model");
         goto fail;
     }
     for (d = 0; d < m->D; d++) {
@@ -759,42 +251,37 @@ af_framed *af_framed_load(const char *path, const char *angle, char *error, size
     }
     m->Q = (int)q; m->Z = (int)z;
     width = 6 + m->rmax;
-    {   /* work: the scratch of af_framed_step (framed_scratch) */
+    {   /* work: the scratch of af_framed_advance (framed_scratch) */
         long Z = m->Z, D = m->D, nodes = m->nodes, rm = m->rmax;
         size_t doubles = (size_t)(7 * Z * Z + 2 * 3 * D * Z + 8 * Z
                                   + 3 * nodes * (2 + 3 * width) + 9 * (long)m->pairs
                                   + 9 * D + 9 * m->Q + 3 * D + 5 * (12 * D + m->Q) + 9 * D
                                   + (rm + 2) * (rm + 2) * (rm + 2) / 6 * 2 + 3 * rm * rm
                                   + 4 * rm + 256);
-        m->work = malloc(doubles * sizeof(double));
-        m->constant = calloc((size_t)(9 * D + 9 * m->Q + 3 * D), sizeof(double));
+        m->work = (double *)malloc(doubles * sizeof(double));
+        m->constant = (double *)calloc((size_t)(9 * D + 9 * m->Q + 3 * D), sizeof(double));
         if (!m->work || !m->constant) {
-            say(error, error_size, "no memory for a model%s%s", "", "");
+            af_say(f->error, f->error_size, "no memory for a model");
             goto fail;
         }
     }
-    free(tets); free(json); free(bin);
+    free(tets);
     return m;
 fail:
-    free(tets); free(json); free(bin);
-    af_framed_free(m);
+    free(tets);
+    af_framed_close(m);
     return NULL;
 }
 #undef F64
 #undef I32
 
-int af_framed_vertices(const af_framed *m) { return m->n; }
-int af_framed_state_size(const af_framed *m) { return 12 * m->D + m->Q + 12; }
-const double *af_framed_masses(const af_framed *m) { return m->masses; }
-const double *af_framed_rest_positions(const af_framed *m) { return m->rest; }
-int af_framed_iterations(const af_framed *m) { return m->iterations; }
+int af_framed_size(const af_framed *m) { return 12 * m->D + m->Q + 12; }
 
 static void framed_moments(const af_framed *m, const double *force, double *T0, double *T,
                            double *t);
 
-int af_framed_set_constant_force(af_framed *m, const double *force) {
+int af_framed_set_force(af_framed *m, const double *force) {
     long i, count = 9L * m->D + 9L * m->Q + 3L * m->D;
-    if (force) for (i = 0; i < 3L * m->n; i++) if (!isfinite(force[i])) return AF_BAD_INPUT;
     for (i = 0; i < count; i++) m->constant[i] = 0.0;
     if (force)
         framed_moments(m, force, m->constant, m->constant + 9L * m->D,
@@ -805,7 +292,7 @@ int af_framed_set_constant_force(af_framed *m, const double *force) {
 /* the base of a state: [R_g (9, row-major) | c_g (3)] after its coordinates */
 #define BASE(m, st) ((st) + 12 * (m)->D + (m)->Q)
 
-void af_framed_rest_state(const af_framed *m, double *state) {
+void af_framed_rest(const af_framed *m, double *state) {
     long d, i;
     for (i = 0; i < 12L * m->D + m->Q + 12; i++) state[i] = 0.0;
     for (d = 0; d < m->D; d++) {
@@ -844,7 +331,7 @@ static void framed_positions(const af_framed *m, const double *st, const int *no
     }
 }
 
-void af_framed_positions(const af_framed *m, const double *state, double *x) {
+void af_framed_place(const af_framed *m, const double *state, double *x) {
     long i, k, a;
     double p[3 * 16];
     if (!m->display_nodes) {
@@ -979,9 +466,9 @@ static double domain_quartic(const af_framed *m, int d, const double *q, double 
     const double *c1 = m->c1 + m->q0[d], *C2 = m->C2 + o[0], *S3 = m->S3 + o[1];
     const double *W4 = m->W4 + o[2];
     double *A = scratch, *X = A + T, *Y = X + r * r, E = m->c0[d];
-    for (a = 0; a < T; a++) A[a] = dot(W4 + a * r, q, r);
-    contract(A, q, X, r);
-    for (a = 0; a < r * r; a++) Y[a] = dot(S3 + a * r, q, r);
+    for (a = 0; a < T; a++) A[a] = af_dot(W4 + a * r, q, r);
+    af_contract(A, q, X, r);
+    for (a = 0; a < r * r; a++) Y[a] = af_dot(S3 + a * r, q, r);
     for (a = 0; a < r; a++) {
         double Cq = 0.0, Yq = 0.0, Xq = 0.0;
         for (b = 0; b < r; b++) {
@@ -1431,18 +918,20 @@ static int rigid(const double *base) {
            + base[2] * (base[3] * base[7] - base[4] * base[6]) > 0.0;
 }
 
-int af_framed_step(af_framed *m, const double *now, const double *before, double *next,
-                   const double *force, const double *base, double dt, int max_iter) {
+int af_framed_advance(af_framed *m, const double *now, const double *before, double *next,
+                      const double *force, const double *base, double dt, double step_share,
+                      int max_iter, char *error, size_t error_size) {
     long Z = m->Z, D = m->D, S = 12 * D + m->Q + 12, i, it;
     double *cursor = m->work, inertia, tolerance, bound = INFINITY;
     framed_scratch w;
     double *g, *H, *N, *HN, *CN, *L, *V, *B, *lam, *t1, *dz, *gc, *state, *trial, *t, *t2;
 #define TAKE(count) (cursor += (count), cursor - (count))
-    if (!(dt > 0.0) || max_iter < 1) return AF_BAD_INPUT;
     if (!base) base = BASE(m, now);
-    if (!rigid(base)) return AF_BAD_INPUT;
-    if (force) for (i = 0; i < 3L * m->n; i++) if (!isfinite(force[i])) return AF_BAD_INPUT;
-    for (i = 0; i < S; i++) if (!isfinite(now[i]) || !isfinite(before[i])) return AF_BAD_INPUT;
+    if (!rigid(base)) {
+        af_say(error, error_size, "base: not a rigid motion (its first 9 numbers must be a "
+               "rotation, row-major, to 1e-9; then a translation)");
+        return AF_BAD_INPUT;
+    }
     w.T0 = TAKE(9 * D); w.T = TAKE(9 * m->Q); w.t = TAKE(3 * D);
     w.x = TAKE(3 * m->nodes); w.grad = TAKE(3 * m->nodes); w.blocks = TAKE(9 * m->pairs);
     w.Jn = TAKE(3L * m->nodes * (6 + m->rmax)); w.K = TAKE(3 * Z);
@@ -1456,38 +945,43 @@ int af_framed_step(af_framed *m, const double *now, const double *before, double
     inertia = 1.0 / (dt * dt);
     framed_targets(m, now, before, force, inertia, w.T0, w.T, w.t);
     framed_extrapolated(m, now, before, base, state, t, t2);
-    tolerance = STEP_TOLERANCE * m->size;
+    tolerance = step_share * m->size;
     for (it = 1; it <= max_iter; it++) {
         double E = framed_derivatives(m, state, &w, inertia, g, H, N, HN, CN, gc), last, alpha,
                slope = 0.0;
-        if (!isfinite(E)) return AF_NOT_CONVERGED;
-        for (i = 0; i < Z; i++) if (!isfinite(g[i])) return AF_NOT_CONVERGED;
-        newton_direction(H, g, dz, L, V, lam, B, t1, Z, MIRROR_FLOOR, 1);
+        for (i = 0; i < Z && isfinite(E); i++) if (!isfinite(g[i])) E = NAN;
+        if (!isfinite(E)) {
+            af_say(error, error_size, "step: the energy or its gradient is not finite at "
+                   "iteration %ld", it);
+            return AF_NOT_CONVERGED;
+        }
+        af_newton_direction(H, g, dz, L, V, lam, B, t1, Z, MIRROR_FLOOR, 1);
         last = bound;
         bound = framed_bound(m, dz, N);
         if (bound <= tolerance || (bound < last && last < INFINITY
                                    && bound * bound / last <= tolerance)) {
             framed_retract(m, state, dz, 1.0, next, t);
             nearest_rotations(next + 3 * D, D);
-            m->iterations = (int)it;
-            return AF_OK;
+            return (int)it;
         }
         for (i = 0; i < Z; i++) slope += g[i] * dz[i];
         for (alpha = 1.0;; alpha *= 0.5) {
             if (alpha < 1.0 && alpha * bound <= tolerance) {
                 if (bound <= 1e3 * tolerance) {  /* round-off: no decrease resolved */
                     memcpy(next, state, (size_t)S * sizeof(double));
-                    m->iterations = (int)it;
-                    return AF_OK;
+                    return (int)it;
                 }
+                af_say(error, error_size, "step: the line search found no decrease at iteration "
+                       "%ld (the step's largest move %.3g m)", it, bound);
                 return AF_NOT_CONVERGED;
             }
             framed_retract(m, state, dz, alpha, trial, t);
-            if (framed_energy(m, trial, &w, inertia, NULL, NULL) <= E + ARMIJO * alpha * slope)
+            if (framed_energy(m, trial, &w, inertia, NULL, NULL) <= E + AF_ARMIJO * alpha * slope)
                 break;
         }
         memcpy(state, trial, (size_t)S * sizeof(double));
     }
-    m->iterations = (int)max_iter;
+    af_say(error, error_size, "step: Newton stopped after %d iterations, its last move %.3g m "
+           "against a tolerance of %.3g m", max_iter, bound, tolerance);
     return AF_NOT_CONVERGED;
 }

@@ -1,0 +1,71 @@
+/* What the runtime's source files share (not for engines: they include anisofem.h). */
+#ifndef AF_INTERNAL_H
+#define AF_INTERNAL_H
+
+#include <stddef.h>
+
+#include "anisofem.h"
+
+#define AF_ARRAYS_FORMAT "anisognn-arrays-1"
+#define AF_REDUCED_FORMAT "anisofem-reduced-1"
+#define AF_FRAMED_FORMAT "anisofem-framed-1"
+#define AF_ARMIJO 1e-4
+
+/* An arrays file being read: its JSON header (NUL-terminated), the "arrays" table in it, the
+ * raw .bin bytes, the angle's tag ("@30" or ""), and where a failure's message goes. */
+typedef struct {
+    const char *json, *table, *bin;
+    long bin_size;
+    char tag[64];
+    const char *name;          /* the file, as messages name it */
+    char *error;
+    size_t error_size;
+} af_file;
+
+/* printf into error (size bytes; nothing where error is NULL or size 0). */
+void af_say(char *error, size_t size, const char *fmt, ...);
+/* The text after `"key":` searching from start; NULL if absent. */
+const char *af_value_of(const char *start, const char *key);
+/* A JSON string value (at its opening quote) copied into out; 0 if it is not one. */
+int af_string_value(const char *v, char *out, size_t size);
+/* Whether the file has array `name` (with the angle's tag where tagged). */
+int af_has_array(const af_file *f, const char *name, int tagged);
+/* A new copy of array `name` (+ the angle's tag where tagged) of dtype `type` ("float64",
+ * "int32" or "uint8") and rank `dims`, its shape in shape (4 longs); float64 entries checked
+ * finite. NULL with a message naming the file and the array. */
+void *af_array(const af_file *f, const char *name, int tagged, const char *type, int dims,
+               long *shape);
+
+/* Linear algebra on small dense matrices (row-major, r x r). */
+double af_dot(const double *a, const double *b, long r);
+/* X[a, b] = sum_c T[a, b, c] u_c for the symmetric T whose sorted triples a <= b <= c are A. */
+void af_contract(const double *A, const double *u, double *X, long r);
+/* p = -H^-1 g by Cholesky, or with H's eigenvalues clamped to floor_share of the largest
+ * (mirror: their absolute values), scratch L, V, B (r x r) and lam, t1 (r). */
+void af_newton_direction(const double *H, const double *g, double *p, double *L, double *V,
+                         double *lam, double *B, double *t1, long r, double floor_share,
+                         int mirror);
+
+/* The two kinds of model, behind af_model. rest and masses are the model's (af_model owns
+ * them); open returns NULL with a message. */
+typedef struct af_reduced af_reduced;
+af_reduced *af_reduced_open(const af_file *f, int n, const double *rest);
+void af_reduced_close(af_reduced *m);
+int af_reduced_size(const af_reduced *m);
+int af_reduced_set_force(af_reduced *m, const double *force);
+int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force, double dt,
+                       double rtol, int max_iter, char *error, size_t error_size);
+void af_reduced_place(const af_reduced *m, const double *q, double *x);
+
+typedef struct af_framed af_framed;
+af_framed *af_framed_open(const af_file *f, int n, const double *rest, const double *masses);
+void af_framed_close(af_framed *m);
+int af_framed_size(const af_framed *m);
+void af_framed_rest(const af_framed *m, double *state);
+int af_framed_set_force(af_framed *m, const double *force);
+int af_framed_advance(af_framed *m, const double *now, const double *before, double *next,
+                      const double *force, const double *base, double dt, double tolerance,
+                      int max_iter, char *error, size_t error_size);
+void af_framed_place(const af_framed *m, const double *state, double *x);
+
+#endif

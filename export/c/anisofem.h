@@ -1,0 +1,111 @@
+/* anisofem's runtime: a reduced model or a framed model of one asset, written by `python -m
+ * export reduced [--framed]` (PATH.json + PATH.bin), stepped by backward Euler in C99 with no
+ * dependency beyond the C library. One API for both kinds of model; it builds as C99 or C++.
+ *
+ *   char err[512];
+ *   af_model *m = af_load("tentacle", NULL, err, sizeof err);   // NULL: err says why
+ *   int n = af_vertices(m), size = af_state_size(m);
+ *   double *state = malloc(size * sizeof(double)), *x = malloc(3 * n * sizeof(double));
+ *   af_rest_state(m, state);
+ *   af_set_constant_force(m, gravity);                   // n x 3, N: projected once
+ *   if (af_step(m, state, drag, NULL, 0.02) != AF_OK)    // drag: n x 3 N, or NULL
+ *       puts(af_error(m));
+ *   af_positions(m, state, x);                           // x: n x 3, m
+ *   af_free(m);
+ *
+ * Units SI: positions m, forces N, time s. Arrays are row-major, vertex by vertex (x0 y0 z0 x1
+ * ...). A state is af_state_size doubles that the caller keeps and passes back: for a reduced
+ * model its coordinates q and their velocities, for a framed model its state now and a step
+ * earlier. A function that can fail returns a negative AF_* code (or NULL) and says why: the
+ * loaders in their error buffer, the others in af_error.
+ */
+#ifndef ANISOFEM_H
+#define ANISOFEM_H
+
+#include <stddef.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#if defined(_WIN32)
+#define AF_API __declspec(dllexport)
+#else
+#define AF_API __attribute__((visibility("default")))
+#endif
+
+enum {
+    AF_OK = 0,
+    AF_BAD_FILE = -1,      /* the file is missing, corrupt, or of another format version */
+    AF_BAD_INPUT = -2,     /* a non-finite force or state, dt <= 0, a base that is not rigid */
+    AF_NOT_CONVERGED = -3, /* Newton stopped short of its tolerance (the state is unchanged) */
+    AF_NO_MEMORY = -4
+};
+
+/* The kinds of model (af_kind). */
+enum { AF_REDUCED = 1, AF_FRAMED = 2 };
+
+typedef struct af_model af_model;
+
+/* Load PATH.json and the .bin its header names, beside it (path without extension; '/' or
+ * '\\' separate folders). angle: NULL for a file of one model, or the fiber angle to step in
+ * a file of several (`python -m export bake-reduced`), as its header writes it ("30").
+ * Returns NULL on failure with the reason in error (error_size bytes; may be 0). */
+AF_API af_model *af_load(const char *path, const char *angle, char *error, size_t error_size);
+/* The same from memory: the header's JSON text (header_size bytes, no terminator needed) and
+ * the .bin's bytes; neither is kept. For engines that pack their assets, and the browser. */
+AF_API af_model *af_load_memory(const char *header, size_t header_size, const void *bin,
+                                size_t bin_size, const char *angle, char *error,
+                                size_t error_size);
+AF_API void af_free(af_model *model);
+
+AF_API int af_kind(const af_model *model);
+/* n, the vertices the model moves (a display mesh's, where the file was written for one). */
+AF_API int af_vertices(const af_model *model);
+/* Doubles in a state. */
+AF_API int af_state_size(const af_model *model);
+/* The rest state: no displacement, no velocity. */
+AF_API void af_rest_state(const af_model *model, double *state);
+
+/* A force (n x 3, N) added to every later step (gravity: masses times g), projected once here
+ * so that a step need not project it again. NULL clears it. AF_OK or AF_BAD_INPUT. */
+AF_API int af_set_constant_force(af_model *model, const double *force);
+/* Newton's tolerance (relative: of the reduced gradient over the step's force size for a
+ * reduced model, of the largest move over the body's size for a framed one; default 1e-8)
+ * and its iteration budget (default 50). AF_OK or AF_BAD_INPUT. */
+AF_API int af_set_solver(af_model *model, double tolerance, int max_iter);
+
+/* One backward-Euler step of dt s of state, in place, under the constant force plus nodal
+ * forces force (n x 3, N; NULL: none). base: where the held vertices are at the step's end, 12
+ * doubles, a rotation R_g (row-major) and a translation c_g, x = R_g x0 + c_g (the hand that
+ * holds a finger, the character a tail hangs from); NULL keeps them where they are. Only a
+ * framed model's held vertices move. Returns AF_OK, or a negative code with state unchanged
+ * and af_error saying why. */
+AF_API int af_step(af_model *model, double *state, const double *force, const double *base,
+                   double dt);
+/* Newton iterations of the last step. */
+AF_API int af_iterations(const af_model *model);
+/* Why the last af_step or af_set_* failed, "" if it did not. */
+AF_API const char *af_error(const af_model *model);
+
+/* Positions x (n x 3), m, of a state. */
+AF_API void af_positions(const af_model *model, const double *state, double *x);
+
+/* The file's body, to draw it and to form forces: lumped masses (n,), kg; rest positions
+ * (n x 3), m; held (n x 3), 1 where a component is held; the boundary triangles (count x 3,
+ * counter-clockwise seen from outside) and the tets (count x nodes: 4 or 10); gravity (3,),
+ * m/s^2, where the file states one (returns 1, else 0); the time step it was validated at, s
+ * (0 where it states none). */
+AF_API const double *af_masses(const af_model *model);
+AF_API const double *af_rest_positions(const af_model *model);
+AF_API const unsigned char *af_held(const af_model *model);
+AF_API const int *af_surface(const af_model *model, int *count);
+AF_API const int *af_tets(const af_model *model, int *count, int *nodes);
+AF_API int af_gravity(const af_model *model, double *g);
+AF_API double af_time_step(const af_model *model);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

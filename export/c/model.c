@@ -1,0 +1,429 @@
+/* af_model: one API over the two kinds of model. Loading checks the header (complete JSON, the
+ * arrays format, the model format and its version, the angle) and the body's arrays (rest
+ * positions, masses, held flags, surface, tets) before the kind reads its own; a step checks
+ * its inputs and says why it failed. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "af_internal.h"
+
+#define ERROR_SIZE 320
+
+struct af_model {
+    int kind, n, iterations, max_iter, surface_count, tet_count, tet_nodes, has_gravity;
+    double tolerance, gravity[3], dt;
+    double *rest, *masses, *next;       /* next: a framed step's result before it is kept */
+    unsigned char *held;
+    int *surface, *tets;
+    af_reduced *reduced;
+    af_framed *framed;
+    char error[ERROR_SIZE];
+};
+
+/* Whether text (NUL-terminated) is one complete JSON value: brackets balanced outside
+ * strings, nothing but blanks after it. */
+static int complete_json(const char *text) {
+    long depth = 0;
+    int in_string = 0, seen = 0;
+    const char *p;
+    for (p = text; *p; p++) {
+        if (in_string) {
+            if (*p == '\\' && p[1]) p++;
+            else if (*p == '"') in_string = 0;
+            continue;
+        }
+        if (*p == '"') in_string = 1;
+        else if (*p == '{' || *p == '[') depth++, seen = 1;
+        else if (*p == '}' || *p == ']') {
+            if (--depth < 0) return 0;
+            if (depth == 0) {
+                for (p++; *p == ' ' || *p == '\n' || *p == '\r' || *p == '\t'; p++) continue;
+                return *p == '\0';
+            }
+        }
+    }
+    return seen && depth == 0 && !in_string;
+}
+
+void af_free(af_model *m) {
+    if (!m) return;
+    af_reduced_close(m->reduced);
+    af_framed_close(m->framed);
+    free(m->rest); free(m->masses); free(m->next); free(m->held); free(m->surface);
+    free(m->tets);
+    free(m);
+}
+
+/* The header's model format as a kind, or 0 with a message. */
+static int kind_of(const af_file *f) {
+    char text[128];
+    const char *v = af_value_of(f->json, "format");
+    if (!v) {
+        af_say(f->error, f->error_size, "%s: no \"format\" key: not an arrays header (python -m "
+               "export reduced writes one)", f->name);
+        return 0;
+    }
+    if (!af_string_value(v, text, sizeof text) || strcmp(text, AF_ARRAYS_FORMAT) != 0) {
+        af_say(f->error, f->error_size, "%s: format '%s', expected '%s'", f->name, text,
+               AF_ARRAYS_FORMAT);
+        return 0;
+    }
+    v = af_value_of(f->json, "model_format");
+    if (!v) {
+        af_say(f->error, f->error_size, "%s: no \"model_format\" key: the arrays of no model "
+               "(python -m export reduced writes one)", f->name);
+        return 0;
+    }
+    af_string_value(v, text, sizeof text);
+    if (!strcmp(text, AF_REDUCED_FORMAT)) return AF_REDUCED;
+    if (!strcmp(text, AF_FRAMED_FORMAT)) return AF_FRAMED;
+    af_say(f->error, f->error_size, "%s: holds model_format '%s', and this runtime reads '%s' and "
+           "'%s'; rebuild the file with this version's python -m export reduced [--framed]",
+           f->name, text, AF_REDUCED_FORMAT, AF_FRAMED_FORMAT);
+    return 0;
+}
+
+/* The angle's tag into f->tag, checking that the file holds a model at it; 0 with a message. */
+static int pick_angle(af_file *f, const char *angle, const char *probe) {
+    const char *angles = af_value_of(f->json, "fiber_angles");
+    char list[96];
+    f->tag[0] = '\0';
+    list[0] = '\0';
+    if (angles && *angles == '[') {
+        const char *end = strchr(angles, ']');
+        snprintf(list, sizeof list, "%.*s", end ? (int)(end - angles + 1) : 0, angles);
+    }
+    if (angle) {
+        if (strlen(angle) > 40) {
+            af_say(f->error, f->error_size, "angle: longer than a fiber angle");
+            return 0;
+        }
+        snprintf(f->tag, sizeof f->tag, "@%s", angle);
+    }
+    if (af_has_array(f, probe, 1)) return 1;
+    if (angle)
+        af_say(f->error, f->error_size, "angle: %s holds no model at fiber angle %s%s%s",
+               f->name, angle, list[0] ? "; its angles: " : "", list);
+    else if (list[0])
+        af_say(f->error, f->error_size, "angle: %s holds a model per fiber angle %s: name one",
+               f->name, list);
+    else
+        af_say(f->error, f->error_size, "%s: no array %s in its arrays table", f->name, probe);
+    return 0;
+}
+
+/* The body's arrays every file has, checked against each other and the header's n. */
+static int read_body(af_model *m, const af_file *f) {
+    long shape[4], i;
+    const char *v;
+    if (!(m->rest = (double *)af_array(f, "rest_positions", 0, "float64", 2, shape))) return 0;
+    m->n = (int)shape[0];
+    if (shape[1] != 3) {
+        af_say(f->error, f->error_size, "%s: array rest_positions has %ld columns, expected 3",
+               f->name, shape[1]);
+        return 0;
+    }
+    v = af_value_of(f->json, "n");
+    if (v && strtol(v, NULL, 10) != m->n) {
+        af_say(f->error, f->error_size, "%s: the header says n = %ld vertices, and array "
+               "rest_positions has %d", f->name, strtol(v, NULL, 10), m->n);
+        return 0;
+    }
+    if (!(m->masses = (double *)af_array(f, "masses", 0, "float64", 1, shape))) return 0;
+    if (shape[0] != m->n) goto rows;
+    if (!(m->held = (unsigned char *)af_array(f, "held", 0, "uint8", 2, shape))) return 0;
+    if (shape[0] != m->n || shape[1] != 3) goto rows;
+    if (!(m->surface = (int *)af_array(f, "surface", 0, "int32", 2, shape))) return 0;
+    m->surface_count = (int)shape[0];
+    if (shape[1] != 3) goto rows;
+    for (i = 0; i < 3L * m->surface_count; i++)
+        if (m->surface[i] < 0 || m->surface[i] >= m->n) goto index;
+    if (!(m->tets = (int *)af_array(f, "tets", 0, "int32", 2, shape))) return 0;
+    m->tet_count = (int)shape[0];
+    m->tet_nodes = (int)shape[1];
+    if (m->tet_nodes != 4 && m->tet_nodes != 10) goto rows;
+    for (i = 0; i < (long)m->tet_count * m->tet_nodes; i++)
+        if (m->tets[i] < 0 || m->tets[i] >= m->n) goto index;
+    for (i = 0; i < m->n; i++)
+        if (!(m->masses[i] > 0.0)) {
+            af_say(f->error, f->error_size, "%s: array masses holds %g kg at vertex %ld, not a "
+                   "positive mass", f->name, m->masses[i], i);
+            return 0;
+        }
+    v = af_value_of(f->json, "gravity");
+    if (v && *v == '[') {
+        char *next;
+        for (i = 0, v++; i < 3; i++) {
+            m->gravity[i] = strtod(v, &next);
+            if (next == v) break;
+            for (v = next; *v == ',' || *v == ' '; v++) continue;
+        }
+        m->has_gravity = i == 3 && isfinite(m->gravity[0] + m->gravity[1] + m->gravity[2]);
+    }
+    v = af_value_of(f->json, "dt");
+    m->dt = v ? strtod(v, NULL) : 0.0;
+    if (!(m->dt > 0.0) || !isfinite(m->dt)) m->dt = 0.0;
+    return 1;
+rows:
+    af_say(f->error, f->error_size, "%s: the arrays masses (n,), held (n, 3), surface (k, 3) and "
+           "tets (m, 4 or 10) do not fit rest_positions' %d vertices", f->name, m->n);
+    return 0;
+index:
+    af_say(f->error, f->error_size, "%s: the array surface or tets names a vertex outside the "
+           "%d of rest_positions", f->name, m->n);
+    return 0;
+}
+
+/* af_load_memory with `name` for the file in messages; bin NULL: the header names none. */
+static af_model *load_named(const char *header, size_t header_size, const void *bin,
+                            size_t bin_size, const char *angle, const char *name, char *error,
+                            size_t error_size) {
+    af_file f;
+    af_model *m;
+    char *json;
+    if (error && error_size) error[0] = '\0';
+    json = (char *)malloc(header_size + 1);
+    m = (af_model *)calloc(1, sizeof *m);
+    if (!json || !m) {
+        free(json);
+        free(m);
+        af_say(error, error_size, "no memory for a model");
+        return NULL;
+    }
+    memcpy(json, header, header_size);
+    json[header_size] = '\0';
+    memset(&f, 0, sizeof f);
+    f.json = json;
+    f.bin = (const char *)bin;
+    f.bin_size = (long)bin_size;
+    f.name = name;
+    f.error = error;
+    f.error_size = error_size;
+    if (strlen(json) != header_size || !complete_json(json)) {
+        af_say(error, error_size, "%s: not complete JSON (a truncated or binary file?)", f.name);
+        goto fail;
+    }
+    if (!(m->kind = kind_of(&f))) goto fail;
+    f.table = af_value_of(json, "arrays");
+    if (!f.table || *f.table != '{') {
+        af_say(error, error_size, "%s: no \"arrays\" table", f.name);
+        goto fail;
+    }
+    if (!bin) {
+        af_say(error, error_size, "%s: no \"bin\" key naming its .bin file", f.name);
+        goto fail;
+    }
+    if (!pick_angle(&f, angle, m->kind == AF_REDUCED ? "W4" : "r")) goto fail;
+    if (!read_body(m, &f)) goto fail;
+    if (m->kind == AF_REDUCED) {
+        if (!(m->reduced = af_reduced_open(&f, m->n, m->rest))) goto fail;
+    } else {
+        if (!(m->framed = af_framed_open(&f, m->n, m->rest, m->masses))) goto fail;
+        if (!(m->next = (double *)malloc((size_t)af_framed_size(m->framed) * sizeof(double)))) {
+            af_say(error, error_size, "no memory for a model");
+            goto fail;
+        }
+    }
+    m->tolerance = 1e-8;
+    m->max_iter = 50;
+    free(json);
+    return m;
+fail:
+    free(json);
+    af_free(m);
+    return NULL;
+}
+
+af_model *af_load_memory(const char *header, size_t header_size, const void *bin,
+                         size_t bin_size, const char *angle, char *error, size_t error_size) {
+    if (!header || !bin) {
+        af_say(error, error_size, "%s: NULL", header ? "bin" : "header");
+        return NULL;
+    }
+    return load_named(header, header_size, bin, bin_size, angle, "the header", error,
+                      error_size);
+}
+
+/* The whole file at path, NUL-terminated, its length in *length; NULL where it cannot be read. */
+static char *read_file(const char *path, long *length) {
+    FILE *f = fopen(path, "rb");
+    char *data;
+    long size;
+    if (!f) return NULL;
+    if (fseek(f, 0, SEEK_END) != 0 || (size = ftell(f)) < 0 || fseek(f, 0, SEEK_SET) != 0) {
+        fclose(f);
+        return NULL;
+    }
+    data = (char *)malloc((size_t)size + 1);
+    if (data && fread(data, 1, (size_t)size, f) != (size_t)size) {
+        free(data);
+        data = NULL;
+    }
+    fclose(f);
+    if (data) data[size] = '\0';
+    *length = size;
+    return data;
+}
+
+af_model *af_load(const char *path, const char *angle, char *error, size_t error_size) {
+    char name[4096], bin_name[4096], text[1024];
+    char *json, *bin = NULL;
+    const char *slash, *back;
+    long json_size = 0, bin_size = 0;
+    int folder;
+    af_model *m;
+    if (error && error_size) error[0] = '\0';
+    if (!path) {
+        af_say(error, error_size, "path: NULL");
+        return NULL;
+    }
+    if (strlen(path) > sizeof name - 16) {
+        af_say(error, error_size, "path: longer than %d characters", (int)sizeof name - 16);
+        return NULL;
+    }
+    snprintf(name, sizeof name, "%s.json", path);
+    if (!(json = read_file(name, &json_size))) {
+        af_say(error, error_size, "path: cannot read %s", name);
+        return NULL;
+    }
+    if (!complete_json(json)) {
+        af_say(error, error_size, "%s: not complete JSON (a truncated or binary file?)", name);
+        free(json);
+        return NULL;
+    }
+    slash = strrchr(path, '/');
+    back = strrchr(path, '\\');
+    if (back && (!slash || back > slash)) slash = back;
+    folder = slash ? (int)(slash - path + 1) : 0;
+    if (af_string_value(af_value_of(json, "bin"), text, sizeof text)) {
+        snprintf(bin_name, sizeof bin_name, "%.*s%s", folder, path, text);
+        if (!(bin = read_file(bin_name, &bin_size))) {
+            af_say(error, error_size, "path: %s names its arrays' file %s, and it cannot be read",
+                   name, bin_name);
+            free(json);
+            return NULL;
+        }
+    }
+    m = load_named(json, (size_t)json_size, bin, (size_t)bin_size, angle, name, error,
+                   error_size);
+    free(json);
+    free(bin);
+    return m;
+}
+
+int af_kind(const af_model *m) { return m->kind; }
+int af_vertices(const af_model *m) { return m->n; }
+int af_iterations(const af_model *m) { return m->iterations; }
+const char *af_error(const af_model *m) { return m->error; }
+const double *af_masses(const af_model *m) { return m->masses; }
+const double *af_rest_positions(const af_model *m) { return m->rest; }
+const unsigned char *af_held(const af_model *m) { return m->held; }
+double af_time_step(const af_model *m) { return m->dt; }
+
+int af_state_size(const af_model *m) {
+    return m->kind == AF_REDUCED ? 2 * af_reduced_size(m->reduced)
+                                 : 2 * af_framed_size(m->framed);
+}
+
+void af_rest_state(const af_model *m, double *state) {
+    int i, size = af_state_size(m);
+    if (m->kind == AF_REDUCED) {
+        for (i = 0; i < size; i++) state[i] = 0.0;
+    } else {
+        af_framed_rest(m->framed, state);
+        memcpy(state + size / 2, state, (size_t)(size / 2) * sizeof(double));
+    }
+}
+
+const int *af_surface(const af_model *m, int *count) {
+    if (count) *count = m->surface_count;
+    return m->surface;
+}
+
+const int *af_tets(const af_model *m, int *count, int *nodes) {
+    if (count) *count = m->tet_count;
+    if (nodes) *nodes = m->tet_nodes;
+    return m->tets;
+}
+
+int af_gravity(const af_model *m, double *g) {
+    if (m->has_gravity && g) memcpy(g, m->gravity, sizeof m->gravity);
+    return m->has_gravity;
+}
+
+/* Whether force (n x 3) is finite, saying where it is not. */
+static int finite_force(af_model *m, const double *force, const char *what) {
+    long i;
+    if (!force) return 1;
+    for (i = 0; i < 3L * m->n; i++)
+        if (!isfinite(force[i])) {
+            af_say(m->error, ERROR_SIZE, "%s: vertex %ld, component %ld is not finite", what,
+                   i / 3, i % 3);
+            return 0;
+        }
+    return 1;
+}
+
+int af_set_constant_force(af_model *m, const double *force) {
+    m->error[0] = '\0';
+    if (!finite_force(m, force, "constant force")) return AF_BAD_INPUT;
+    return m->kind == AF_REDUCED ? af_reduced_set_force(m->reduced, force)
+                                 : af_framed_set_force(m->framed, force);
+}
+
+int af_set_solver(af_model *m, double tolerance, int max_iter) {
+    m->error[0] = '\0';
+    if (!(tolerance >= 0.0) || !isfinite(tolerance) || max_iter < 1) {
+        af_say(m->error, ERROR_SIZE, "solver: a tolerance >= 0 and at least 1 iteration, got "
+               "%g and %d", tolerance, max_iter);
+        return AF_BAD_INPUT;
+    }
+    m->tolerance = tolerance;
+    m->max_iter = max_iter;
+    return AF_OK;
+}
+
+int af_step(af_model *m, double *state, const double *force, const double *base, double dt) {
+    int i, size = af_state_size(m), result;
+    m->error[0] = '\0';
+    if (!(dt > 0.0) || !isfinite(dt)) {
+        af_say(m->error, ERROR_SIZE, "dt: a positive time step, got %g s", dt);
+        return AF_BAD_INPUT;
+    }
+    if (!finite_force(m, force, "force")) return AF_BAD_INPUT;
+    for (i = 0; i < size; i++)
+        if (!isfinite(state[i])) {
+            af_say(m->error, ERROR_SIZE, "state: entry %d is not finite", i);
+            return AF_BAD_INPUT;
+        }
+    if (m->kind == AF_REDUCED) {
+        if (base) {
+            af_say(m->error, ERROR_SIZE, "base: a reduced model's held vertices stay where they "
+                   "are; a framed model's move (python -m export reduced --framed)");
+            return AF_BAD_INPUT;
+        }
+        result = af_reduced_advance(m->reduced, state, state + size / 2, force, dt, m->tolerance,
+                                    m->max_iter, m->error, ERROR_SIZE);
+        if (result < 0) return result;
+    } else {
+        for (i = 0; base && i < 12; i++)
+            if (!isfinite(base[i])) {
+                af_say(m->error, ERROR_SIZE, "base: entry %d is not finite", i);
+                return AF_BAD_INPUT;
+            }
+        result = af_framed_advance(m->framed, state, state + size / 2, m->next, force, base, dt,
+                                   m->tolerance, m->max_iter, m->error, ERROR_SIZE);
+        if (result < 0) return result;
+        memcpy(state + size / 2, state, (size_t)(size / 2) * sizeof(double));
+        memcpy(state, m->next, (size_t)(size / 2) * sizeof(double));
+    }
+    m->iterations = result;
+    return AF_OK;
+}
+
+void af_positions(const af_model *m, const double *state, double *x) {
+    if (m->kind == AF_REDUCED) af_reduced_place(m->reduced, state, x);
+    else af_framed_place(m->framed, state, x);
+}

@@ -1,0 +1,216 @@
+/* The reduced model's backward-Euler step: positions x = x0 + basis q and the exact elastic
+ * energy V(q) = c0 + c1.q + q^T C2 q / 2 + S3[q,q,q] + S4[q,q,q,q], W4 holding S4[a,b,c,:]
+ * for the sorted triples a <= b <= c. A step minimizes |q - q_hat|^2 / (2 dt^2) + V(q) - f.q
+ * (q_hat = q + dt w, f = basis^T force, the basis mass-orthonormal) by Newton with the
+ * Hessian's negative eigenvalues clamped and an Armijo search on the exact quartic along the
+ * step, as export/runtime.py's ReducedSimulator does. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "af_internal.h"
+
+#define FLOOR 1.0
+#define SMALLEST_STEP 1e-12
+#define CLAMP 1e-8
+
+struct af_reduced {
+    int n, r;
+    long triples;                /* T = r (r + 1) (r + 2) / 6 */
+    const double *rest;          /* (n, 3), the model's */
+    double *basis, *c1, *C2, *S3, *W4;
+    double *constant;            /* (r,) the projected constant force */
+    double *work;                /* scratch for a step */
+};
+
+void af_reduced_close(af_reduced *m) {
+    if (!m) return;
+    free(m->basis); free(m->c1); free(m->C2); free(m->S3); free(m->W4); free(m->work);
+    free(m->constant);
+    free(m);
+}
+
+af_reduced *af_reduced_open(const af_file *f, int n, const double *rest) {
+    long shape[4], r;
+    af_reduced *m = (af_reduced *)calloc(1, sizeof *m);
+    if (!m) {
+        af_say(f->error, f->error_size, "no memory for a model");
+        return NULL;
+    }
+    m->n = n;
+    m->rest = rest;
+    if (!(m->basis = (double *)af_array(f, "basis", 1, "float64", 3, shape))) goto fail;
+    r = m->r = (int)shape[2];
+    if (shape[0] != n || shape[1] != 3) {
+        af_say(f->error, f->error_size, "%s: array basis%s has shape (%ld, %ld, %ld), expected "
+               "(%d, 3, r): one row per vertex", f->name, f->tag, shape[0], shape[1], r, n);
+        goto fail;
+    }
+    m->triples = r * (r + 1) * (r + 2) / 6;
+    if (!(m->c1 = (double *)af_array(f, "c1", 1, "float64", 1, shape))) goto fail;
+    if (shape[0] != r) goto shape;
+    if (!(m->C2 = (double *)af_array(f, "C2", 1, "float64", 2, shape))) goto fail;
+    if (shape[0] != r || shape[1] != r) goto shape;
+    if (!(m->S3 = (double *)af_array(f, "S3", 1, "float64", 3, shape))) goto fail;
+    if (shape[0] != r || shape[1] != r || shape[2] != r) goto shape;
+    if (!(m->W4 = (double *)af_array(f, "W4", 1, "float64", 2, shape))) goto fail;
+    if (shape[0] != m->triples || shape[1] != r) goto shape;
+    /* work: A, Ap (T each); X, Y, H, L, V, J (r^2 each); g, p, x, load, terms, t1, lam (r
+       each) */
+    m->work = (double *)malloc((size_t)(2 * m->triples + 6 * r * r + 7 * r + 1) * sizeof(double));
+    m->constant = (double *)calloc((size_t)r + 1, sizeof(double));
+    if (!m->work || !m->constant) {
+        af_say(f->error, f->error_size, "no memory for a model of r = %ld", r);
+        goto fail;
+    }
+    return m;
+shape:
+    af_say(f->error, f->error_size, "%s: the arrays c1, C2, S3 and W4%s do not fit a basis of "
+           "r = %ld coordinates ((r,), (r, r), (r, r, r), (r (r + 1) (r + 2) / 6, r))", f->name,
+           f->tag, r);
+fail:
+    af_reduced_close(m);
+    return NULL;
+}
+
+int af_reduced_size(const af_reduced *m) { return m->r; }
+
+void af_reduced_place(const af_reduced *m, const double *q, double *x) {
+    long i, k, r = m->r;
+    for (i = 0; i < 3L * m->n; i++) {
+        double s = 0.0;
+        const double *row = m->basis + i * r;
+        for (k = 0; k < r; k++) s += row[k] * q[k];
+        x[i] = m->rest[i] + s;
+    }
+}
+
+/* out (T,) = W4 v */
+static void w4_times(const af_reduced *m, const double *v, double *out) {
+    long t, r = m->r;
+    for (t = 0; t < m->triples; t++) out[t] = af_dot(m->W4 + t * r, v, r);
+}
+
+/* The cubic forms T[p, p, p] of A and of Ap (sorted triples as in contract): each sorted
+ * triple weighted by its number of orderings. */
+static void cubic_forms(const double *A, const double *Ap, const double *p, long r,
+                        double *mixed, double *pure) {
+    long a, b, c, t = 0;
+    double m = 0.0, q = 0.0;
+    for (a = 0; a < r; a++)
+        for (b = a; b < r; b++) {
+            double pab = p[a] * p[b], w = pab * p[b] * (a == b ? 1.0 : 3.0);  /* c = b */
+            m += w * A[t];
+            q += w * Ap[t];
+            t++;
+            w = (a == b ? 3.0 : 6.0) * pab;                                   /* c > b */
+            for (c = b + 1; c < r; c++) {
+                m += w * p[c] * A[t];
+                q += w * p[c] * Ap[t];
+                t++;
+            }
+        }
+    *mixed = m;
+    *pure = q;
+}
+
+/* Y[a, b] = S3[a, b, :] . u */
+static void s3_times(const af_reduced *m, const double *u, double *Y) {
+    long ab, r = m->r;
+    for (ab = 0; ab < r * r; ab++) Y[ab] = af_dot(m->S3 + ab * r, u, r);
+}
+
+/* u^T M u for an r x r matrix M */
+static double form(const double *M, const double *u, long r) {
+    double s = 0.0;
+    long a;
+    for (a = 0; a < r; a++) s += u[a] * af_dot(M + a * r, u, r);
+    return s;
+}
+
+/* load (r,) += basis^T force (n x 3) */
+static void project(const af_reduced *m, const double *force, double *load) {
+    long i, k, r = m->r;
+    for (i = 0; i < 3L * m->n; i++) {
+        const double *row = m->basis + i * r;
+        double f = force[i];
+        if (f != 0.0) for (k = 0; k < r; k++) load[k] += f * row[k];
+    }
+}
+
+int af_reduced_set_force(af_reduced *m, const double *force) {
+    long k;
+    for (k = 0; k < m->r; k++) m->constant[k] = 0.0;
+    if (force) project(m, force, m->constant);
+    return AF_OK;
+}
+
+int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force, double dt,
+                       double rtol, int max_iter, char *error, size_t error_size) {
+    long r = m->r, rr = r * r, i, k, it;
+    double *A = m->work, *Ap = A + m->triples, *X = Ap + m->triples, *Y = X + rr,
+           *H = Y + rr, *L = H + rr, *V = L + rr, *J = V + rr, *g = J + rr, *p = g + r,
+           *x = p + r, *load = x + r, *terms = load + r, *t1 = terms + r, *lam = t1 + r;
+    double inertia, tolerance, residual = 0.0, eps = 2.220446049250313e-16;
+    for (k = 0; k < r; k++) load[k] = m->constant[k];
+    if (force) project(m, force, load);
+    inertia = 1.0 / (dt * dt);
+    tolerance = rtol * (sqrt(af_dot(load, load, r)) + sqrt(af_dot(w, w, r)) / dt);
+    for (k = 0; k < r; k++) x[k] = q[k] + dt * w[k];
+    w4_times(m, x, A);
+    for (it = 0; it <= max_iter; it++) {
+        double a1, a2, a3, pure, mixed, step = 1.0, floor_;
+        af_contract(A, x, X, r);
+        s3_times(m, x, Y);
+        for (i = 0; i < r; i++) {
+            double s = m->c1[i];
+            for (k = 0; k < r; k++)
+                s += (m->C2[i * r + k] + 3.0 * Y[i * r + k] + 4.0 * X[i * r + k]) * x[k];
+            g[i] = s;
+        }
+        if (it == 0) tolerance += rtol * sqrt(af_dot(g, g, r));
+        for (i = 0; i < r; i++) {
+            g[i] += inertia * (x[i] - (q[i] + dt * w[i])) - load[i];
+            for (k = 0; k < r; k++)
+                H[i * r + k] = m->C2[i * r + k] + 6.0 * Y[i * r + k] + 12.0 * X[i * r + k]
+                               + (i == k ? inertia : 0.0);
+        }
+        residual = sqrt(af_dot(g, g, r));
+        if (!isfinite(residual)) {
+            af_say(error, error_size, "step: the reduced force is not finite at iteration %ld",
+                   it);
+            return AF_NOT_CONVERGED;
+        }
+        for (i = 0; i < r; i++) {
+            double s = 0.0;
+            for (k = 0; k < r; k++) s += fabs(H[i * r + k]) * fabs(x[k]);
+            terms[i] = s + fabs(load[i]) + fabs(m->c1[i]);
+        }
+        floor_ = FLOOR * eps * (double)r * sqrt(af_dot(terms, terms, r));
+        if (residual <= (tolerance > floor_ ? tolerance : floor_)) {
+            for (k = 0; k < r; k++) {
+                w[k] = (x[k] - q[k]) / dt;
+                q[k] = x[k];
+            }
+            return (int)it;
+        }
+        if (it == max_iter) break;
+        af_newton_direction(H, g, p, L, V, lam, J, t1, r, CLAMP, 0);
+        a1 = af_dot(g, p, r);
+        if (!(a1 < 0.0)) break;
+        a2 = 0.5 * form(H, p, r);
+        w4_times(m, p, Ap);
+        cubic_forms(A, Ap, p, r, &mixed, &pure);
+        s3_times(m, p, Y);
+        a3 = form(Y, p, r) + 4.0 * mixed;
+        while (step * (a2 + step * (a3 + step * pure)) > -(1.0 - AF_ARMIJO) * a1
+               && step >= SMALLEST_STEP)
+            step *= 0.5;
+        if (step < SMALLEST_STEP) break;
+        for (k = 0; k < r; k++) x[k] += step * p[k];
+        for (k = 0; k < m->triples; k++) A[k] += step * Ap[k];
+    }
+    af_say(error, error_size, "step: Newton stopped at |g| = %.3g, its tolerance %.3g, after "
+           "%ld iterations", residual, tolerance, it);
+    return AF_NOT_CONVERGED;
+}
