@@ -320,6 +320,46 @@ window.anisognn = {
     return { positions, msPerStep: total / state.sim.steps, fiberAngle: state.sim.fiberAngle,
              n: state.sim.n, bases };
   },
+  // a reduced model's rollout from rest under gravity and a drag, timed step by step: the
+  // force forces[k] (N, 3 numbers) on vertex `vertex` at step k; returns each step's wall time
+  // (ms, the step and the positions) and, where record, the positions after every step (flat)
+  async rollout(vertex, forces, record = true) {
+    state.paused = true;
+    while (state.busy) await new Promise((resolve) => setTimeout(resolve, 5));
+    state.sim.reset();
+    const positions = [], ms = [];
+    const force = new Float64Array(3 * state.sim.n);
+    for (const f of forces) {
+      for (let c = 0; c < 3; c++) force[3 * vertex + c] = f[c];
+      ms.push(await state.sim.step(force, null));
+      if (record) positions.push(Array.from(state.sim.x));
+    }
+    updateBody();
+    return { positions, ms, n: state.sim.n, fiberAngle: state.sim.fiberAngle };
+  },
+  // the free vertex farthest from the held ones' centroid at rest (an arm's or a tip's end),
+  // and the body's weight (N) under the scene's gravity
+  farthest() {
+    const rest = state.sceneData.arrays.rest_positions.data;
+    const held = state.sceneData.arrays.held.data;
+    const masses = state.sceneData.arrays.masses.data;
+    const h = [0, 0, 0];
+    let count = 0, mass = 0;
+    for (let j = 0; j < state.sim.n; j++) {
+      mass += masses[j];
+      if (!held[3 * j]) continue;
+      for (let c = 0; c < 3; c++) h[c] += rest[3 * j + c];
+      count += 1;
+    }
+    let best = 0, far = -1;
+    for (let j = 0; j < state.sim.n; j++) {
+      if (held[3 * j]) continue;
+      const d = Math.hypot(rest[3 * j] - h[0] / count, rest[3 * j + 1] - h[1] / count,
+                           rest[3 * j + 2] - h[2] / count);
+      if (d > far) { far = d; best = j; }
+    }
+    return { vertex: best, weight: mass * Math.hypot(...state.sceneData.header.gravity) };
+  },
   // the page pixel (x, y) where vertex i is drawn; the mean height (m) of the vertices
   // farthest along x (a cantilever's tip); the vertex nearest a rest point (m)
   screenOf(i) {

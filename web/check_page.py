@@ -44,11 +44,22 @@ ANGLE = 45.0
 #: the reduced model in the page against runtime.py's, over the largest displacement: the same
 #: float64 arithmetic in another order
 REDUCED_BOUND = 1e-6
+#: the reduced models under the swinging drag in the page against the numpy runtimes, every
+#: step, over the largest displacement
+DRAG_BOUND = 1e-9
 #: steps at which the T's framed model in the page is compared with framed_runtime.py's
 FRAMED_CHECKPOINTS = (1, 10, 50)
 
 
 class _Quiet(http.server.SimpleHTTPRequestHandler):
+    """Serves quietly, the page cross-origin isolated: its performance.now() then ticks in
+    microseconds rather than in 0.1 ms steps, fine enough to time a step."""
+
+    def end_headers(self):
+        self.send_header("Cross-Origin-Opener-Policy", "same-origin")
+        self.send_header("Cross-Origin-Embedder-Policy", "require-corp")
+        super().end_headers()
+
     def log_message(self, *args):
         pass
 
@@ -96,6 +107,36 @@ def reduced_reference():
     ms = 1e3 * (time.perf_counter() - start) / CHECKPOINTS[-1]
     positions = np.asarray(positions)
     return positions, float(np.linalg.norm(positions - sim.rest_positions, axis=2).max()), ms
+
+
+def drag_gaps(drags):
+    """{scene: (the largest gap over every step of the page's drag rollout against the numpy
+    runtime's of the same file, angle and forces, over the largest displacement; the largest
+    displacement, m)} for the cantilever's reduced model and the T's and Y's framed ones."""
+    gaps = {}
+    for name, run in drags.items():
+        path = os.path.join(HERE, "scenes", f"{name}-reduced")
+        header, _ = runtime.read_arrays(path)
+        framed = header["model_format"] == framed_runtime.FRAMED_FORMAT
+        sim = (framed_runtime.FramedSimulator if framed else runtime.ReducedSimulator)(
+            path, angle=run["fiberAngle"])
+        gravity = sim.masses[:, None] * np.asarray(header["gravity"])
+        now = before = sim.rest_state()
+        expected = []
+        for f in run["forces"]:
+            force = gravity.copy()
+            force[run["vertex"]] += f
+            if framed:
+                now, before = sim.step(now, before, force, header["dt"]), now
+                expected.append(sim.positions(now))
+            else:
+                now = sim.step(*now, force, header["dt"])
+                expected.append(sim.positions(now[0]))
+        expected = np.asarray(expected)
+        got = np.asarray(run["positions"]).reshape(expected.shape)
+        largest = float(np.abs(expected - sim.rest_positions).max())
+        gaps[name] = (float(np.abs(got - expected).max()) / largest, largest)
+    return gaps
 
 
 def framed_reference(bases):
@@ -182,6 +223,12 @@ def main():
     if not stated or abs(float(stated.group(1)) - 100 * framed_tip) > 0.05 * 100 * framed_tip:
         failures.append(f"the T's framed model: the page says {page['framed']['stats']!r}, "
                         f"its file {100 * framed_tip:.2g}%")
+    dragged = drag_gaps(page["drags"])
+    for name, (gap, largest_d) in dragged.items():
+        if not gap <= DRAG_BOUND:
+            failures.append(f"{name}'s reduced model under the drag in the page against the numpy "
+                            f"runtime: {gap:.2e} of the largest displacement, more than "
+                            f"{DRAG_BOUND}")
     if "cannot load" not in page["bad_model_message"]:
         failures.append(f"bad model message: {page['bad_model_message']!r}")
     if "cannot step" not in page["cut_scene_message"]:
@@ -205,6 +252,12 @@ def main():
           f"largest displacement ({largest_f * 1e3:.1f} mm) over {FRAMED_CHECKPOINTS[-1]} "
           f"steps; ms per step: browser {page['framed']['msPerStep']:.2f}, numpy "
           f"{framed_ms:.2f}; the page says: {page['framed']['stats']}")
+    for name, (gap, largest_d) in dragged.items():
+        times = np.asarray(page["stepTimes"][name])
+        print(f"{name}'s reduced model under a swinging drag: the page against the numpy runtime "
+              f"{gap:.1e} of the largest displacement ({largest_d * 1e3:.1f} mm) over "
+              f"{len(page['drags'][name]['forces'])} steps; a step in the page: median "
+              f"{np.median(times):.3f} ms, mean {times.mean():.3f} ms over {len(times)} steps")
     print(f"bad model: {page['bad_model_message']}")
     print(f"cut scene: {page['cut_scene_message']}")
     if failures:

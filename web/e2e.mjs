@@ -7,7 +7,8 @@
 // step, the tip height before and during a drag upwards, and whether the other scenes (chosen
 // from the menu) step; then the same with the reduced models (OUT_DIR/reduced.png), and the
 // T's framed model, its foot carried, at steps 1, 10 and 50 (with each step's base) and the
-// validation the page states.
+// validation the page states; the cantilever's reduced model and the T's and Y's framed ones
+// under a swinging drag (every step's positions), and each step's time over a longer drag.
 import fs from "node:fs";
 import path from "node:path";
 import { chromium } from "playwright-core";
@@ -15,6 +16,18 @@ import { chromium } from "playwright-core";
 const [base, out, checkpointsArg] = process.argv.slice(2);
 const checkpoints = (checkpointsArg || "1,10,50,100,200").split(",").map(Number);
 const FRAMED_CHECKPOINTS = [1, 10, 50];
+// the reduced models' drag: DRAG_STEPS steps recorded, then TIMED_STEPS timed
+const DRAG_STEPS = 200;
+const TIMED_STEPS = 300;
+
+// forces (N) per step on one vertex: 0.3 of the body's weight turning in the x-z plane (a
+// period of 80 steps) for the first three quarters of the steps, then released
+function swing(steps, weight) {
+  return Array.from({ length: steps }, (_, k) => {
+    const a = (2 * Math.PI * k) / 80, f = k < (3 * steps) / 4 ? 0.3 * weight : 0;
+    return [f * Math.sin(a), 0, 0.5 * f * Math.cos(a)];
+  });
+}
 const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
 fs.mkdirSync(out, { recursive: true });
 
@@ -62,12 +75,27 @@ try {
   await page.waitForFunction(() => window.anisognn.stepper() === "reduced", null,
                              { timeout: 60000 });
   result.reducedScenes = {};
+  result.drags = {};
+  result.stepTimes = {};
   for (const name of ["cylinder", "t", "y", "cantilever"]) {
     await page.selectOption("#scene", name);
     await page.waitForFunction((n) => window.anisognn.scene() === n, name, { timeout: 60000 });
     const run = await page.evaluate(() => window.anisognn.run([5]));
     result.reducedScenes[name] = { n: run.n, message: await page.textContent("#message"),
                                    finite: run.positions[0].every(Number.isFinite) };
+    if (name !== "cylinder") {
+      // the cantilever's reduced model and the T's and Y's framed ones under a swinging drag,
+      // every step's positions (compared with the numpy runtimes), then timed alone
+      const far = await page.evaluate(() => window.anisognn.farthest());
+      const forces = swing(DRAG_STEPS, far.weight);
+      const run = await page.evaluate(([v, f]) => window.anisognn.rollout(v, f),
+                                      [far.vertex, forces]);
+      result.drags[name] = { vertex: far.vertex, forces, positions: run.positions,
+                             fiberAngle: run.fiberAngle };
+      const timed = await page.evaluate(([v, f]) => window.anisognn.rollout(v, f, false),
+                                        [far.vertex, swing(TIMED_STEPS, far.weight)]);
+      result.stepTimes[name] = timed.ms;
+    }
     if (name === "t") {
       // the T's framed model from rest, its foot carried (compared with runtime.py's
       // FramedSimulator, stepped with the same bases)
