@@ -75,7 +75,8 @@ pretrained: $(VENV)/.installed
 	done
 
 # The browser page (web/): onnxruntime-web and three.js from npm (web/package-lock.json), the
-# scenes baked from the shipped model (python -m export bake), served on 127.0.0.1 only.
+# scenes baked from the shipped model (python -m export bake), their reduced models and the C
+# runtime built to WebAssembly, served on 127.0.0.1 only.
 WEB_SCENES := cantilever cylinder t y
 WEB_PORT ?= 8000
 
@@ -98,7 +99,20 @@ web/scenes/%-reduced.json: export/reduced.py export/runtime.py export/framed_run
 	$(PY) -m export bake-reduced $* -o web/scenes/$*-reduced \
 	  $(if $(filter $*,$(WEB_FRAMED)),--framed,--modes 4 --snapshots 16)
 
-web-assets: web/node_modules/.package-lock.json web/models/directional.onnx \
+# the C runtime (export/c, less its file loader) built to WebAssembly by zig's C compiler (the
+# ziglang wheel from PyPI): the page's reduced and framed models step with it
+ZIG_SPEC ?= ziglang==0.17.1
+WASM_SOURCES := $(addprefix export/c/,arrays.c linalg.c reduced.c framed.c model.c)
+
+$(VENV)/.zig: $(VENV)/.fem
+	$(PY) -m pip install --quiet "$(ZIG_SPEC)"
+	touch $@
+
+web/anisofem.wasm: $(WASM_SOURCES) export/c/anisofem.h export/c/af_internal.h $(VENV)/.zig
+	$(PY) -m ziglang cc --target=wasm32-wasi -std=c99 -O3 -s -mexec-model=reactor \
+	  -Wl,--export-dynamic -Wl,--export=malloc -Wl,--export=free -o $@ $(WASM_SOURCES)
+
+web-assets: web/node_modules/.package-lock.json web/anisofem.wasm web/models/directional.onnx \
             web/models/meshgraphnets.onnx $(WEB_SCENES:%=web/scenes/%.json) \
             $(WEB_SCENES:%=web/scenes/%-reduced.json)
 
@@ -114,4 +128,4 @@ test-web: web-assets
 	$(PY) web/check_page.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info web/node_modules web/models web/scenes web/out
+	rm -rf $(VENV) build *.egg-info web/node_modules web/models web/scenes web/out web/anisofem.wasm

@@ -23,7 +23,7 @@ import numpy as np
 FOLDER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "c")
 #: The runtime's sources, in build order, and its headers.
 SOURCES = tuple(os.path.join(FOLDER, f"{name}.c")
-                for name in ("arrays", "linalg", "reduced", "framed", "model"))
+                for name in ("arrays", "linalg", "reduced", "framed", "model", "files"))
 HEADERS = (os.path.join(FOLDER, "anisofem.h"), os.path.join(FOLDER, "af_internal.h"))
 #: The kinds af_kind returns (anisofem.h).
 REDUCED, FRAMED = 1, 2

@@ -5,8 +5,7 @@
 // end-to-end test steps it through window.anisognn).
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
-import { FramedSimulation } from "./framed.js";
-import { loadReduced, ReducedSimulation } from "./reduced.js";
+import { ModelSimulation } from "./runtime.js";
 import { loadModel, loadScene, Simulation } from "./stepper.js";
 
 const params = new URLSearchParams(location.search);
@@ -62,20 +61,19 @@ async function openScene(name, angle) {
   if (!reduced && !state.session) {
     state.session = await loadModel(params.get("model") || "models/directional.onnx");
   }
-  state.sceneData = reduced ? await loadReduced(`scenes/${name}-reduced`)
-                            : await loadScene(`scenes/${name}`);
+  state.sceneData = await loadScene(`scenes/${name}${reduced ? "-reduced" : ""}`);
   const angles = state.sceneData.header.fiber_angles;
   ui.angle.max = String(angles.length - 1);
   const wanted = angle === null || angle === undefined ? 45 : Number(angle);
   const index = Math.max(0, angles.findIndex((a) => a === wanted));
   ui.angle.value = String(index);
   ui.angleValue.textContent = String(angles[index]);
-  const framed = reduced && state.sceneData.header.model_format === "anisofem-framed-1";
-  const Reduced = framed ? FramedSimulation : ReducedSimulation;
-  state.sim = reduced ? new Reduced(state.sceneData, angles[index])
+  if (state.sim && state.sim.free) state.sim.free();
+  state.sim = null;
+  state.sim = reduced ? await ModelSimulation.create(state.sceneData, angles[index])
                       : new Simulation(state.session, state.sceneData, angles[index]);
   state.times = [];
-  ui.carry.disabled = !framed;
+  ui.carry.disabled = !state.sim.framed;
   buildMeshes();
   say("");
 }
@@ -168,7 +166,7 @@ function dragForce() {
 
 async function advance(steps) {
   for (let k = 0; k < steps; k++) {
-    const carried = state.carry && state.sim instanceof FramedSimulation;
+    const carried = state.carry && state.sim.framed;
     const base = carried ? carryBase((state.sim.steps + 1) * state.sim.dt) : null;
     const ms = await state.sim.step(dragForce(), base);
     state.times.push(ms);
@@ -205,8 +203,8 @@ async function frame(now) {
     const pace = speed >= 1 ? "real time" : `${speed.toFixed(2)}x real time`;
     const v = state.sim.validation;
     const checked = v && v.cases ? `on ${v.cases} unseen drags` : "in the static answer";
-    const kind = state.sim instanceof FramedSimulation
-      ? `framed reduced model, ${state.sim.m.D} domains,` : "reduced model,";
+    const kind = state.sim.framed
+      ? `framed reduced model, ${state.sim.domains} domains,` : "reduced model,";
     const model = v ? `${kind} r = ${state.sim.r}; its tip within ` +
       `${(100 * v.tip_error).toPrecision(2)}% of the FEM's ${checked}. ` : "";
     ui.stats.textContent = `${model}${state.sim.steps} steps of ${state.sim.dt} s, ` +
@@ -314,7 +312,7 @@ window.anisognn = {
     }
     updateBody();
     renderer.render(world, camera);
-    const carried = carry && state.sim instanceof FramedSimulation;
+    const carried = carry && state.sim.framed;
     const bases = [];
     for (let k = 1; k <= state.sim.steps; k++) bases.push(carried ? carryBase(k * state.sim.dt) : null);
     return { positions, msPerStep: total / state.sim.steps, fiberAngle: state.sim.fiberAngle,
@@ -390,8 +388,7 @@ window.anisognn = {
   },
   scene() { return state.sceneData ? state.sceneData.header.scene : null; },
   stepper() {
-    const reduced = state.sim instanceof ReducedSimulation || state.sim instanceof FramedSimulation;
-    return reduced ? "reduced" : "network";
+    return state.sim instanceof ModelSimulation ? "reduced" : "network";
   },
   stats() { return ui.stats.textContent; },
   resume() { state.paused = false; state.lastFrame = null; },

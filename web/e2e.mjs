@@ -131,6 +131,20 @@ try {
   await cut.waitForFunction(() => document.getElementById("message").textContent.length > 0,
                             null, { timeout: 60000 });
   result.cut_scene_message = await cut.textContent("#message");
+
+  // a reduced model's file whose array W4 at fiber angle 45 claims another dtype: the C
+  // runtime's message, shown on the page
+  const shifted = await browser.newPage();
+  await shifted.route("**/scenes/cantilever-reduced.json", async (route) => {
+    const response = await route.fetch();
+    const header = await response.json();
+    header.arrays["W4@45"].dtype = "float32";
+    await route.fulfill({ response, json: header });
+  });
+  await shifted.goto(`${base}/index.html?scene=cantilever&stepper=reduced&angle=45`);
+  await shifted.waitForFunction(() => document.getElementById("message").textContent.length > 0,
+                                null, { timeout: 60000 });
+  result.bad_reduced_message = await shifted.textContent("#message");
 } finally {
   await browser.close();
 }

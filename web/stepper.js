@@ -8,12 +8,14 @@ const STATE = ["positions", "velocities", "external_force"];
 // the inputs that depend on the fiber, baked once per angle as NAME@ANGLE
 const FIBER_INPUTS = ["fiber", "tet_fiber"];
 
-// {header, arrays: {name: {data, dtype, shape}}} of a baked scene at url (without extension).
+// {header, arrays: {name: {data, dtype, shape}}, text, buffer} of a baked scene (or a reduced
+// model's file) at url (without extension): the header parsed and as text, the .bin's bytes.
 export async function loadScene(url) {
   const response = await fetch(`${url}.json`);
   if (!response.ok) throw new Error(`scene: ${url}.json not found (${response.status}); ` +
                                     "run `make web` to bake the scenes");
-  const header = await response.json();
+  const text = await response.text();
+  const header = JSON.parse(text);
   if (header.format !== "anisognn-arrays-1") {
     throw new Error(`scene: ${url}.json is not a baked scene (format ${header.format})`);
   }
@@ -27,7 +29,7 @@ export async function loadScene(url) {
     arrays[name] = { data: new ARRAYS[spec.dtype](buffer, spec.offset, count),
                      dtype: spec.dtype, shape: spec.shape };
   }
-  return { header, arrays };
+  return { header, arrays, text, buffer, url };
 }
 
 // A model session; a file onnxruntime cannot read, or one that is not an anisognn step

@@ -1,7 +1,7 @@
 // A C# program over the C runtime (Unity, Godot and .NET call it the same way): step a model
 // file from rest under gravity and print the lowest vertex height per step.
 //
-//   cc -std=c99 -O2 -shared -fPIC -o libanisofem.so arrays.c linalg.c reduced.c framed.c model.c -lm
+//   cc -std=c99 -O2 -shared -fPIC -o libanisofem.so arrays.c linalg.c reduced.c framed.c model.c files.c -lm
 //   mcs Example.cs && mono Example.exe tentacle 100 0.02      (or: dotnet run)
 using System;
 using System.Runtime.InteropServices;

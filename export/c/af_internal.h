@@ -26,6 +26,8 @@ typedef struct {
 void af_say(char *error, size_t size, const char *fmt, ...);
 /* The text after `"key":` searching from start; NULL if absent. */
 const char *af_value_of(const char *start, const char *key);
+/* The same for a key of the JSON object json itself, not of one nested in it. */
+const char *af_top_value(const char *json, const char *key);
 /* A JSON string value (at its opening quote) copied into out; 0 if it is not one. */
 int af_string_value(const char *v, char *out, size_t size);
 /* Whether the file has array `name` (with the angle's tag where tagged). */
@@ -45,6 +47,13 @@ void af_contract(const double *A, const double *u, double *X, long r);
 void af_newton_direction(const double *H, const double *g, double *p, double *L, double *V,
                          double *lam, double *B, double *t1, long r, double floor_share,
                          int mirror);
+
+/* Whether text (NUL-terminated) is one complete JSON value. */
+int af_complete_json(const char *text);
+/* af_load_memory with `name` for the file in messages; bin NULL: the header names no .bin. */
+af_model *af_load_named(const char *header, size_t header_size, const void *bin,
+                        size_t bin_size, const char *angle, const char *name, char *error,
+                        size_t error_size);
 
 /* The two kinds of model, behind af_model. rest and masses are the model's (af_model owns
  * them); open returns NULL with a message. */

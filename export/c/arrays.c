@@ -37,6 +37,37 @@ const char *af_value_of(const char *start, const char *key) {
     return NULL;
 }
 
+const char *af_top_value(const char *json, const char *key) {
+    size_t k = strlen(key);
+    long depth = 0;
+    int in_string = 0;
+    const char *p;
+    for (p = json; *p; p++) {
+        if (in_string) {
+            if (*p == '\\' && p[1]) p++;
+            else if (*p == '"') in_string = 0;
+            continue;
+        }
+        if (*p == '"') {
+            if (depth == 1 && strncmp(p + 1, key, k) == 0 && p[k + 1] == '"') {
+                const char *c = p + k + 2;
+                while (blank(*c)) c++;
+                if (*c == ':') {
+                    c++;
+                    while (blank(*c)) c++;
+                    return c;
+                }
+            }
+            in_string = 1;
+        } else if (*p == '{' || *p == '[') {
+            depth++;
+        } else if (*p == '}' || *p == ']') {
+            depth--;
+        }
+    }
+    return NULL;
+}
+
 int af_string_value(const char *v, char *out, size_t size) {
     size_t i = 0;
     if (size) out[0] = '\0';

@@ -1,7 +1,7 @@
 /* Step a model file (reduced or framed) under gravity from rest and print its lowest vertex
  * height per step.
  *
- *   cc -std=c99 -O2 -o example example.c arrays.c linalg.c reduced.c framed.c model.c -lm
+ *   cc -std=c99 -O2 -o example example.c arrays.c linalg.c reduced.c framed.c model.c files.c -lm
  *   ./example cantilever 100 0.02            # PATH (no extension), steps, dt (s)
  */
 #include <stdio.h>
@@ -27,9 +27,9 @@ int main(int argc, char **argv) {
     steps = atoi(argv[2]);
     dt = atof(argv[3]);
     af_gravity(model, g);                          /* the file's, where it states one */
-    state = malloc((size_t)af_state_size(model) * sizeof *state);
-    gravity = malloc((size_t)n * 3 * sizeof *gravity);
-    x = malloc((size_t)n * 3 * sizeof *x);
+    state = (double *)malloc((size_t)af_state_size(model) * sizeof *state);
+    gravity = (double *)malloc((size_t)n * 3 * sizeof *gravity);
+    x = (double *)malloc((size_t)n * 3 * sizeof *x);
     af_rest_state(model, state);
     for (i = 0; i < 3 * n; i++) gravity[i] = g[i % 3] * af_masses(model)[i / 3];
     af_set_constant_force(model, gravity);         /* projected once */

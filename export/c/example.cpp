@@ -2,7 +2,7 @@
 // gravity and a drag on its top vertex for the first half of the steps, and print the lowest
 // vertex height per step.
 //
-//   c++ -std=c++17 -O2 -o example example.cpp arrays.c linalg.c reduced.c framed.c model.c
+//   c++ -std=c++17 -O2 -o example example.cpp arrays.c linalg.c reduced.c framed.c model.c files.c
 //   ./example tentacle 200 0.02            # PATH (no extension), steps, dt (s)
 //
 // (The runtime's sources compile as C++ too; or build them as C with the CMakeLists.txt beside

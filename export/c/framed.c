@@ -170,7 +170,7 @@ af_framed *af_framed_open(const af_file *f, int n, const double *rest, const dou
     m->n = n;
     m->rest = rest;
     m->masses = masses;
-    v = af_value_of(f->json, "size");
+    v = af_top_value(f->json, "size");
     m->size = v ? strtod(v, NULL) : 0.0;
     if (!(m->size > 0.0) || !isfinite(m->size)) {
         af_say(f->error, f->error_size, "%s: the header's \"size\" (the body's size, m) is "

@@ -24,7 +24,7 @@ struct af_model {
 
 /* Whether text (NUL-terminated) is one complete JSON value: brackets balanced outside
  * strings, nothing but blanks after it. */
-static int complete_json(const char *text) {
+int af_complete_json(const char *text) {
     long depth = 0;
     int in_string = 0, seen = 0;
     const char *p;
@@ -59,7 +59,7 @@ void af_free(af_model *m) {
 /* The header's model format as a kind, or 0 with a message. */
 static int kind_of(const af_file *f) {
     char text[128];
-    const char *v = af_value_of(f->json, "format");
+    const char *v = af_top_value(f->json, "format");
     if (!v) {
         af_say(f->error, f->error_size, "%s: no \"format\" key: not an arrays header (python -m "
                "export reduced writes one)", f->name);
@@ -70,7 +70,7 @@ static int kind_of(const af_file *f) {
                AF_ARRAYS_FORMAT);
         return 0;
     }
-    v = af_value_of(f->json, "model_format");
+    v = af_top_value(f->json, "model_format");
     if (!v) {
         af_say(f->error, f->error_size, "%s: no \"model_format\" key: the arrays of no model "
                "(python -m export reduced writes one)", f->name);
@@ -87,7 +87,7 @@ static int kind_of(const af_file *f) {
 
 /* The angle's tag into f->tag, checking that the file holds a model at it; 0 with a message. */
 static int pick_angle(af_file *f, const char *angle, const char *probe) {
-    const char *angles = af_value_of(f->json, "fiber_angles");
+    const char *angles = af_top_value(f->json, "fiber_angles");
     char list[96];
     f->tag[0] = '\0';
     list[0] = '\0';
@@ -125,7 +125,7 @@ static int read_body(af_model *m, const af_file *f) {
                f->name, shape[1]);
         return 0;
     }
-    v = af_value_of(f->json, "n");
+    v = af_top_value(f->json, "n");
     if (v && strtol(v, NULL, 10) != m->n) {
         af_say(f->error, f->error_size, "%s: the header says n = %ld vertices, and array "
                "rest_positions has %d", f->name, strtol(v, NULL, 10), m->n);
@@ -152,7 +152,7 @@ static int read_body(af_model *m, const af_file *f) {
                    "positive mass", f->name, m->masses[i], i);
             return 0;
         }
-    v = af_value_of(f->json, "gravity");
+    v = af_top_value(f->json, "gravity");
     if (v && *v == '[') {
         char *next;
         for (i = 0, v++; i < 3; i++) {
@@ -162,7 +162,7 @@ static int read_body(af_model *m, const af_file *f) {
         }
         m->has_gravity = i == 3 && isfinite(m->gravity[0] + m->gravity[1] + m->gravity[2]);
     }
-    v = af_value_of(f->json, "dt");
+    v = af_top_value(f->json, "dt");
     m->dt = v ? strtod(v, NULL) : 0.0;
     if (!(m->dt > 0.0) || !isfinite(m->dt)) m->dt = 0.0;
     return 1;
@@ -176,8 +176,7 @@ index:
     return 0;
 }
 
-/* af_load_memory with `name` for the file in messages; bin NULL: the header names none. */
-static af_model *load_named(const char *header, size_t header_size, const void *bin,
+af_model *af_load_named(const char *header, size_t header_size, const void *bin,
                             size_t bin_size, const char *angle, const char *name, char *error,
                             size_t error_size) {
     af_file f;
@@ -201,12 +200,12 @@ static af_model *load_named(const char *header, size_t header_size, const void *
     f.name = name;
     f.error = error;
     f.error_size = error_size;
-    if (strlen(json) != header_size || !complete_json(json)) {
+    if (strlen(json) != header_size || !af_complete_json(json)) {
         af_say(error, error_size, "%s: not complete JSON (a truncated or binary file?)", f.name);
         goto fail;
     }
     if (!(m->kind = kind_of(&f))) goto fail;
-    f.table = af_value_of(json, "arrays");
+    f.table = af_top_value(json, "arrays");
     if (!f.table || *f.table != '{') {
         af_say(error, error_size, "%s: no \"arrays\" table", f.name);
         goto fail;
@@ -242,75 +241,8 @@ af_model *af_load_memory(const char *header, size_t header_size, const void *bin
         af_say(error, error_size, "%s: NULL", header ? "bin" : "header");
         return NULL;
     }
-    return load_named(header, header_size, bin, bin_size, angle, "the header", error,
-                      error_size);
-}
-
-/* The whole file at path, NUL-terminated, its length in *length; NULL where it cannot be read. */
-static char *read_file(const char *path, long *length) {
-    FILE *f = fopen(path, "rb");
-    char *data;
-    long size;
-    if (!f) return NULL;
-    if (fseek(f, 0, SEEK_END) != 0 || (size = ftell(f)) < 0 || fseek(f, 0, SEEK_SET) != 0) {
-        fclose(f);
-        return NULL;
-    }
-    data = (char *)malloc((size_t)size + 1);
-    if (data && fread(data, 1, (size_t)size, f) != (size_t)size) {
-        free(data);
-        data = NULL;
-    }
-    fclose(f);
-    if (data) data[size] = '\0';
-    *length = size;
-    return data;
-}
-
-af_model *af_load(const char *path, const char *angle, char *error, size_t error_size) {
-    char name[4096], bin_name[4096], text[1024];
-    char *json, *bin = NULL;
-    const char *slash, *back;
-    long json_size = 0, bin_size = 0;
-    int folder;
-    af_model *m;
-    if (error && error_size) error[0] = '\0';
-    if (!path) {
-        af_say(error, error_size, "path: NULL");
-        return NULL;
-    }
-    if (strlen(path) > sizeof name - 16) {
-        af_say(error, error_size, "path: longer than %d characters", (int)sizeof name - 16);
-        return NULL;
-    }
-    snprintf(name, sizeof name, "%s.json", path);
-    if (!(json = read_file(name, &json_size))) {
-        af_say(error, error_size, "path: cannot read %s", name);
-        return NULL;
-    }
-    if (!complete_json(json)) {
-        af_say(error, error_size, "%s: not complete JSON (a truncated or binary file?)", name);
-        free(json);
-        return NULL;
-    }
-    slash = strrchr(path, '/');
-    back = strrchr(path, '\\');
-    if (back && (!slash || back > slash)) slash = back;
-    folder = slash ? (int)(slash - path + 1) : 0;
-    if (af_string_value(af_value_of(json, "bin"), text, sizeof text)) {
-        snprintf(bin_name, sizeof bin_name, "%.*s%s", folder, path, text);
-        if (!(bin = read_file(bin_name, &bin_size))) {
-            af_say(error, error_size, "path: %s names its arrays' file %s, and it cannot be read",
-                   name, bin_name);
-            free(json);
-            return NULL;
-        }
-    }
-    m = load_named(json, (size_t)json_size, bin, (size_t)bin_size, angle, name, error,
-                   error_size);
-    free(json);
-    free(bin);
-    return m;
+    return af_load_named(header, header_size, bin, bin_size, angle, "the header", error,
+                         error_size);
 }
 
 int af_kind(const af_model *m) { return m->kind; }
