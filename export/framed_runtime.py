@@ -35,9 +35,11 @@ positions returned on them. It needs numpy and runtime.py (copy both files toget
 import numpy as np
 
 try:
-    from .runtime import _angle_tag, _real, _same_mesh, _triple_rows, read_arrays
+    from .runtime import (MESH_ARRAYS, _angle_tag, _check_mesh, _in_range, _real, _same_mesh,
+                          _triple_rows, checked, read_arrays)
 except ImportError:  # copied next to runtime.py, outside the export package
-    from runtime import _angle_tag, _real, _same_mesh, _triple_rows, read_arrays
+    from runtime import (MESH_ARRAYS, _angle_tag, _check_mesh, _in_range, _real, _same_mesh,
+                         _triple_rows, checked, read_arrays)
 
 FRAMED_FORMAT = "anisofem-framed-1"
 #: Newton's last step moves no node more than this share of the body's size (the library's).
@@ -46,6 +48,53 @@ STEP_TOLERANCE = 1e-8
 GEN = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
                 [[0, 0, 1], [0, 0, 0], [-1, 0, 0]],
                 [[0, -1, 0], [1, 0, 0], [0, 0, 0]]], dtype=float)
+
+
+#: a framed model's arrays (framed_arrays in export/reduced.py): N model nodes, D domains, Q
+#: coordinates in all, R the most in a domain, J joint elements of k nodes and p points
+FRAMED_ARRAYS = {
+    "labels": ("int32", ("N",)), "Y": ("float64", ("N", 3)), "U": ("float64", ("N", 3, "R")),
+    "r": ("int32", ("D",)), "centre": ("float64", ("D", 3)), "mass": ("float64", ("D",)),
+    "a": ("float64", ("Q",)), "J": ("float64", ("D", 3, 3)), "A": ("float64", ("Q", 3, 3)),
+    "B": ("float64", (None, 3, 3)), "radius": ("float64", ("D",)),
+    "reach": ("float64", ("D",)), "c0": ("float64", ("D",)), "c1": ("float64", ("Q",)),
+    "C2": ("float64", (None,)), "S3": ("float64", (None,)), "W4": ("float64", (None,)),
+    "poly_offsets": ("int32", ("D", 3)), "parent": ("int32", ("D",)),
+    "order": ("int32", ("D",)), "arm_parent": ("float64", ("D", 3)),
+    "arm_own": ("float64", ("D", 3)), "chain": ("int32", ("P", 2)),
+    "arms": ("float64", ("P", 3)), "joint_tets": ("int32", ("J", "k")),
+    "joint_grads": ("float64", ("J", "p", "k", 3)), "joint_weights": ("float64", ("J", "p")),
+    "mu": ("float64", ("J",)), "lam": ("float64", ("J",)), "kappa": ("float64", ("J",)),
+    "fiber": ("float64", ("J", 3))}
+
+
+def _check_framed(path, header, arrays, tag):
+    """ValueError naming the file and the array unless the framed model's arrays (with the
+    angle's tag) fit each other, the mesh's and the header's."""
+    spec = {**MESH_ARRAYS, **{name + tag: kind for name, kind in FRAMED_ARRAYS.items()}}
+    if "display_nodes" in arrays:
+        spec.update({"display_nodes": ("int32", ("n", "dk")),
+                     "display_weights": ("float64", ("n", "dk")),
+                     "physics_rest": ("float64", ("N", 3))})
+    sizes = checked(path, header, arrays, spec)
+    r = arrays["r" + tag]
+    if (r < 0).any() or (r > sizes["R"]).any() or r.sum() != sizes["Q"]:
+        raise ValueError(f"path: {path}.json: array r{tag} ({r.tolist()}) does not fit the "
+                         f"bases U{tag} ({sizes['R']} columns) and c1{tag} ({sizes['Q']})")
+    if "display_nodes" not in arrays and sizes["N"] != sizes["n"]:
+        raise ValueError(f"path: {path}.json: array labels{tag} has {sizes['N']} entries for "
+                         f"{sizes['n']} vertices, and no display_nodes map a display mesh on them")
+    _in_range(path, "labels" + tag, arrays["labels" + tag], -1, sizes["D"])
+    _in_range(path, "joint_tets" + tag, arrays["joint_tets" + tag], 0, sizes["N"])
+    _in_range(path, "parent" + tag, arrays["parent" + tag], -1, sizes["D"])
+    _in_range(path, "order" + tag, arrays["order" + tag], 0, sizes["D"])
+    _in_range(path, "chain" + tag, arrays["chain" + tag], 0, sizes["D"])
+    if "display_nodes" in arrays:
+        _in_range(path, "display_nodes", arrays["display_nodes"], 0, sizes["N"])
+    if not isinstance(header.get("size"), (int, float)) or not header["size"] > 0:
+        raise ValueError(f"path: {path}.json: the header's \"size\" (the body's size, m) is "
+                         f"missing or not a positive number")
+    _check_mesh(path, header, arrays)
 
 
 class FramedSimulator:
@@ -61,9 +110,10 @@ class FramedSimulator:
                              f"{header.get('model_format')!r}, expected {FRAMED_FORMAT!r}); "
                              f"rebuild it with `python -m export reduced SCENE --framed -o "
                              f"PATH`")
+        tag = _angle_tag(header, angle)
+        _check_framed(path, header, arrays, tag)
         _same_mesh(arrays, vertices, tets)
         self.header = header
-        tag = _angle_tag(header, angle)
         a = {k[:len(k) - len(tag)] if tag and k.endswith(tag) else k: np.array(v)
              for k, v in arrays.items() if not tag or k.endswith(tag) or "@" not in k}
         self.rest_positions, self.masses = a["rest_positions"], a["masses"]

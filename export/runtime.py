@@ -235,22 +235,88 @@ ARRAY_DTYPES = {"float64": "<f8", "float32": "<f4", "int64": "<i8", "int32": "<i
                 "uint8": "u1"}
 
 
+ARRAY_ALIGNMENT = 8
+
+
 def read_arrays(path):
     """(header dict, {name: numpy array}) of the files PATH.json and PATH.bin written by
-    export.bake.write_arrays(path, ...)."""
-    with open(str(path) + ".json") as f:
-        header = json.load(f)
-    if header.get("format") != ARRAYS_FORMAT:
-        raise ValueError(f"path: {path}.json is not an {ARRAYS_FORMAT!r} header (format "
-                         f"{header.get('format')!r})")
-    data = np.fromfile(os.path.join(os.path.dirname(str(path)), header["bin"]), dtype=np.uint8)
+    export.bake.write_arrays(path, ...). ValueError naming the file and what is wrong where
+    the header is not complete JSON or not an arrays header, the .bin is missing, or an array's
+    dtype, shape or place in the .bin is not one numpy can read."""
+    name = f"{path}.json"
+    try:
+        with open(name) as f:
+            header = json.load(f)
+    except json.JSONDecodeError as err:
+        raise ValueError(f"path: {name} is not complete JSON ({err.msg} at line {err.lineno}, "
+                         f"column {err.colno}): a truncated or binary file?") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"path: {name} is not a text file") from None
+    if not isinstance(header, dict) or header.get("format") != ARRAYS_FORMAT:
+        found = header.get("format") if isinstance(header, dict) else None
+        raise ValueError(f"path: {name} is not an {ARRAYS_FORMAT!r} header (format {found!r})")
+    table = header.get("arrays")
+    if not isinstance(table, dict) or not isinstance(header.get("bin"), str):
+        raise ValueError(f"path: {name} has no \"arrays\" table or no \"bin\" file name")
+    bin_path = os.path.join(os.path.dirname(str(path)), header["bin"])
+    if not os.path.exists(bin_path):
+        raise ValueError(f"path: {name} names its arrays' file {bin_path}, and it is missing")
+    data = np.fromfile(bin_path, dtype=np.uint8)
     arrays = {}
-    for name, spec in header["arrays"].items():
-        dtype = np.dtype(ARRAY_DTYPES[spec["dtype"]])
-        count = int(np.prod(spec["shape"], dtype=np.int64))
-        arrays[name] = np.frombuffer(data, dtype=dtype, count=count,
-                                     offset=spec["offset"]).reshape(spec["shape"])
+    for key, spec in table.items():
+        try:
+            dtype = np.dtype(ARRAY_DTYPES[spec["dtype"]])
+            shape = tuple(spec["shape"])
+            offset = spec["offset"]
+        except (KeyError, TypeError):
+            raise ValueError(f"path: {name}: array {key} has no dtype of "
+                             f"{sorted(ARRAY_DTYPES)}, shape or offset") from None
+        if not all(isinstance(d, int) and d >= 0 for d in shape) or not isinstance(offset, int):
+            raise ValueError(f"path: {name}: array {key} has shape {list(shape)} and offset "
+                             f"{offset!r}: whole numbers >= 0 expected")
+        size = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+        if offset % ARRAY_ALIGNMENT or offset < 0:
+            raise ValueError(f"path: {name}: array {key} starts at offset {offset}, not a "
+                             f"multiple of {ARRAY_ALIGNMENT}")
+        if offset + size > data.size:
+            raise ValueError(f"path: {name}: array {key} ({size} bytes at offset {offset}) runs "
+                             f"past the end of the {data.size}-byte .bin file")
+        arrays[key] = np.frombuffer(data, dtype=dtype, count=size // dtype.itemsize,
+                                    offset=offset).reshape(shape)
     return header, arrays
+
+
+def checked(path, header, arrays, spec):
+    """arrays checked against spec, {name: (dtype, shape)}, each shape a tuple of numbers and
+    names (a name stands for one size wherever it appears; "n" is the header's n where it
+    states one; None: any size); float64 arrays must be finite. Returns the sizes the names
+    stand for; ValueError naming the file and the array otherwise."""
+    name = f"{path}.json"
+    sizes = {"n": header["n"]} if isinstance(header.get("n"), int) else {}
+    for key, (dtype, shape) in spec.items():
+        if key not in arrays:
+            raise ValueError(f"path: {name} has no array {key} (a model file needs "
+                             f"{', '.join(spec)})")
+        a = arrays[key]
+        if a.dtype != np.dtype(dtype):
+            raise ValueError(f"path: {name}: array {key} is {a.dtype}, expected {dtype}")
+        if a.ndim != len(shape):
+            raise ValueError(f"path: {name}: array {key} has {a.ndim} dimensions, expected "
+                             f"{len(shape)}")
+        for size, want in zip(a.shape, shape):
+            if isinstance(want, str):
+                want = sizes.setdefault(want, size)
+            if want is not None and size != want:
+                raise ValueError(f"path: {name}: array {key} has shape {a.shape}, expected "
+                                 f"{_shape_text(shape, sizes)}")
+        if a.dtype == np.float64 and not np.isfinite(a).all():
+            raise ValueError(f"path: {name}: array {key} holds a non-finite number at entry "
+                             f"{int(np.flatnonzero(~np.isfinite(a.ravel()))[0])}")
+    return sizes
+
+
+def _shape_text(shape, sizes):
+    return "(" + ", ".join(str(sizes.get(d, d)) if d is not None else "any" for d in shape) + ")"
 
 
 class OnnxSimulator:
@@ -386,6 +452,18 @@ class ReducedSimulator:
         if header.get("model_format") != REDUCED_FORMAT:
             raise ValueError(f"path: {path}.json holds no reduced model (model_format "
                              f"{header.get('model_format')!r}, expected {REDUCED_FORMAT!r})")
+        tag = _angle_tag(header, angle)
+        r = checked(path, header, arrays, {**MESH_ARRAYS, **{
+            "basis" + tag: ("float64", ("n", 3, "r")), "c1" + tag: ("float64", ("r",)),
+            "C2" + tag: ("float64", ("r", "r")), "S3" + tag: ("float64", ("r", "r", "r")),
+            "W4" + tag: ("float64", ("T", "r"))}})["r"]
+        if arrays["W4" + tag].shape[0] != r * (r + 1) * (r + 2) // 6:
+            raise ValueError(f"path: {path}.json: array W4{tag} has {arrays['W4' + tag].shape[0]} "
+                             f"rows, expected r (r + 1) (r + 2) / 6 = {r * (r + 1) * (r + 2) // 6}")
+        if isinstance(header.get("r"), int) and header["r"] != r:
+            raise ValueError(f"path: {path}.json: the header says r = {header['r']}, and array "
+                             f"basis has {r} columns")
+        _check_mesh(path, header, arrays)
         self.header = header
         dtype = np.dtype(dtype)
         if dtype not in (np.float64, np.float32):
@@ -396,9 +474,7 @@ class ReducedSimulator:
         self.held = arrays["held"].astype(bool)
         self.surface = np.array(arrays["surface"])
         _same_mesh(arrays, vertices, tets)
-        tag = _angle_tag(header, angle)
         self.basis = np.array(arrays["basis" + tag], dtype=dtype)    # (n, 3, r)
-        r = self.basis.shape[2]
         self.r = r
         self.c1, self.C2 = (np.array(arrays[k + tag], dtype=dtype) for k in ("c1", "C2"))
         self.S3 = np.array(arrays["S3" + tag], dtype=dtype).reshape(r * r, r)
@@ -537,6 +613,36 @@ def _same_mesh(arrays, vertices, tets):
             raise ValueError(f"tets: not the mesh this reduced model was built on "
                              f"({built.shape[0]} tets; got {tets.shape[0]}, {differ} of them "
                              f"different)")
+
+
+#: the arrays of the mesh every model file moves (export.reduced._mesh_arrays)
+MESH_ARRAYS = {"rest_positions": ("float64", ("n", 3)), "masses": ("float64", ("n",)),
+               "held": ("uint8", ("n", 3)), "surface": ("int32", (None, 3)),
+               "tets": ("int32", ("m", None))}
+
+
+def _check_mesh(path, header, arrays):
+    """ValueError naming the file unless the mesh's tets match the header's m, have 4 or 10
+    nodes, and the tets and surface name vertices of the file's n, and the masses are > 0."""
+    n, tets = arrays["rest_positions"].shape[0], arrays["tets"]
+    if isinstance(header.get("m"), int) and tets.shape[0] != header["m"]:
+        raise ValueError(f"path: {path}.json: the header says m = {header['m']} tets, and array "
+                         f"tets has {tets.shape[0]}")
+    if tets.shape[1] not in (4, 10):
+        raise ValueError(f"path: {path}.json: array tets has {tets.shape[1]} nodes a tet, "
+                         f"expected 4 or 10")
+    _in_range(path, "tets", tets, 0, n)
+    _in_range(path, "surface", arrays["surface"], 0, n)
+    if not (arrays["masses"] > 0).all():
+        raise ValueError(f"path: {path}.json: array masses holds a mass <= 0 kg")
+
+
+def _in_range(path, key, a, low, high):
+    """ValueError naming the file unless every entry of the index array a is in [low, high)."""
+    bad = (a < low) | (a >= high)
+    if bad.any():
+        raise ValueError(f"path: {path}.json: array {key} holds {int(a.ravel()[bad.ravel()][0])}"
+                         f", outside [{low}, {high})")
 
 
 def _real(value, name, shape):

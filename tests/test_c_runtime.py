@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from anisofem.reduced import ReducedModel
+from corrupt_files import corrupt, cut_bin, nan_at, set_spec, truncated_header
 from export import native
 from export import reduced as writer
 from export.runtime import ReducedSimulator, read_arrays
@@ -297,38 +298,6 @@ def _sanitized(tmp_path):
     return exe
 
 
-def _corrupt(path, out, edit_header=None, edit_bin=None):
-    """A copy of the model file at path as out (.json + .bin), its header dict passed through
-    edit_header(header) and its bytes through edit_bin(bytes, header)."""
-    with open(path + ".json") as f:
-        header = json.load(f)
-    data = bytearray(open(path + ".bin", "rb").read())
-    if edit_bin:
-        data = edit_bin(data, header)
-    header["bin"] = os.path.basename(out) + ".bin"
-    if edit_header:
-        edit_header(header)
-    with open(out + ".json", "w") as f:
-        json.dump(header, f)
-    with open(out + ".bin", "wb") as f:
-        f.write(bytes(data))
-    return out
-
-
-def _nan_at(name):
-    def edit(data, header):
-        offset = header["arrays"][name]["offset"]
-        data[offset:offset + 8] = np.array([np.nan]).tobytes()
-        return data
-    return edit
-
-
-def _set(name, key, value):
-    def edit(header):
-        header["arrays"][name][key] = value(header["arrays"][name][key])
-    return edit
-
-
 def test_under_the_sanitizers_good_files_step_and_bad_files_say_what_is_wrong(built, framed,
                                                                                tmp_path):
     """Both kinds step 50 steps; each corrupt file gives one message that names the file and
@@ -337,46 +306,44 @@ def test_under_the_sanitizers_good_files_step_and_bad_files_say_what_is_wrong(bu
     _, t, _ = framed
     exe = _sanitized(tmp_path)
     out = str(tmp_path / "bad")
-    truncated = _corrupt(reduced, out + "-truncated-json")
-    text = open(truncated + ".json").read()
-    open(truncated + ".json", "w").write(text[:len(text) // 2])
+    truncated = truncated_header(reduced, out + "-truncated-json")
     cases = [
         (reduced, r"ok 1 "),
         (t, r"ok 2 "),
-        (_corrupt(reduced, out + "-no-format", lambda h: h.pop("format")),
+        (corrupt(reduced, out + "-no-format", lambda h: h.pop("format")),
          r"no-format.json: no \"format\" key"),
-        (_corrupt(reduced, out + "-no-model", lambda h: h.pop("model_format")),
+        (corrupt(reduced, out + "-no-model", lambda h: h.pop("model_format")),
          r"no-model.json: no \"model_format\" key"),
         (truncated, r"truncated-json.json: not complete JSON"),
-        (_corrupt(reduced, out + "-short-bin", edit_bin=lambda d, h: d[:len(d) // 2]),
+        (corrupt(reduced, out + "-short-bin", edit_bin=cut_bin),
          r"short-bin.json: array \w+ \(\d+ bytes at offset \d+\) runs past the end of the "
          r"\d+-byte .bin"),
-        (_corrupt(reduced, out + "-nan", edit_bin=_nan_at("c1")),
+        (corrupt(reduced, out + "-nan", edit_bin=nan_at("c1")),
          r"nan.json: array c1 holds a non-finite number at entry 0"),
-        (_corrupt(reduced, out + "-dtype", _set("basis", "dtype", lambda _: "float32")),
+        (corrupt(reduced, out + "-dtype", set_spec("basis", "dtype", lambda _: "float32")),
          r"dtype.json: array basis is float32, expected float64"),
-        (_corrupt(reduced, out + "-offset", _set("W4", "offset", lambda o: o + 4)),
+        (corrupt(reduced, out + "-offset", set_spec("W4", "offset", lambda o: o + 4)),
          r"offset.json: array W4 starts at offset \d+, not a multiple of its 8-byte entries"),
-        (_corrupt(reduced, out + "-rank", _set("C2", "shape", lambda s: s[:1])),
+        (corrupt(reduced, out + "-rank", set_spec("C2", "shape", lambda s: s[:1])),
          r"rank.json: array C2 has 1 dimensions, expected 2"),
-        (_corrupt(reduced, out + "-r", _set("c1", "shape", lambda s: [s[0] - 1])),
+        (corrupt(reduced, out + "-r", set_spec("c1", "shape", lambda s: [s[0] - 1])),
          r"r.json: the arrays c1, C2, S3 and W4 do not fit a basis of r = 20"),
-        (_corrupt(reduced, out + "-n", lambda h: h.update(n=h["n"] + 1)),
+        (corrupt(reduced, out + "-n", lambda h: h.update(n=h["n"] + 1)),
          r"n.json: the header says n = \d+ vertices, and array rest_positions has \d+"),
-        (_corrupt(reduced, out + "-missing", lambda h: h["arrays"].pop("C2")),
+        (corrupt(reduced, out + "-missing", lambda h: h["arrays"].pop("C2")),
          r"missing.json: no array C2 in its arrays table"),
-        (_corrupt(reduced, out + "-tets", _set("tets", "dtype", lambda _: "int64")),
+        (corrupt(reduced, out + "-tets", set_spec("tets", "dtype", lambda _: "int64")),
          r"tets.json: array tets is int64, expected int32"),
-        (_corrupt(t, out + "-labels", _set("labels", "dtype", lambda _: "int64")),
+        (corrupt(t, out + "-labels", set_spec("labels", "dtype", lambda _: "int64")),
          r"labels.json: array labels is int64, expected int32"),
-        (_corrupt(t, out + "-joint-nan", edit_bin=_nan_at("joint_grads")),
+        (corrupt(t, out + "-joint-nan", edit_bin=nan_at("joint_grads")),
          r"joint-nan.json: array joint_grads holds a non-finite number at entry 0"),
-        (_corrupt(t, out + "-kind", lambda h: h.update(model_format="anisofem-framed-0")),
+        (corrupt(t, out + "-kind", lambda h: h.update(model_format="anisofem-framed-0")),
          r"kind.json: holds model_format 'anisofem-framed-0', and this runtime reads "
          r"'anisofem-reduced-1' and 'anisofem-framed-1'; rebuild"),
         (str(tmp_path / "nowhere"), r"path: cannot read .*nowhere.json"),
     ]
-    no_bin = _corrupt(reduced, out + "-no-bin")
+    no_bin = corrupt(reduced, out + "-no-bin")
     os.remove(no_bin + ".bin")
     cases.append((no_bin, r"no-bin.json names its arrays' file .*no-bin.bin, and it cannot be "
                           r"read"))
@@ -407,7 +374,7 @@ def test_a_path_with_backslashes_finds_its_bin_beside_it(built, tmp_path, monkey
     as a Windows folder would place them."""
     _, path, lib = built
     monkeypatch.chdir(tmp_path)
-    _corrupt(path, str(tmp_path / "models\\beam"))
+    corrupt(path, str(tmp_path / "models\\beam"))
     header = json.loads(open(tmp_path / "models\\beam.json").read())
     header["bin"] = "beam.bin"
     (tmp_path / "models\\beam.json").write_text(json.dumps(header))

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from anisofem.reduced import ReducedModel
+from corrupt_files import corrupt, cut_bin, nan_at, set_spec, truncated_header
 from export import reduced as writer
 from export.bake import write_arrays
 from export.cli import main
@@ -218,3 +219,68 @@ def test_display_mesh_file_moves_the_coarse_vertices_by_the_fine_model(tmp_path)
     library = coarse.vertices + U @ q
     sag = np.abs(library - coarse.vertices).max()
     assert np.abs(sim.positions(qs) - library).max() < 0.02 * sag
+
+
+def _refusals(sim_class, path, cases, tmp_path):
+    """Each (name, edit_header, edit_bin, expected) case: a corrupt copy of path that sim_class
+    refuses with a ValueError matching expected."""
+    for name, edit_header, edit_bin, expected in cases:
+        out = corrupt(path, str(tmp_path / name), edit_header, edit_bin)
+        with pytest.raises(ValueError, match=expected):
+            sim_class(out)
+
+
+def test_the_numpy_runtime_checks_a_file_against_its_header(written, tmp_path):
+    """What a corrupt file gives: one ValueError naming the file and what is wrong, never a
+    numpy error from deep inside or a model that loads and steps to NaN."""
+    _, _, path = written
+    truncated = truncated_header(path, str(tmp_path / "truncated"))
+    with pytest.raises(ValueError, match="truncated.json is not complete JSON"):
+        ReducedSimulator(truncated)
+    _refusals(ReducedSimulator, path, [
+        ("short", None, cut_bin, r"short.json: array \w+ \(\d+ bytes at offset \d+\) runs past "
+                                 r"the end of the \d+-byte .bin"),
+        ("nan", None, nan_at("c1"), r"nan.json: array c1 holds a non-finite number at entry 0"),
+        ("dtype", set_spec("basis", "dtype", lambda _: "float32"), None,
+         r"dtype.json: array basis is float32, expected float64"),
+        ("shape", set_spec("basis", "shape", lambda s: [s[0], 3 * s[2]]), None,
+         r"shape.json: array basis has 2 dimensions, expected 3"),
+        ("offset", set_spec("W4", "offset", lambda o: o + 4), None,
+         r"offset.json: array W4 starts at offset \d+, not a multiple of 8"),
+        ("missing", lambda h: h["arrays"].pop("C2"), None, r"missing.json has no array C2"),
+        ("n", lambda h: h.update(n=h["n"] + 1), None,
+         r"n.json: array rest_positions has shape \(\d+, 3\), expected \(\d+, 3\)"),
+        ("r", lambda h: h.update(r=h["r"] + 1), None,
+         r"r.json: the header says r = 21, and array basis has 20 columns"),
+        ("tets", lambda h: h.update(m=h["m"] - 1), None,
+         r"tets.json: array tets has shape \(\d+, 4\), expected \(\d+, any\)|"
+         r"tets.json: the header says m = \d+ tets"),
+        ("tets-dtype", set_spec("tets", "dtype", lambda _: "float32"), None,
+         r"tets-dtype.json: array tets is float32, expected int32"),
+        ("tets-long", set_spec("tets", "dtype", lambda _: "int64"), None,
+         r"tets-long.json: array tets \(\d+ bytes at offset \d+\) runs past the end"),
+        ("bin", lambda h: h.update(bin="nowhere.bin"), None,
+         r"bin.json names its arrays' file .*nowhere.bin, and it is missing"),
+    ], tmp_path)
+
+
+def test_the_framed_numpy_runtime_checks_a_file_against_its_header(tmp_path):
+    """The same for a framed model's arrays: their dtypes, their sizes against each other, the
+    indices they hold."""
+    from anisofem.reduced import FramedModel
+    from export.framed_runtime import FramedSimulator
+    from test_framed_model import t_scene
+    path = str(tmp_path / "t")
+    writer.write_framed(FramedModel(t_scene(), validate=False), path, "t")
+    FramedSimulator(path)
+    _refusals(FramedSimulator, path, [
+        ("labels", set_spec("labels", "dtype", lambda _: "int64"), None,
+         r"labels.json: array labels is int64, expected int32"),
+        ("joint-nan", None, nan_at("joint_grads"),
+         r"joint-nan.json: array joint_grads holds a non-finite number"),
+        ("r", set_spec("r", "shape", lambda s: [s[0] - 1]), None,
+         r"r.json: array (r|centre) has shape"),
+        ("size", lambda h: h.pop("size"), None, r"size.json: the header's \"size\""),
+        ("order", set_spec("order", "dtype", lambda _: "float32"), None,
+         r"order.json: array order is float32, expected int32"),
+    ], tmp_path)
