@@ -87,13 +87,13 @@ web/models/%.onnx: export/models/%.onnx
 	mkdir -p web/models
 	cp $< $@
 
-web/scenes/%.json: export/models/directional.onnx export/bake.py export/runtime.py $(VENV)/.installed
+web/scenes/%.json: export/models/directional.onnx export/writers/bake.py export/runtime.py $(VENV)/.installed
 	mkdir -p web/scenes
 	$(PY) -m export bake $* -o web/scenes/$*
 
 # the T and the Y bend far at their arms: their reduced models are framed
 WEB_FRAMED := t y
-web/scenes/%-reduced.json: export/reduced.py export/runtime.py export/framed_runtime.py \
+web/scenes/%-reduced.json: export/writers/reduced.py export/runtime.py export/framed_runtime.py \
                            anisofem/reduced/*.py $(VENV)/.installed
 	mkdir -p web/scenes
 	$(PY) -m export bake-reduced $* -o web/scenes/$*-reduced \

@@ -125,7 +125,7 @@ def build_reduced(path, vertices, tets, framed=False):
     one step that needs the library (anisofem) rather than the runtime."""
     import anisofem as af
     from anisofem.reduced import Drag, FramedModel, Loads, ReducedModel
-    from export.reduced import write, write_framed
+    from export.writers.reduced import write, write_framed
     material = af.Material(1e5, 0.48, DENSITY, np.array(FIBER) / np.linalg.norm(FIBER), KAPPA)
     scene = af.Scene(af.TetMesh(vertices, tets), material,
                      fixed=np.flatnonzero(vertices[:, 0] < 1e-9), gravity=(0.0, 0.0, -9.81))

@@ -53,7 +53,7 @@ def build(path):
     needs the library (anisofem) rather than the runtime."""
     import anisofem as af
     from anisofem.reduced import Carry, Drag, FramedModel, Loads
-    from export.reduced import write_framed
+    from export.writers.reduced import write_framed
     mesh = af.box_beam((LENGTH, 0.02, 0.02), (16, 2, 2))
     scene = af.Scene(mesh, af.Material(1e5, 0.48, 1000.0, (1.0, 0.0, 0.0), 1e5),
                      fixed=af.metrics.end_vertices(mesh, 0, "min"), gravity=(0, 0, -9.81))

@@ -1,6 +1,15 @@
-"""export: a trained anisognn model as ONNX (to_onnx, `python -m export MODEL -o model.onnx`)
-and runtime.py, the one-file numpy + onnxruntime runtime (OnnxSimulator). This package imports
-nothing at import time, so `from export.runtime import OnnxSimulator` needs no torch.
+"""export: what is deployed, what writes it, and what measures it.
+
+- Deployed: the C runtime of reduced and framed models (c/, the one implementation engines
+  link, Python calls through `native` and the browser runs as WebAssembly), and the numpy
+  runtimes, one file each, its readable reference (`runtime`: also model.onnx through
+  onnxruntime, OnnxSimulator; `framed_runtime`).
+- Writers (`writers`): a trained anisognn model as ONNX (`python -m export MODEL -o
+  model.onnx`), baked scenes, reduced and framed model files.
+- Benches (`benches`): `python -m export bench`, `bench-reduced`.
+
+This package imports nothing at import time, so `from export.runtime import OnnxSimulator`
+needs no torch.
 
     sim = OnnxSimulator(export.model_path("directional"), vertices, tets, ...)
 """

@@ -9,7 +9,8 @@ import sys
 from anisofem.cli import BAD_INPUT, Parser
 from anisofem.io.output import check_folder, result_path
 
-from . import bake, model_path
+from .writers import bake
+from . import model_path
 
 #: The subcommands, each with what it does (python -m export --help lists them)
 COMMANDS = {"bench": "onnxruntime against torch per step (table + JSON)",
@@ -28,7 +29,7 @@ def main(argv=None):
     """Run a command; bad input ends it with a one-line error and exit status 2."""
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["bench"]:
-        from . import bench
+        from .benches import onnx as bench
         parser = Parser(prog="python -m export bench",
                         description="onnxruntime vs torch per step")
         parser.add_argument("--json", default=result_path("bench_export.json"),
@@ -66,7 +67,7 @@ def main(argv=None):
     from anisognn import shipped
     from anisognn.cli import add_galerkin_arguments, stepping
 
-    from . import to_onnx
+    from .writers import to_onnx
     parser = Parser(
         prog="python -m export", usage="python -m export {MODEL,%s} ..." % ",".join(COMMANDS),
         description="export a trained anisognn model to ONNX: python -m export MODEL -o "
@@ -97,7 +98,7 @@ def _reduced(argv):
     from anisofem.cli import BODIES, add_scene_arguments, body_of, scene_of
     from anisofem.reduced import MODES, ReducedModel
 
-    from . import reduced
+    from .writers import reduced
     parser = Parser(
         prog="python -m export reduced", description="build a scene's reduced model "
         "(anisofem.reduced) and write it as PATH.json + PATH.bin for runtime.ReducedSimulator",
@@ -149,7 +150,7 @@ def _framed(args, scene, display):
     vertices of the TetMesh display, where given)."""
     from anisofem.reduced import FramedModel
 
-    from . import reduced
+    from .writers import reduced
     if args.body or args.snapshots:
         raise ValueError("--framed: builds on the scene's own mesh from its default declared "
                          "loads; --body and --snapshots are the linear model's")
@@ -179,7 +180,7 @@ def _checked(v):
 
 def _bench_reduced(argv):
     """python -m export bench-reduced: the reduced model's build, size and step times."""
-    from . import bench_reduced
+    from .benches import reduced as bench_reduced
     parser = Parser(
         prog="python -m export bench-reduced", description=bench_reduced.__doc__.split("\n")[0],
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -202,7 +203,7 @@ def _bake_reduced(argv):
     """python -m export bake-reduced: a baked scene's reduced models, one per fiber angle."""
     from anisofem.reduced import MODES
 
-    from . import reduced
+    from .writers import reduced
     parser = Parser(
         prog="python -m export bake-reduced", description="write the reduced models of a "
         "baked scene at several fiber angles as PATH.json + PATH.bin (the browser page's)",

@@ -50,8 +50,9 @@ GEN = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
                 [[0, -1, 0], [1, 0, 0], [0, 0, 0]]], dtype=float)
 
 
-#: a framed model's arrays (framed_arrays in export/reduced.py): N model nodes, D domains, Q
-#: coordinates in all, R the most in a domain, J joint elements of k nodes and p points
+#: a framed model's arrays (framed_arrays in export/writers/reduced.py): N model nodes, D
+#: domains, Q coordinates in all, R the most in a domain, J joint elements of k nodes and p
+#: points
 FRAMED_ARRAYS = {
     "labels": ("int32", ("N",)), "Y": ("float64", ("N", 3)), "U": ("float64", ("N", 3, "R")),
     "r": ("int32", ("D",)), "centre": ("float64", ("D", 3)), "mass": ("float64", ("D",)),

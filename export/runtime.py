@@ -228,7 +228,7 @@ def surface_triangles(vertices, tets):
     return faces
 
 
-#: the baked-scene file format (export.bake.write_arrays / read_arrays)
+#: the baked-scene file format (export.writers.bake.write_arrays / read_arrays)
 ARRAYS_FORMAT = "anisognn-arrays-1"
 #: numpy dtypes a baked file may hold, by the names its header uses
 ARRAY_DTYPES = {"float64": "<f8", "float32": "<f4", "int64": "<i8", "int32": "<i4",
@@ -240,7 +240,7 @@ ARRAY_ALIGNMENT = 8
 
 def read_arrays(path):
     """(header dict, {name: numpy array}) of the files PATH.json and PATH.bin written by
-    export.bake.write_arrays(path, ...). ValueError naming the file and what is wrong where
+    export.writers.bake.write_arrays(path, ...). ValueError naming the file and what is wrong where
     the header is not complete JSON or not an arrays header, the .bin is missing, or an array's
     dtype, shape or place in the .bin is not one numpy can read."""
     name = f"{path}.json"
@@ -414,7 +414,7 @@ class OnnxSimulator:
         return out
 
 
-#: The header format of a reduced model's arrays files (export.reduced writes them).
+#: The header format of a reduced model's arrays files (export.writers.reduced writes them).
 REDUCED_FORMAT = "anisofem-reduced-1"
 #: A step has converged where its reduced gradient is below FLOOR eps r |(|H| |q| + |f| + |c1|)|,
 #: the round-off bound of its sum, whatever rtol asks (float32: 0.43% of the deflection off
@@ -615,7 +615,7 @@ def _same_mesh(arrays, vertices, tets):
                              f"different)")
 
 
-#: the arrays of the mesh every model file moves (export.reduced._mesh_arrays)
+#: the arrays of the mesh every model file moves (export.writers.reduced._mesh_arrays)
 MESH_ARRAYS = {"rest_positions": ("float64", ("n", 3)), "masses": ("float64", ("n",)),
                "held": ("uint8", ("n", 3)), "surface": ("int32", (None, 3)),
                "tets": ("int32", ("m", None))}

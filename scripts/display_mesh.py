@@ -27,7 +27,7 @@ from anisofem.io.output import publish, result_path
 from anisofem.studies.convergence import cantilever
 from anisofem.reduced import FramedModel, ReducedModel
 from export import native
-from export import reduced as writer
+from export.writers import reduced as writer
 from export.framed_runtime import FramedSimulator
 from export.runtime import ReducedSimulator
 

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import anisofem
-from export import bake, cli, runtime
+from export.writers import bake
+from export import cli, runtime
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MODEL = os.path.join(ROOT, "export", "models", "directional.onnx")

@@ -15,7 +15,7 @@ import pytest
 from anisofem.reduced import ReducedModel
 from corrupt_files import corrupt, cut_bin, nan_at, set_spec, truncated_header
 from export import native
-from export import reduced as writer
+from export.writers import reduced as writer
 from export.runtime import ReducedSimulator, read_arrays
 from test_framed_model import cubature_model  # noqa: F401 (a fixture)
 from test_framed_runtime import cubature_written, displayed, tip_drag  # noqa: F401 (fixtures)

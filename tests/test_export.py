@@ -16,7 +16,8 @@ import torch
 import anisofem
 import anisognn
 from anisognn.model import with_galerkin
-from export import cli, runtime, to_onnx
+from export import cli, runtime
+from export.writers import to_onnx
 from export.runtime import OnnxSimulator
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -1,4 +1,4 @@
-"""The framed model written by export.reduced.write_framed and stepped by
+"""The framed model written by export.writers.reduced.write_framed and stepped by
 framed_runtime.FramedSimulator (numpy only) moves like the library's FramedModel, refuses
 another file and another mesh, and `python -m export reduced --framed` writes it."""
 import json
@@ -8,7 +8,7 @@ import pytest
 
 import anisofem as af
 from anisofem.reduced import Drag, FramedModel, Loads
-from export import reduced as writer
+from export.writers import reduced as writer
 from export import cli
 from export.cli import main
 from export.framed_runtime import FRAMED_FORMAT, FramedSimulator
@@ -249,7 +249,8 @@ def test_bake_command_writes_the_framed_models_per_fiber_angle(tmp_path, capsys)
 
 
 def test_bench_row_measures_the_framed_model(tmp_path):
-    from export import bench_reduced, native
+    from export.benches import reduced as bench_reduced
+    from export import native
     lib = native.build(str(tmp_path / "c")) if native.compiler() else None
     row = bench_reduced.measure_framed((6, 1, 1), str(tmp_path), lib=lib)
     assert row["tets"] == 30 and row["snapshots"] == "framed" and row["validation_cases"] == 3

@@ -1,4 +1,4 @@
-"""The reduced model written by export.reduced and stepped by runtime.ReducedSimulator (numpy
+"""The reduced model written by export.writers.reduced and stepped by runtime.ReducedSimulator (numpy
 only) moves like the library's stepper, refuses another mesh and another file, and the
 command writes it."""
 import json
@@ -10,8 +10,8 @@ import pytest
 
 from anisofem.reduced import ReducedModel
 from corrupt_files import corrupt, cut_bin, nan_at, set_spec, truncated_header
-from export import reduced as writer
-from export.bake import write_arrays
+from export.writers import reduced as writer
+from export.writers.bake import write_arrays
 from export.cli import main
 from export.runtime import ReducedSimulator
 from test_reduced import FIBER, cantilever
@@ -187,7 +187,8 @@ def test_commands_make_the_folders_they_write_to(tmp_path):
 
 
 def test_bench_row_measures_what_it_names(tmp_path):
-    from export import bench_reduced, native
+    from export.benches import reduced as bench_reduced
+    from export import native
     row = bench_reduced.measure((4, 1, 1), 3, str(tmp_path))
     assert row["tets"] == 20 and row["r"] == 9 and row["modes"] == 3
     assert row["file_mb"] > 0 and row["library_ms"] > 0 and row["runtime_ms"] > 0

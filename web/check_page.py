@@ -35,7 +35,8 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from export import bake, framed_runtime, runtime  # noqa: E402
+from export.writers import bake
+from export import framed_runtime, runtime
 
 #: steps at which the page's positions are compared with runtime.py's, and the largest distance
 #: allowed at each, over the largest displacement of the rollout. One step agrees to float32

@@ -20,7 +20,7 @@ from anisofem.physics import metrics
 from anisofem.io.output import atomic_path
 from anisofem.physics.scene import GRAVITY
 
-from . import runtime
+from .. import runtime
 
 #: the scenes `bake` knows: name -> (title, mesh maker, held end (axis, side))
 SCENES = {

@@ -1,5 +1,5 @@
 """`python -m export reduced SCENE -o PATH`: a scene's reduced model (anisofem.reduced) written
-as PATH.json + PATH.bin (export.bake.write_arrays), which runtime.ReducedSimulator steps with
+as PATH.json + PATH.bin (export.writers.bake.write_arrays), which runtime.ReducedSimulator steps with
 numpy alone.
 
 The arrays (float64 unless said): rest_positions (n, 3) m, the positions the basis moves;
@@ -17,7 +17,7 @@ or on `cases` unseen loads), gravity (m/s^2) and material.
 framed_runtime.FramedSimulator and the C runtime's af_framed_step; export/README.md), for a
 display mesh too.
 
-`python -m export bake-reduced SCENE -o PATH` writes the models of a baked scene (export.bake)
+`python -m export bake-reduced SCENE -o PATH` writes the models of a baked scene (export.writers.bake)
 at several fiber angles in one pair of files, for the browser page: the arrays that depend on
 the fiber once per angle A as NAME@A (runtime.ReducedSimulator(path, angle=A) reads them);
 with --framed the framed models (bake_framed).
@@ -31,8 +31,8 @@ from anisofem.reduced import FramedModel, ReducedModel
 from anisofem.reduced.display import node_weights
 from anisofem.physics.scene import GRAVITY
 
-from . import runtime
-from .framed_runtime import FRAMED_FORMAT
+from .. import runtime
+from ..framed_runtime import FRAMED_FORMAT
 from .bake import SCENES, fiber_direction, scene_mesh, write_arrays
 
 #: The time step the page steps a baked reduced model with, s (the shipped networks' dt).
@@ -87,7 +87,7 @@ def _display_masses(scene, display):
 
 
 def _angle_scenes(name, angles):
-    """(angles as floats, the baked scene `name` (export.bake.SCENES) with the trained material
+    """(angles as floats, the baked scene `name` (export.writers.bake.SCENES) with the trained material
     (Material.paper, fiber stiffness E) and gravity at each fiber angle, degrees from x towards
     z); ValueError naming the scene or the angles."""
     if name not in SCENES:
@@ -102,7 +102,7 @@ def _angle_scenes(name, angles):
 
 
 def bake(name, out, modes, angles, snapshots=0):
-    """Write the reduced models of the baked scene `name` (export.bake.SCENES; the trained
+    """Write the reduced models of the baked scene `name` (export.writers.bake.SCENES; the trained
     material: Material.paper with fiber stiffness E, gravity) at each fiber angle (degrees from
     x towards z) as out.json and out.bin: the mesh arrays once, the model arrays (basis, c1,
     C2, S3, W4) once per angle as NAME@A; the header lists fiber_angles and r per angle.

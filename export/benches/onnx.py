@@ -17,8 +17,8 @@ from anisognn import shipped
 from anisognn.bench import MESHES
 from anisognn.model import GraphNet, ModelConfig, with_galerkin
 
-from .runtime import INPUTS, OnnxSimulator
-from .to_onnx import Step, export
+from ..runtime import INPUTS, OnnxSimulator
+from ..writers.to_onnx import Step, export
 
 #: the paper's reported step time for 100 elements (desktop GPU, LibTorch), s
 PAPER_STEP_S = 9e-3

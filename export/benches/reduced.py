@@ -20,9 +20,10 @@ from anisofem.studies.convergence import cantilever
 from anisofem.io.output import publish
 from anisofem.reduced import FramedModel, ReducedModel
 
-from . import native, reduced
-from .framed_runtime import FramedSimulator
-from .runtime import ReducedSimulator
+from .. import native
+from ..writers import reduced
+from ..framed_runtime import FramedSimulator
+from ..runtime import ReducedSimulator
 
 #: mesh label -> box_beam cells of the 0.1 m cantilever (5 tets per cell)
 MESHES = {"200": (10, 2, 2), "12800": (40, 8, 8), "102400": (80, 16, 16)}

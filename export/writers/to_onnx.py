@@ -24,7 +24,7 @@ from anisognn.graph import Graph
 from anisognn.model import GraphNet, integrate
 from anisognn.sampler import DENSITY, POISSON, YOUNG
 
-from .runtime import FORMAT, INPUTS, OUTPUTS, STATE, mesh_tensors
+from ..runtime import FORMAT, INPUTS, OUTPUTS, STATE, mesh_tensors
 
 #: names of the constant mesh inputs, in INPUTS order
 CONSTANTS = tuple(name for name, _, _ in INPUTS if name not in STATE)
