@@ -7,6 +7,7 @@ import argparse
 import sys
 
 from anisofem.cli import BAD_INPUT, Parser
+from anisofem.cli.arguments import ShowDefaults
 from anisofem.io.output import check_folder, result_path
 
 from .writers import bake
@@ -102,7 +103,7 @@ def _reduced(argv):
     parser = Parser(
         prog="python -m export reduced", description="build a scene's reduced model "
         "(anisofem.reduced) and write it as PATH.json + PATH.bin for runtime.ReducedSimulator",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        formatter_class=ShowDefaults)
     add_scene_arguments(parser)
     parser.add_argument("--modes", type=int, default=MODES,
                         help="vibration modes; without --snapshots the basis adds their modal "
@@ -122,19 +123,40 @@ def _reduced(argv):
                         help="the framed model instead (anisofem.reduced.FramedModel: domains "
                              "in their own rotating frames, for bodies that bend and swing "
                              "far), for framed_runtime.FramedSimulator")
+    parser.add_argument("--drag", nargs="+", action="append", default=[], metavar="WHERE N",
+                        help="a drag the model must handle (repeatable): up to N newtons on "
+                             "the vertices at WHERE (AXIS-SIDE like x-max, or a surface of a "
+                             "scene file), in any direction, or along DX DY DZ given after N; "
+                             "declared drags replace the default, half the body's weight at "
+                             "each free end")
+    parser.add_argument("--cone", type=float, default=0.0,
+                        help="degrees by which the scene's gravity may turn (a body carried "
+                             "around)")
+    parser.add_argument("--carry", nargs=3, type=float, metavar=("TURN", "MOVE", "SECONDS"),
+                        help="with --framed: the held vertices carried, turned by up to TURN "
+                             "degrees and moved by up to MOVE m, each motion taking at least "
+                             "SECONDS s")
     parser.add_argument("-o", "--output", required=True, help="PATH (without extension)")
     args = parser.parse_args(argv)
     try:
         check_folder(args.output, "--output")
         if args.body and args.display:
             raise ValueError("--body, --display: give one (--body draws on the scene's mesh)")
+        fixed = args.fixed
         scene = scene_of(args)
+        loads = _declared_loads(args, scene)
         shown = None if args.display is None else read_mesh(args.display)
+        _say_what_is_built(args, scene, fixed, loads)
         if args.framed:
-            return _framed(args, scene, shown)
+            return _framed(args, scene, shown, loads)
+        if args.carry:
+            raise ValueError("--carry: the framed model's held vertices move; add --framed")
         display = scene.mesh if args.body else shown
         built = body_of(args, scene, args.body, "--body") if args.body else scene
-        model = ReducedModel(built, modes=args.modes, snapshots=args.snapshots)
+        if args.body and loads is not None:
+            raise ValueError("--body: builds from the default declared loads; --drag and "
+                             "--cone name the scene mesh's vertices")
+        model = ReducedModel(built, modes=args.modes, snapshots=args.snapshots, loads=loads)
         header = reduced.write(model, args.output, title=args.scene, gravity=scene.gravity,
                                display=display)
     except BAD_INPUT as err:
@@ -145,16 +167,73 @@ def _reduced(argv):
           f"{model.build_seconds:.2g} s{_checked(model.validation)}")
 
 
-def _framed(args, scene, display):
+def _declared_loads(args, scene):
+    """The Loads of --drag, --cone and --carry, or None where none is given."""
+    from anisofem.cli.arguments import is_scene_file
+    from anisofem.io.scenefile import SceneFile
+    from anisofem.physics.metrics import end_vertices
+    from anisofem.reduced import Carry, Drag, Loads
+    if not (args.drag or args.cone or args.carry):
+        return None
+    drags = []
+    for entry in args.drag:
+        if len(entry) not in (2, 5):
+            raise ValueError(f"--drag: WHERE N or WHERE N DX DY DZ, got {' '.join(entry)!r}")
+        where, numbers = entry[0], entry[1:]
+        try:
+            magnitude, *direction = (float(x) for x in numbers)
+        except ValueError:
+            raise ValueError(f"--drag {where}: N and DX DY DZ are numbers, got "
+                             f"{' '.join(numbers)!r}") from None
+        if is_scene_file(args.scene):
+            vertices = SceneFile(args.scene).vertices(where)
+        else:
+            axis, _, side = where.partition("-")
+            if axis not in ("x", "y", "z") or side not in ("min", "max"):
+                raise ValueError(f"--drag: WHERE is AXIS-SIDE like x-max for a shape or a mesh "
+                                 f"file (a scene file names its surfaces), got {where!r}")
+            vertices = end_vertices(scene.mesh, "xyz".index(axis), side)
+        drags.append(Drag(vertices, magnitude, (direction,) if direction else None))
+    carry = Carry(*args.carry) if args.carry else None
+    loads = Loads(drags=tuple(drags), cone=args.cone, carry=carry)
+    loads.check(scene)
+    return loads
+
+
+def _say_what_is_built(args, scene, fixed, loads):
+    """One line on stderr before the build: the mesh, the vertices it holds and why those,
+    what it builds and from which loads (a build of a few thousand tets takes a minute)."""
+    from anisofem.cli.arguments import SHAPES, is_scene_file
+    held = int(scene.fixed_mask.any(axis=1).sum())
+    if is_scene_file(args.scene):
+        where = "as the scene file says"
+    elif fixed:
+        where = f"at {args.fixed} (--fixed)"
+    else:
+        kind = "the shape's" if args.scene in SHAPES else "a mesh file's"
+        where = f"at {args.fixed} ({kind} default; --fixed holds another end)"
+    what = ("its framed model" if args.framed else
+            f"{args.modes} modes + {args.snapshots} directions fitted to static equilibria"
+            if args.snapshots else f"{args.modes} modes and their modal derivatives")
+    declared = (f"the declared loads ({len(loads.drags)} drags, a {loads.cone:g} degree "
+                f"cone{', a carry' if loads.carry else ''})" if loads else
+                "the default loads (half the body's weight at each free end)")
+    fitted = args.framed or args.snapshots
+    print(f"{args.scene}: {scene.mesh.n_tets} tets, holding {held} vertices {where}; "
+          f"building {what}{' from ' + declared if fitted else ''}, then validating it "
+          f"against the full FEM ...", file=sys.stderr, flush=True)
+
+
+def _framed(args, scene, display, loads):
     """python -m export reduced --framed: the FramedModel of the scene, written (for the
     vertices of the TetMesh display, where given)."""
     from anisofem.reduced import FramedModel
 
     from .writers import reduced
     if args.body or args.snapshots:
-        raise ValueError("--framed: builds on the scene's own mesh from its default declared "
-                         "loads; --body and --snapshots are the linear model's")
-    model = FramedModel(scene, modes=args.modes)
+        raise ValueError("--framed: builds on the scene's own mesh from its declared loads; "
+                         "--body and --snapshots are the linear model's")
+    model = FramedModel(scene, modes=args.modes, loads=loads)
     header = reduced.write_framed(model, args.output, title=args.scene, gravity=scene.gravity,
                                   display=display)
     print(f"wrote {args.output}.json and .bin: {header['n']} vertices, {header['m']} tets, "
@@ -183,7 +262,7 @@ def _bench_reduced(argv):
     from .benches import reduced as bench_reduced
     parser = Parser(
         prog="python -m export bench-reduced", description=bench_reduced.__doc__.split("\n")[0],
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        formatter_class=ShowDefaults)
     parser.add_argument("--sizes", nargs="+", default=list(bench_reduced.MESHES),
                         choices=list(bench_reduced.MESHES), help="meshes, by tets")
     parser.add_argument("--modes", type=int, nargs="+", default=list(bench_reduced.MODES),
@@ -207,7 +286,7 @@ def _bake_reduced(argv):
     parser = Parser(
         prog="python -m export bake-reduced", description="write the reduced models of a "
         "baked scene at several fiber angles as PATH.json + PATH.bin (the browser page's)",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        formatter_class=ShowDefaults)
     parser.add_argument("scene", choices=sorted(bake.SCENES))
     parser.add_argument("-o", "--output", required=True, help="PATH (without extension)")
     parser.add_argument("--modes", type=int, default=MODES, help="vibration modes")

@@ -2,6 +2,7 @@
 only) moves like the library's stepper, refuses another mesh and another file, and the
 command writes it."""
 import json
+import re
 import subprocess
 import sys
 
@@ -285,3 +286,31 @@ def test_the_framed_numpy_runtime_checks_a_file_against_its_header(tmp_path):
         ("order", set_spec("order", "dtype", lambda _: "float32"), None,
          r"order.json: array order is float32, expected int32"),
     ], tmp_path)
+
+
+def test_the_command_builds_for_the_loads_it_is_given_and_says_what_it_holds(tmp_path,
+                                                                            capsys):
+    """--drag and --cone declare what the model is fitted to and validated on (the header
+    records them); before the build one line says which vertices it holds and why."""
+    path = str(tmp_path / "beam")
+    main(["reduced", "box", "--cells", "10", "2", "2", "--modes", "4", "--snapshots", "4",
+          "--drag", "x-max", "0.3", "--drag", "x-max", "0.1", "0", "1", "0", "--cone", "10",
+          "-o", path])
+    err = capsys.readouterr().err
+    assert "holding 9 vertices at x-min (the shape's default" in err
+    assert "from the declared loads (2 drags, a 10 degree cone)" in err
+    header = json.load(open(path + ".json"))
+    assert header["loads"] == {"drags": [{"vertices": 9, "magnitude": 0.3, "directions": None},
+                                         {"vertices": 9, "magnitude": 0.1,
+                                          "directions": [[0.0, 1.0, 0.0]]}],
+                               "cone": 10.0, "carry": None}
+    assert header["validation"]["cases"] == 3
+    for flags, message in ((["--drag", "x-mid", "1"], "--drag: WHERE is AXIS-SIDE"),
+                           (["--drag", "x-max", "one"], "--drag x-max: N and DX DY DZ"),
+                           (["--drag", "x-max"], "--drag: WHERE N or WHERE N DX DY DZ"),
+                           (["--drag", "x-min", "1"], r"drags\[0\].vertices: every one"),
+                           (["--carry", "30", "0", "1"], "--carry: the framed model's")):
+        with pytest.raises(SystemExit) as exit_:
+            main(["reduced", "box", "--cells", "10", "2", "2", *flags, "-o", path])
+        assert exit_.value.code == 2
+        assert re.search(message, capsys.readouterr().err), flags

@@ -69,11 +69,25 @@ def write(model, path, title="", gravity=None, display=None):
               "build_seconds": model.build_seconds,
               "validation": (None if model.validation is None
                              else dataclasses.asdict(model.validation)),
+              "loads": declared(model.loads),
               "gravity": None if gravity is None else [float(g) for g in gravity],
               "material": {key: np.asarray(getattr(material, key)).tolist()
                            for key in ("young", "poisson", "density")}}
     write_arrays(path, arrays, header)
     return header
+
+
+def declared(loads):
+    """The loads a model was built and validated for (a Loads, or None: the scene's own), as
+    the header records them: each drag's vertex count, magnitude (N) and directions (None: any),
+    the gravity cone (degrees) and the carry (turn in degrees, move in m, seconds)."""
+    if loads is None:
+        return None
+    return {"drags": [{"vertices": len(d.vertices), "magnitude": d.magnitude,
+                       "directions": None if d.directions is None else
+                       [list(map(float, v)) for v in d.directions]} for d in loads.drags],
+            "cone": loads.cone,
+            "carry": None if loads.carry is None else dataclasses.asdict(loads.carry)}
 
 
 def _display_masses(scene, display):
@@ -155,6 +169,7 @@ def write_framed(model, path, title="", gravity=None, display=None):
               "build_seconds": model.build_seconds,
               "validation": (None if model.validation is None
                              else dataclasses.asdict(model.validation)),
+              "loads": declared(model.loads),
               "gravity": None if gravity is None else [float(g) for g in gravity],
               "material": {key: np.asarray(getattr(scene.material, key)).tolist()
                            for key in ("young", "poisson", "density")}}
