@@ -189,3 +189,46 @@ def test_the_trade_makes_the_folders_of_its_files(tmp_path):
     assert (tmp_path / "results" / "trade" / "box.json").exists()
     assert (tmp_path / "results" / "trade" / "box.png").exists()
     assert "machine" in json.loads((tmp_path / "results" / "trade" / "box.json").read_text())
+
+
+@pytest.mark.parametrize("package", ["anisofem", "export", "anisognn"])
+def test_warnings_print_as_one_line(package, tmp_path):
+    """`python -m PACKAGE`: a warning raised by a command is one line, "warning: MESSAGE",
+    not Python's file, line and source line (the command here warns before it runs)."""
+    command = {"anisofem": "anisofem.cli", "export": "export.cli", "anisognn": "anisognn.cli"}
+    code = (f"import runpy, sys, warnings; import {command[package]} as cli; "
+            f"main = cli.main; cli.main = lambda *a: (warnings.warn('a test'), main(*a))[1]; "
+            f"sys.argv = ['{package}', '--help']; runpy.run_module('{package}', "
+            f"run_name='__main__')")
+    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                          text=True)
+    assert done.stderr == "warning: a test\n", done.stderr
+
+
+def test_fit_and_design_name_what_is_wrong_in_their_input(tmp_path):
+    """A marker file that is empty, holds text where a number goes, bounds on a parameter not
+    fitted, a mesh file where a scene file goes, a region the mesh lacks: one line each."""
+    run("mesh", "box", "-o", "beam.msh", cwd=tmp_path)
+    (tmp_path / "beam.toml").write_text('mesh = "beam.msh"\n[[boundary]]\nwhere = "x-min"\n'
+                                        'held = true\n')
+    (tmp_path / "empty.csv").write_text("x,y,z,ux,uy,uz\n")
+    (tmp_path / "text.csv").write_text("x,y,z,ux,uy,uz\n0.1,0,0,0,0,-0.001\n0.1,0,0,0,0,abc\n")
+    (tmp_path / "ok.csv").write_text("0.1,0,0,0,0,-0.001\n")
+    cases = [
+        (["fit", "beam.toml", "--markers", "empty.csv", "--params", "young"],
+         "--markers: empty.csv holds no marker rows"),
+        (["fit", "beam.toml", "--markers", "text.csv", "--params", "young"],
+         "--markers: text.csv line 3: 'abc' is not a finite number"),
+        (["fit", "beam.toml", "--markers", "ok.csv", "--params", "young", "--bounds",
+          "kappa=0:1"], "bounds: 'kappa' is not fitted (fitted: young)"),
+        (["fit", "beam.msh", "--markers", "ok.csv", "--params", "young"],
+         "beam.msh: not text: a scene file is TOML text that names its mesh"),
+        (["design", "beam.toml", "--region", "nowhere", "--tip", "x-max", "--target", "0", "0",
+          "0"], "beam.toml: nowhere: the mesh has no physical volume 'nowhere'"),
+        (["trade", "box", "--tolerance", "-1"], "tolerance: a share of the static deflection"),
+    ]
+    for args, message in cases:
+        done = subprocess.run([sys.executable, "-m", "anisofem", *args], cwd=tmp_path,
+                              capture_output=True, text=True)
+        assert done.returncode == 2 and message in done.stderr, (args, done.stderr)
+        assert len(done.stderr.strip().splitlines()) == 1, done.stderr

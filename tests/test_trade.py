@@ -53,6 +53,9 @@ def test_rungs_must_start_with_exact_and_land_on_the_checked_times(beam):
         ladder.trade(scene, steps=15)
     with pytest.raises(TypeError, match="bogus: not an option"):
         ladder_rungs.fem_rung("x", bogus=1)
+    for tolerance in (-1, 0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="tolerance: a share of the static deflection"):
+            ladder.trade(scene, steps=10, tolerance=tolerance)
 
 
 def run(*args, cwd):

@@ -8,11 +8,17 @@ from .commands import bench_command, mesh_command, solve_command, trade_command
 from .inverse import design_command, fit_command
 from .parser import build_parser
 
-__all__ = ["main", "BAD_INPUT", "BODIES", "Parser", "add_scene_arguments", "body_of", "scene_of",
+__all__ = ["main", "one_line_warning", "BAD_INPUT", "BODIES", "Parser", "add_scene_arguments", "body_of", "scene_of",
            "build_parser"]
 
 #: What a command's bad input raises: each ends it with one line and exit status 2
 BAD_INPUT = (ValueError, TypeError, FileNotFoundError, ImportError)
+
+
+def one_line_warning(message, category, filename, lineno, line=None):
+    """warnings.formatwarning for the command line: "warning: MESSAGE", one line, not the
+    source line that raised it."""
+    return f"warning: {message}\n"
 
 
 def main(argv=None):

@@ -1,5 +1,6 @@
 """The inverse commands: `fit` (material parameters from measured markers) and `design`
 (a fiber layout for a target)."""
+import math
 import os
 
 import numpy as np
@@ -82,12 +83,14 @@ def design_command(args):
 
     def progress(k, J, g, angles):
         print(f"iteration {k}: J = {J:.4e}, |dJ/dangles| = {g:.3e}, angles "
-              + " ".join(f"{a:.2f}" for a in angles), flush=True)
+              + _listed(angles, "{:.2f}"), flush=True)
     result = design(scene_file.scene, helix, scene_file.vertices(args.tip), args.target, start,
                     (low, high), args.smooth, args.max_iter, progress)
     print(f"stopped after {result.iterations} iterations ({result.evaluations} solves, "
           f"{result.seconds:.1f} s): {result.message}")
-    print("angles (degrees): " + " ".join(f"{a:.3f}" for a in result.angles))
+    print("angles (degrees): " + _listed(result.angles, "{:.3f}")
+          + ("" if len(result.angles) <= SHOWN else f" (all {len(result.angles)} in the "
+             f"scene file{' ' + args.output if args.output else ' --output writes'})"))
     print(f"tip at {np.array2string(result.tip, precision=6)} m, "
           f"{1e3 * result.distance:.4g} mm from the target")
     if args.output:
@@ -104,18 +107,48 @@ def design_command(args):
     return 0 if result.converged else 1
 
 
+#: Numbers a progress line shows of a list, the first and the last ones where it is longer
+SHOWN = 8
+
+
+def _listed(values, form):
+    """values formatted and joined by spaces; past SHOWN, the first SHOWN - 2 and the last two
+    around "... (k more) ...", so that a line stays a line."""
+    text = [form.format(v) for v in values]
+    if len(text) > SHOWN:
+        text = text[:SHOWN - 2] + [f"... ({len(text) - SHOWN + 2} more) ..."] + text[-2:]
+    return " ".join(text)
+
+
 def _marker_table(path):
-    """(k, 6) rows of a marker CSV: x, y, z, ux, uy, uz in m (a header line skipped)."""
+    """(k, 6) rows of a marker CSV: x, y, z, ux, uy, uz in m, a header line allowed; ValueError
+    naming the file and the line of what is not six numbers."""
     if not os.path.isfile(path):
         raise FileNotFoundError(f"--markers: no such file {path!r}")
+    rows = []
+    with open(path, errors="replace") as f:
+        for k, line in enumerate(f, 1):
+            fields = [x.strip() for x in line.split(",")]
+            if not line.strip() or (k == 1 and not _numbers(fields)):
+                continue  # a blank line, or the header
+            if len(fields) != 6:
+                raise ValueError(f"--markers: {path} line {k}: {len(fields)} fields, expected "
+                                 f"x, y, z, ux, uy, uz")
+            if not _numbers(fields):
+                bad = next(x for x in fields if not _numbers([x]))
+                raise ValueError(f"--markers: {path} line {k}: {bad!r} is not a finite number")
+            rows.append([float(x) for x in fields])
+    if not rows:
+        raise ValueError(f"--markers: {path} holds no marker rows (x, y, z, ux, uy, uz in m)")
+    return np.array(rows)
+
+
+def _numbers(fields):
+    """Whether every field is a finite number."""
     try:
-        rows = np.loadtxt(path, delimiter=",", ndmin=2)
+        return all(math.isfinite(float(x)) for x in fields)
     except ValueError:
-        rows = np.loadtxt(path, delimiter=",", ndmin=2, skiprows=1)
-    if rows.shape[1] != 6 or rows.shape[0] == 0:
-        raise ValueError(f"--markers: {path} needs rows x, y, z, ux, uy, uz; got shape "
-                         f"{rows.shape}")
-    return rows
+        return False
 
 
 def _interval(text):
@@ -127,9 +160,9 @@ def _interval(text):
 
 def _assignment(text, flag, parse):
     name, sep, value = text.partition("=")
-    if not sep or name not in fitting.PARAMETERS:
+    if not sep or name.partition("@")[0] not in fitting.PARAMETERS:
         raise ValueError(f"{flag}: expected NAME=VALUE with NAME one of "
-                         f"{', '.join(fitting.PARAMETERS)}, got {text!r}")
+                         f"{', '.join(fitting.PARAMETERS)} (or NAME@REGION), got {text!r}")
     try:
         return name, parse(value)
     except ValueError as err:

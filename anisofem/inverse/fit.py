@@ -238,9 +238,11 @@ class _Layout:
                      "kappa": params["kappa"],
                      "fiber_azimuth": np.degrees(fiber_angles(params["fiber"])[:, 0]),
                      "fiber_elevation": np.degrees(fiber_angles(params["fiber"])[:, 1])}
-        for n in start:
-            if n not in names:
-                raise ValueError(f"start: {n!r} is not fitted (fitted: {', '.join(names)})")
+        for given, what in ((start, "start"), (bounds, "bounds")):
+            for n in given:
+                if n not in names:
+                    raise ValueError(f"{what}: {n!r} is not fitted (fitted: "
+                                     f"{', '.join(names)})")
         self.start = {n: float(start.get(n, self.base[self.kinds[n]][masks[n]].mean()))
                       for n in names}
         self.bounds = {}

@@ -55,8 +55,12 @@ class SceneFile:
         with open(self.path, "rb") as f:
             try:
                 self.table = tomllib.load(f)
-            except tomllib.TOMLDecodeError as err:
-                raise SceneFileError(f"{self.path}: not TOML ({err})") from None
+            except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+                why = ("not text" if isinstance(err, UnicodeDecodeError) else f"not TOML ({err})")
+                raise SceneFileError(f"{self.path}: {why}: a scene file is TOML text that names "
+                                     f"its mesh (mesh = \"part.msh\", docs/scenes.md); a mesh "
+                                     f"file goes there, or where a command takes a mesh") \
+                    from None
         self._reader = _Reader(self.path)
         self.scene = self._reader.scene(self.table)
 
@@ -67,6 +71,7 @@ class SceneFile:
         """(unit axis (3,), origin (3,) m, crossed, the winding angle in degrees: angle, or the
         mean of segments) of the helix fibers of a region (its own fiber key, else
         [material]'s); ValueError where they are not a helix."""
+        self.region(region)  # a name the mesh lacks: the error lists the ones it has
         for where in (self.table.get("regions", {}).get(region, {}),
                       self.table.get("material", {})):
             if "fiber" in where:

@@ -106,6 +106,10 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, progress=True, 
         raise ValueError(f"steps: must be >= 1, got {steps}")
     if not dt > 0:
         raise ValueError(f"dt: must be > 0 s, got {dt}")
+    tolerance = float(tolerance)
+    if not 0 < tolerance < math.inf:
+        raise ValueError(f"tolerance: a share of the static deflection > 0 (0.01: 1%), got "
+                         f"{tolerance}")
     notes = []
     if rungs is None:
         rungs = fem_rungs() + registered_rungs(scene, dt, notes)
