@@ -8,7 +8,8 @@ PID controller on the mean tip height; the target steps up 3 mm above the rest h
 and down 3 mm below it at t = 2 s, and the tip must stay within 0.3 mm of it from 1 s after
 each step on. Only export/runtime.py (numpy + onnxruntime) steps the
 model. Prints the tip error when each target is settled and the real-time factor (simulated
-over wall time), and draws the tip against the target in out/finger_control.png.
+over wall time), and draws the tip against the target in out/finger_control_VARIANT.png
+(VARIANT: the .onnx file's name, reduced or framed).
 
     python examples/finger_control.py [MODEL.onnx]   (default export/models/directional.onnx)
     python examples/finger_control.py reduced        (the finger's reduced model)
@@ -182,7 +183,8 @@ def main(which):
     ax.legend(loc="lower left")
     bx.plot(times, 1e3 * np.array(forces), color="tab:red")
     bx.set(xlabel="t (s)", ylabel="tip force (mN)")
-    save(fig, "finger_control.png")
+    variant = which if stepper else os.path.splitext(os.path.basename(which))[0]
+    save(fig, f"finger_control_{variant}.png")
 
 
 if __name__ == "__main__":

@@ -204,3 +204,15 @@ def test_bodies_measure_every_rung_against_the_finest_mesh_of_the_body():
     with pytest.raises(ValueError, match="bodies"):
         af.trade(scene, steps=10, rungs=[ladder_rungs.fem_rung("exact")], progress=False,
                  bodies=[("other", cantilever(af.box_beam(cells=(5, 2, 2))))])
+
+
+def test_the_table_marks_a_rung_that_inverts_elements_and_says_what_min_j_is(result):
+    """A rung whose elements turned inside out reads "!" beside its min J, "stable" or not;
+    the others read a space; a line under the table says what min J and the mark mean."""
+    rows = [dict(r) for r in result["rungs"]]
+    rows[1].update(inverted=3, min_volume_ratio=-0.82)
+    lines = trade_report.trade_table({**result, "rungs": rows}).splitlines()
+    marked = [line for line in lines if line.startswith(rows[1]["name"] + " ")]
+    assert len(marked) == 1 and " -0.82! " in marked[0]
+    assert not any("!" in line for line in lines if line.startswith(rows[0]["name"] + " "))
+    assert any(line.startswith("min J: the smallest volume ratio det F") for line in lines)

@@ -11,7 +11,7 @@ import { loadModel, loadScene, Simulation } from "./stepper.js";
 const params = new URLSearchParams(location.search);
 const ui = { scene: el("scene"), stepper: el("stepper"), angle: el("angle"), angleValue: el("angle-value"),
              carry: el("carry"), pause: el("pause"), reset: el("reset"), stats: el("stats"),
-             message: el("message") };
+             message: el("message"), scaleHigh: el("scale-high") };
 // spring constant of a drag, N/m per kg of the dragged vertices' mass (a 1 cm pull accelerates
 // them at about 5 g)
 const DRAG_STIFFNESS = 5000.0;
@@ -142,6 +142,7 @@ function updateBody() {
     position.setXYZ(i, x[3 * i], x[3 * i + 1], x[3 * i + 2]);
     color.setXYZ(i, 0.15 + 0.8 * d, 0.35 + 0.3 * (1 - Math.abs(2 * d - 1)), 0.85 - 0.7 * d);
   }
+  ui.scaleHigh.textContent = (1e3 * largest).toPrecision(2);
   position.needsUpdate = true;
   color.needsUpdate = true;
   state.body.geometry.computeVertexNormals();

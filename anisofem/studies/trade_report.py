@@ -13,7 +13,7 @@ def trade_table(result):
     body = "reference" in result
     vs_body = f"{'vs body':>9}" if body else ""
     head = (f"{'rung':<27} {'ms/step':>8} {'x exact':>8} {'tip error at t = ' + times + ' s':<36}"
-            f"{vs_body} {'its':>5} {'drift':>8} {'min J':>6} stable")
+            f"{vs_body} {'its':>5} {'drift':>8} {'min J':>7} stable")
     exact = result["rungs"][0]["ms_per_step"]
     lines = [head, "-" * len(head)]
     for r in result["rungs"]:
@@ -23,10 +23,15 @@ def trade_table(result):
         mark = "*" if r.get("busy_cores", 0.0) >= BUSY_CORES else " "
         lines.append(f"{r['name']:<27}{mark}{r['ms_per_step']:8.3g} {exact / r['ms_per_step']:8.2f} "
                      f"{errs:<36}{vs_body} {'' if its is None else f'{its:.1f}':>5} "
-                     f"{r['energy_drift']:8.1e} {r['min_volume_ratio']:6.2f} {r['stable']}")
+                     f"{r['energy_drift']:8.1e} {r['min_volume_ratio']:6.2f}"
+                     f"{'!' if r.get('inverted') else ' '} {r['stable']}")
     s = result["scene"]
     lines.append(f"{s['tets']} tets, {s['unknowns']} unknowns, dt = {s['dt']} s, {s['steps']} "
                  f"steps; errors relative to the static tip deflection {s['deflection']:.4g} m")
+    lines.append("min J: the smallest volume ratio det F of any element at any step (1: none "
+                 "compressed); ! marks a rung that turned elements inside out (det F <= 0): "
+                 "stable says no step failed and no energy was gained, not that the answer is "
+                 "physical")
     rec = result["recommended"]
     lines.append(f"cheapest stable rung within {result['tolerance']:g} at every checked time: "
                  f"{rec if rec else 'none'}")
