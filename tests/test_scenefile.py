@@ -290,6 +290,16 @@ def test_readme_scene_file_loads(tmp_path):
     shutil.copy(os.path.join(SCENES, "actuator.msh"), tmp_path / "actuator.msh")
     scene = af.load_scene(scene_file(tmp_path, block))
     assert scene.pressures[0].magnitude == 2.0e4 and scene.fixed_mask.any()
+    # the whole example (examples/actuator.py inflates it without turning an element inside
+    # out): the same materials, fibers, held vertices and cavity tet by tet
+    example = af.load_scene(os.path.join(SCENES, "actuator.toml"))
+    m = scene.mesh.n_tets
+    for key in ("young", "poisson", "density", "fiber_stiffness"):
+        assert np.array_equal(np.broadcast_to(getattr(scene.material, key), m),
+                              np.broadcast_to(getattr(example.material, key), m)), key
+    assert np.allclose(scene.material.fiber_direction, example.material.fiber_direction)
+    assert np.array_equal(scene.fixed_mask, example.fixed_mask)
+    assert np.array_equal(scene.pressures[0].nodes, example.pressures[0].nodes)
 
 
 def test_named_surfaces_hold_midside_nodes_on_quadratic_tets(tmp_path):
