@@ -102,7 +102,7 @@ def plot(result, path):
     finite = [r[error] for r in rows if 0 < r[error] < math.inf]
     floor = min(finite) / 10 if finite else 1e-6
     ceiling = max(finite) * 10 if finite else 1.0
-    fig, ax = plt.subplots(figsize=(10, 5.5))
+    fig, ax = plt.subplots(figsize=(10, max(5.5, 2.4 + 0.13 * len(rows))))
     ax.axhline(result["tolerance"], color="0.6", lw=0.8, ls="--")
     def y_of(r):
         return min(max(r[error], floor), ceiling)
@@ -149,13 +149,19 @@ def plot(result, path):
                        edgecolors="tab:green", linewidths=2, zorder=4,
                        label=f"recommended (within {result['tolerance']:g}"
                              f"{' of the body' if error != 'max_error' else ''})")
-    labels, top = _label_positions(ax, rows, y_of, xlim, ylim, reference)
+    # each rung marked by its number in the table's order, the numbers' key beside the legend
+    numbered = [dict(r, name=str(k)) for k, r in enumerate(rows, 1)]
+    labels, top = _label_positions(ax, numbered, y_of, xlim, ylim, reference=None)
     for _ in range(3):  # the axes grow to hold the highest label; the labels are placed anew
         if top <= ylim[1]:
             break
         ylim = (ylim[0], top)
         ax.set_ylim(*ylim)
-        labels, top = _label_positions(ax, rows, y_of, xlim, ylim, reference)
+        labels, top = _label_positions(ax, numbered, y_of, xlim, ylim, reference=None)
+    key = "\n".join(f"{k:>2}  {r['name']}" + (" (reference)" if r["name"] == reference else "")
+                    for k, r in enumerate(rows, 1))
+    ax.text(1.02, 0.0, key, transform=ax.transAxes, fontsize=7, va="bottom", ha="left",
+            family="monospace")
     for text, xy, xytext, moved in labels:
         ax.annotate(text, xy, xytext=xytext, fontsize=7.5, va="bottom",
                     arrowprops={"arrowstyle": "-", "color": "0.7", "lw": 0.5} if moved else None)
