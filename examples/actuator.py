@@ -81,8 +81,11 @@ def draw(scene, states, pressure, path, kind):
         ax.view_init(elev=8, azim=-35)
         ax.set_axis_off()
         bend, twist = tip_turn(scene, states[k])
-        ax.set_title(f"{SHARES[k - 1] * pressure / 1e3:.0f} kPa\nbent {bend:.0f} deg, "
-                     f"twisted {twist:.0f} deg", fontsize=9, y=0.98)
+        # the caption under the body's foot, where the view leaves room (above it, the tip
+        # bends into the caption)
+        ax.text2D(0.5, 0.03, f"{SHARES[k - 1] * pressure / 1e3:.0f} kPa\nbent {bend:.0f} deg, "
+                  f"twisted {twist:.0f} deg", transform=ax.transAxes, fontsize=9,
+                  ha="center", va="top")
     fig.subplots_adjust(left=0, right=0.9, bottom=0, top=0.88, wspace=0)
     fig.colorbar(plt.cm.ScalarMappable(norm, "viridis"), cax=fig.add_axes((0.91, 0.15, 0.012, 0.6)),
                  label="displacement (mm)")
