@@ -146,9 +146,9 @@ def _reduced(argv):
         scene = scene_of(args)
         loads = _declared_loads(args, scene)
         shown = None if args.display is None else read_mesh(args.display)
-        _say_what_is_built(args, scene, fixed, loads)
+        progress = _progress(_what_is_built(args, scene, fixed, loads))
         if args.framed:
-            return _framed(args, scene, shown, loads)
+            return _framed(args, scene, shown, loads, progress)
         if args.carry:
             raise ValueError("--carry: the framed model's held vertices move; add --framed")
         display = scene.mesh if args.body else shown
@@ -156,7 +156,8 @@ def _reduced(argv):
         if args.body and loads is not None:
             raise ValueError("--body: builds from the default declared loads; --drag and "
                              "--cone name the scene mesh's vertices")
-        model = ReducedModel(built, modes=args.modes, snapshots=args.snapshots, loads=loads)
+        model = ReducedModel(built, modes=args.modes, snapshots=args.snapshots, loads=loads,
+                             progress=progress)
         header = reduced.write(model, args.output, title=args.scene, gravity=scene.gravity,
                                display=display)
     except BAD_INPUT as err:
@@ -200,9 +201,24 @@ def _declared_loads(args, scene):
     return loads
 
 
-def _say_what_is_built(args, scene, fixed, loads):
-    """One line on stderr before the build: the mesh, the vertices it holds and why those,
-    what it builds and from which loads (a build of a few thousand tets takes a minute)."""
+def _progress(headline):
+    """progress(stage) for a model's build: the headline on stderr at the first stage, then
+    each stage with the seconds since (a build of a few thousand tets takes a minute)."""
+    import time
+    start = []
+
+    def progress(stage):
+        if not start:
+            start.append(time.perf_counter())
+            print(headline, file=sys.stderr, flush=True)
+        print(f"  [{time.perf_counter() - start[0]:5.1f} s] {stage}", file=sys.stderr,
+              flush=True)
+    return progress
+
+
+def _what_is_built(args, scene, fixed, loads):
+    """The line said before the build: the mesh, the vertices it holds and why those, what it
+    builds and from which loads."""
     from anisofem.cli.arguments import SHAPES, is_scene_file
     held = int(scene.fixed_mask.any(axis=1).sum())
     if is_scene_file(args.scene):
@@ -219,12 +235,11 @@ def _say_what_is_built(args, scene, fixed, loads):
                 f"cone{', a carry' if loads.carry else ''})" if loads else
                 "the default loads (half the body's weight at each free end)")
     fitted = args.framed or args.snapshots
-    print(f"{args.scene}: {scene.mesh.n_tets} tets, holding {held} vertices {where}; "
-          f"building {what}{' from ' + declared if fitted else ''}, then validating it "
-          f"against the full FEM ...", file=sys.stderr, flush=True)
+    return (f"{args.scene}: {scene.mesh.n_tets} tets, holding {held} vertices {where}; "
+            f"building {what}{' from ' + declared if fitted else ''}:")
 
 
-def _framed(args, scene, display, loads):
+def _framed(args, scene, display, loads, progress):
     """python -m export reduced --framed: the FramedModel of the scene, written (for the
     vertices of the TetMesh display, where given)."""
     from anisofem.reduced import FramedModel
@@ -233,7 +248,7 @@ def _framed(args, scene, display, loads):
     if args.body or args.snapshots:
         raise ValueError("--framed: builds on the scene's own mesh from its declared loads; "
                          "--body and --snapshots are the linear model's")
-    model = FramedModel(scene, modes=args.modes, loads=loads)
+    model = FramedModel(scene, modes=args.modes, loads=loads, progress=progress)
     header = reduced.write_framed(model, args.output, title=args.scene, gravity=scene.gravity,
                                   display=display)
     print(f"wrote {args.output}.json and .bin: {header['n']} vertices, {header['m']} tets, "

@@ -98,7 +98,7 @@ def test_fit_command(tmp_path):
     for bad, message in ((["--params", "kappa", "--start", "kapa=1"], "--start: expected"),
                          (["--params", "kapa"], "--params: 'kapa' is not a parameter"),
                          (["--params", "kappa", "--markers", "nan.csv"],
-                          r"measured[0]: contains NaN or inf (at index [[3, 1]])"),
+                          "--markers: nan.csv line 4: 'nan' is not a finite number"),
                          (["--params", "kappa", "--markers", "m.csv", "m.csv"],
                           "--markers: one CSV per scene")):
         r = subprocess.run(run[:7] + bad, cwd=tmp_path, capture_output=True,

@@ -291,7 +291,8 @@ def test_the_framed_numpy_runtime_checks_a_file_against_its_header(tmp_path):
 def test_the_command_builds_for_the_loads_it_is_given_and_says_what_it_holds(tmp_path,
                                                                             capsys):
     """--drag and --cone declare what the model is fitted to and validated on (the header
-    records them); before the build one line says which vertices it holds and why."""
+    records them); once the input is checked, one line says which vertices it holds and why,
+    then each stage of the build."""
     path = str(tmp_path / "beam")
     main(["reduced", "box", "--cells", "10", "2", "2", "--modes", "4", "--snapshots", "4",
           "--drag", "x-max", "0.3", "--drag", "x-max", "0.1", "0", "1", "0", "--cone", "10",
@@ -299,6 +300,11 @@ def test_the_command_builds_for_the_loads_it_is_given_and_says_what_it_holds(tmp
     err = capsys.readouterr().err
     assert "holding 9 vertices at x-min (the shape's default" in err
     assert "from the declared loads (2 drags, a 10 degree cone)" in err
+    stages = [line.split("] ", 1)[1] for line in err.splitlines() if line.startswith("  [")]
+    assert stages == ["the 4 lowest vibration modes",
+                      "the full FEM's static equilibria under the declared loads",
+                      "the energy's polynomial in r = 8 coordinates",
+                      "its validation against the full FEM"]
     header = json.load(open(path + ".json"))
     assert header["loads"] == {"drags": [{"vertices": 9, "magnitude": 0.3, "directions": None},
                                          {"vertices": 9, "magnitude": 0.1,

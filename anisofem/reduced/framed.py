@@ -106,6 +106,8 @@ class FramedModel:
         element. Kept only where it takes at most CUBATURE_SHARE of them.
     validate : run the validation (VALIDATION_CASES rollouts against the full FEM), of the
         model with its cubature.
+    progress : a callable(str) told each stage of the build as it starts, once the arguments
+        are checked (None: silent).
 
     Attributes: domains (list of Domain); labels (n,) each node's domain, -1 held; parent
     (D,) each domain's parent in the kinematic tree (-1: the held nodes); joint_nodes, the
@@ -118,7 +120,7 @@ class FramedModel:
     """
 
     def __init__(self, scene, bands=BANDS, coordinates=COORDINATES, modes=MODES, loads=None,
-                 cubature=CUBATURE_RESIDUAL, validate=True):
+                 cubature=CUBATURE_RESIDUAL, validate=True, progress=None):
         check_polynomial_scene(scene, "framed model")
         why = refusal(scene)
         if why:
@@ -139,12 +141,15 @@ class FramedModel:
             raise TypeError(f"loads: expected an anisofem.reduced.Loads, got "
                             f"{type(loads).__name__}")
         loads.check(scene)
+        say = progress or (lambda stage: None)
         t0 = time.perf_counter()
         self.scene, self.loads = scene, loads
         self.x0 = scene.initial_positions()
         self.labels, count = split(scene, bands)
         self.parent, pivots, self._order = tree(scene, self.labels)
+        say(f"the full FEM's static equilibria under the declared loads ({count} domains)")
         states, self.snapshots = static_states(scene, loads)
+        say("each domain's basis and polynomial")
         modes = rest_modes(scene, self.x0, modes)
         inner, joints = self._cut()
         self.domains, z, q = [], 0, 0
@@ -160,9 +165,13 @@ class FramedModel:
         self.size = float(np.ptp(self.x0, axis=0).max())
         self._set_joints(joints)
         self._own = self._project(scene.external_force)
+        if cubature > 0:
+            say("a cubature of the joints, fitted to the model's own rollouts")
         self.cubature = self._fit_joints(joints, cubature) if cubature > 0 else None
         credit = max(self.snapshots.seconds - (time.perf_counter() - t0), 0.0)
         self.build_seconds = time.perf_counter() - t0 + credit
+        if validate:
+            say("its validation against the full FEM")
         self.validation = self.validate() if validate else None
 
     def _cut(self):

@@ -104,6 +104,8 @@ class ReducedModel:
     validate : check the model against the full FEM on cases it was not built from
         (validation: the static equilibrium under the scene's loads, or with declared loads
         VALIDATION_CASES short rollouts under unseen loads drawn from them).
+    progress : a callable(str) told each stage of the build as it starts, once the arguments
+        are checked (None: silent).
 
     Attributes: basis (3n, r) over all vertex components (0 on fixed ones) in m per unit of q,
     with basis^T M basis = I; frequencies (m,) of the vibration modes, Hz; polynomial (the
@@ -114,7 +116,7 @@ class ReducedModel:
     """
 
     def __init__(self, scene, modes=MODES, derivatives=None, snapshots=0, loads=None,
-                 validate=True):
+                 validate=True, progress=None):
         check_polynomial_scene(scene, "reduced model")
         scene.check_static()
         modes = _count(modes, "modes", 1)
@@ -134,6 +136,9 @@ class ReducedModel:
                 raise ValueError("carry: the linear reduced model holds its held vertices in "
                                  "place; FramedModel carries them (its step's base)")
         _check_memory(scene, modes, derivatives, snapshots)
+        say = progress or (lambda stage: None)
+        say(f"the {modes} lowest vibration modes"
+            + (" and their modal derivatives" if derivatives else ""))
         t0 = time.perf_counter()
         self.scene, self.loads, self.snapshots, self.fitted = scene, loads, None, 0
         self.x0 = scene.initial_positions()
@@ -152,15 +157,19 @@ class ReducedModel:
         U = _basis.mass_orthonormal(np.hstack(columns), mass)
         credit = 0.0  # the static solves' time where another model of this scene ran them
         if snapshots:
+            say("the full FEM's static equilibria under the declared loads")
             t1 = time.perf_counter()
             U = self._fit(U, snapshots, mass)
             credit = max(self.snapshots.seconds - (time.perf_counter() - t1), 0.0)
         self.basis = np.zeros((3 * scene.mesh.n_vertices, U.shape[1]))
         self.basis[free] = U
+        say(f"the energy's polynomial in r = {U.shape[1]} coordinates")
         self.polynomial = with_pressure(polynomial(scene.elements, self.x0, self.basis),
                                         scene.pressures, self.x0, self.basis)
         self.external = self.project(scene.external_force)
         self.build_seconds = time.perf_counter() - t0 + credit
+        if validate:
+            say("its validation against the full FEM")
         self.validation = self.validate() if validate else None
 
     def _fit(self, U, count, mass):

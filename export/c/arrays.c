@@ -19,46 +19,40 @@ void af_say(char *error, size_t size, const char *fmt, ...) {
 
 static int blank(char c) { return c == ' ' || c == '\n' || c == '\r' || c == '\t'; }
 
+/* At p, an opening quote: the text after `"key":` where the string there is that key, else
+ * NULL (k: the key's length). */
+static const char *after_key(const char *p, const char *key, size_t k) {
+    const char *c;
+    if (strncmp(p + 1, key, k) != 0 || p[k + 1] != '"') return NULL;
+    for (c = p + k + 2; blank(*c); c++) continue;
+    if (*c != ':') return NULL;
+    for (c++; blank(*c); c++) continue;
+    return c;
+}
+
+/* At p, an opening quote: its closing quote (escapes skipped), or the terminator. */
+static const char *string_end(const char *p) {
+    for (p++; *p && *p != '"'; p++)
+        if (*p == '\\' && p[1]) p++;
+    return p;
+}
+
 const char *af_value_of(const char *start, const char *key) {
     size_t k = strlen(key);
-    const char *p = start;
-    while ((p = strchr(p, '"')) != NULL) {
-        if (strncmp(p + 1, key, k) == 0 && p[k + 1] == '"') {
-            const char *c = p + k + 2;
-            while (blank(*c)) c++;
-            if (*c == ':') {
-                c++;
-                while (blank(*c)) c++;
-                return c;
-            }
-        }
-        p++;
-    }
+    const char *p, *v;
+    for (p = start; (p = strchr(p, '"')) != NULL; p++)
+        if ((v = after_key(p, key, k)) != NULL) return v;
     return NULL;
 }
 
 const char *af_top_value(const char *json, const char *key) {
     size_t k = strlen(key);
     long depth = 0;
-    int in_string = 0;
-    const char *p;
+    const char *p, *v;
     for (p = json; *p; p++) {
-        if (in_string) {
-            if (*p == '\\' && p[1]) p++;
-            else if (*p == '"') in_string = 0;
-            continue;
-        }
         if (*p == '"') {
-            if (depth == 1 && strncmp(p + 1, key, k) == 0 && p[k + 1] == '"') {
-                const char *c = p + k + 2;
-                while (blank(*c)) c++;
-                if (*c == ':') {
-                    c++;
-                    while (blank(*c)) c++;
-                    return c;
-                }
-            }
-            in_string = 1;
+            if (depth == 1 && (v = after_key(p, key, k)) != NULL) return v;
+            if (!*(p = string_end(p))) return NULL;
         } else if (*p == '{' || *p == '[') {
             depth++;
         } else if (*p == '}' || *p == ']') {
@@ -66,6 +60,25 @@ const char *af_top_value(const char *json, const char *key) {
         }
     }
     return NULL;
+}
+
+int af_complete_json(const char *text) {
+    long depth = 0;
+    const char *p;
+    for (p = text; *p; p++) {
+        if (*p == '"') {
+            if (!*(p = string_end(p))) return 0;
+        } else if (*p == '{' || *p == '[') {
+            depth++;
+        } else if (*p == '}' || *p == ']') {
+            if (--depth < 0) return 0;
+            if (depth == 0) {
+                for (p++; blank(*p); p++) continue;
+                return *p == '\0';
+            }
+        }
+    }
+    return 0;
 }
 
 int af_string_value(const char *v, char *out, size_t size) {

@@ -22,31 +22,6 @@ struct af_model {
     char error[ERROR_SIZE];
 };
 
-/* Whether text (NUL-terminated) is one complete JSON value: brackets balanced outside
- * strings, nothing but blanks after it. */
-int af_complete_json(const char *text) {
-    long depth = 0;
-    int in_string = 0, seen = 0;
-    const char *p;
-    for (p = text; *p; p++) {
-        if (in_string) {
-            if (*p == '\\' && p[1]) p++;
-            else if (*p == '"') in_string = 0;
-            continue;
-        }
-        if (*p == '"') in_string = 1;
-        else if (*p == '{' || *p == '[') depth++, seen = 1;
-        else if (*p == '}' || *p == ']') {
-            if (--depth < 0) return 0;
-            if (depth == 0) {
-                for (p++; *p == ' ' || *p == '\n' || *p == '\r' || *p == '\t'; p++) continue;
-                return *p == '\0';
-            }
-        }
-    }
-    return seen && depth == 0 && !in_string;
-}
-
 void af_free(af_model *m) {
     if (!m) return;
     af_reduced_close(m->reduced);
