@@ -452,3 +452,9 @@ def test_a_csharp_program_steps_a_model_through_the_shared_library(built, tmp_pa
         q, w = py.step(q, w, gravity, 0.02)
         expected.append(py.positions(q)[:, 2].min())
     assert np.abs(np.array(done.stdout.split(), dtype=float) - expected).max() < 1e-12
+
+
+def test_without_a_c_compiler_the_build_says_what_to_do_instead(tmp_path, monkeypatch):
+    monkeypatch.setattr(native.shutil, "which", lambda name: None)
+    with pytest.raises(RuntimeError, match="needs a C compiler .* the numpy runtimes"):
+        native.build(str(tmp_path / "nowhere"))
