@@ -1,11 +1,15 @@
 """The command line: generate a mesh, solve it, read the result back."""
 import json
+import os
+import shutil
 import subprocess
 import sys
 
 import meshio
 import numpy as np
 import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def run(*args, cwd):
@@ -232,3 +236,15 @@ def test_fit_and_design_name_what_is_wrong_in_their_input(tmp_path):
                               capture_output=True, text=True)
         assert done.returncode == 2 and message in done.stderr, (args, done.stderr)
         assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
+def test_a_static_solve_that_fails_writes_nothing(tmp_path):
+    """A pressure of 1e30 Pa in the actuator's cavity, no continuation: the solve fails, says
+    so, exits 1 and leaves no file that would look like an answer."""
+    scenes = os.path.join(ROOT, "examples", "scenes")
+    shutil.copy(os.path.join(scenes, "actuator.msh"), tmp_path)
+    with open(os.path.join(scenes, "actuator.toml")) as f:
+        (tmp_path / "p.toml").write_text(f.read().replace("pressure = 2.0e4", "pressure = 1e30"))
+    r = run("solve", "p.toml", "--continuation", "never", "-o", "p.vtu", cwd=tmp_path)
+    assert r.returncode == 1 and "converged: False" in r.stdout
+    assert "nothing written to p.vtu" in r.stdout and not (tmp_path / "p.vtu").exists()

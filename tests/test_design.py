@@ -2,6 +2,7 @@
 that bring its tip to where a known layout brings it, from a uniform start; the command; the
 refusals."""
 import os
+import re
 import subprocess
 import sys
 
@@ -72,3 +73,18 @@ def test_design_refusals():
                        text=True, cwd=ROOT)
     assert r.returncode == 2 and "are not a helix" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_more_segments_than_the_mesh_resolves_are_refused():
+    """1,000 segments along an actuator of about 48 element layers: most would hold no element
+    (their angles change nothing, and the optimizer would run to its limit): refused, naming
+    how many the mesh resolves; that many pass."""
+    scene, helix, tip = actuator()
+    helix.count = 1000
+    with pytest.raises(ValueError, match=r"segments: \d+ of the 1000 segments .* hold no "
+                                         r"element.*at most (\d+)") as err:
+        design(scene, helix, tip, np.zeros(3), 75.0)
+    fits = int(re.search(r"at most (\d+)", str(err.value)).group(1))
+    assert 10 < fits < 1000
+    helix.count = fits
+    design(scene, helix, tip, np.zeros(3), 75.0, max_iter=1)

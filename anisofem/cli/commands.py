@@ -101,13 +101,17 @@ def solve_command(args):
     if not inv.physical:
         print(f"not physical: {inv.inverted} of {mesh.n_tets} elements turned inside out "
               f"(smallest det F {inv.min_volume_ratio:.3g}; the 'inverted' field marks them)")
+    if not ok and states is None:
+        print(f"nothing written to {args.output}: the static solve did not converge, and its "
+              f"last iterate is no answer")
+        return 1
     if series:
         if states is None:
             states, times = [scene.initial_positions(), x], [0.0, 1.0]
         write_series(args.output, mesh, states, times, scene)
     else:
         write_mesh(args.output, mesh, x, scene)
-    print(f"-> {args.output}")
+    print(f"-> {args.output}{'' if ok else ' (the states up to where it failed)'}")
     return 0 if ok else 1
 
 

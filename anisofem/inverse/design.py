@@ -99,6 +99,12 @@ class _Problem:
         s, self.around = helix_frame(scene.mesh.vertices[el_tets].mean(axis=1), helix.axis,
                                      helix.origin)
         self.segment = segments(s, helix.count)
+        empty = helix.count - np.unique(self.segment).size
+        if empty:
+            fits = max(k for k in range(1, helix.count) if np.unique(segments(s, k)).size == k)
+            raise ValueError(f"segments: {empty} of the {helix.count} segments along the "
+                             f"region's axis hold no element, so their angles change nothing; "
+                             f"this mesh resolves at most {fits}")
         self.length = scene.mesh.size
         self.state = scene.initial_positions()
         self.evaluations, self.last_gradient = 0, np.zeros(helix.count)
