@@ -16,7 +16,8 @@ from .studies.trade import trade
 from .studies.trade_report import trade_table
 from .physics.material import Material
 from .physics.mesh import TetMesh
-from .physics.meshgen import (actuator, box_beam, cylinder_beam, hexes_to_tets, t_shape, tube, y_shape)
+from .physics.meshgen import (actuator, box_beam, cylinder_beam, hexes_to_tets, t_shape, tube,
+                              y_shape)
 from .solvers.newton import ConvergenceWarning, InversionWarning, NewtonResult
 from .physics.potential import element_energy, energy, gradient, hessian
 from .physics.pressure import Pressure

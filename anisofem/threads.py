@@ -9,8 +9,8 @@ cores beside 2 busy processes, a 12,800-tet multigrid step 4-7x slower than idle
 and 2.5-3x on one, a 200-tet one up to 300x (docs/fem.md, "On a busy machine").
 
 So before parallel work (`parallel_threads()`, called by anisofem.physics.kernels and
-anisofem.physics.sparse), at most every SAMPLE_SECONDS, the library reads from /proc/stat how much CPU
-time the cores this process may run on gave to other processes since the last look, and sets
+anisofem.physics.sparse), at most every SAMPLE_SECONDS, the library reads from /proc/stat how much
+CPU time the cores this process may run on gave to other processes since the last look, and sets
 numba's thread count (numba.set_num_threads, for the calling thread) to the cores the others
 left free, rounded, at least 1. An idle machine keeps every thread. Where the user chose
 (NUMBA_NUM_THREADS or OMP_NUM_THREADS in the environment when anisofem was imported, or

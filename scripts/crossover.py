@@ -45,8 +45,8 @@ def scene_of(refinement):
     mesh = anisofem.box_beam(size=(0.1, 0.02, 0.02), cells=(10 * refinement, 2 * refinement,
                                                              2 * refinement))
     material = anisofem.Material(1e5, 0.48, 1000.0, FIBER, 1e5)
-    return anisofem.Scene(mesh, material, fixed=anisofem.physics.metrics.end_vertices(mesh, 0, "min"),
-                          gravity=(0, 0, -9.81))
+    return anisofem.Scene(mesh, material, fixed=anisofem.physics.metrics.end_vertices(mesh, 0,
+                          "min"), gravity=(0, 0, -9.81))
 
 
 def timed_steps(advance, x):

@@ -27,8 +27,8 @@ SCENES = {"200": ((10, 2, 2), 20), "12800": ((40, 8, 8), 5)}
 
 def worker(tree, scene_name, names):
     """Time the rungs of the anisofem in `tree` on one scene: {rung: ms per step}. It builds
-    the trade cantilever itself (as anisofem.studies.bench_load does) from the API every version has:
-    an older tree may have no bench_load to import."""
+    the trade cantilever itself (as anisofem.studies.bench_load does) from the API every version
+    has: an older tree may have no bench_load to import."""
     sys.path.insert(0, tree)
     import anisofem as af
     from anisofem.studies import rungs as ladder_rungs

@@ -1,5 +1,5 @@
-"""Identification (anisofem.inverse.fit) on data its own mesh did not make: markers from full solves of
-a finer quadratic mesh at a true fiber angle and stiffness, 1% noise, a start 30 degrees and 3x
+"""Identification (anisofem.inverse.fit) on data its own mesh did not make: markers from full solves
+of a finer quadratic mesh at a true fiber angle and stiffness, 1% noise, a start 30 degrees and 3x
 away; and the refusals."""
 import os
 import sys

@@ -270,7 +270,8 @@ def test_trade_rung_and_where_it_is_left_out():
     it out with a note, the other reduced rungs kept."""
     scene = t_scene()
     result = af.trade(scene, steps=10, progress=False,
-                      rungs=af.studies.rungs.fem_rungs()[:1] + [af.studies.rungs.framed_rung(4, 12)])
+                      rungs=af.studies.rungs.fem_rungs()[:1]
+                      + [af.studies.rungs.framed_rung(4, 12)])
     row = result["rungs"][1]
     assert row["name"] == "reduced framed b4 c12" and row["kind"] == "reduced"
     assert row["stable"] and row["max_error"] < 0.01
@@ -280,7 +281,8 @@ def test_trade_rung_and_where_it_is_left_out():
     roller[mesh.vertices[:, 2] > 0.08 - 1e-9, 0] = True
     notes = []
     rungs = [af.studies.rungs.framed_rung(4, 12), af.studies.rungs.reduced_rung(4, 16)]
-    kept = af.studies.rungs.representable(rungs, af.Scene(mesh, scene.material, fixed=roller), notes)
+    kept = af.studies.rungs.representable(rungs, af.Scene(mesh, scene.material, fixed=roller),
+                                          notes)
     assert [r.name for r in kept] == ["reduced m4 s16"]
     partial = int((roller.any(axis=1) & ~roller.all(axis=1)).sum())
     assert partial == 33 and notes == [

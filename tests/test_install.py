@@ -49,7 +49,8 @@ for module in (anisofem, anisognn, export):
 anisognn.pretrained("directional")
 mesh = anisofem.box_beam(cells=(4, 2, 2))
 scene = anisofem.Scene(mesh, anisofem.Material.paper((1, 0, 0), 1e5),
-                       fixed=anisofem.physics.metrics.end_vertices(mesh, 0, "min"), gravity=(0, 0, -9.81))
+                       fixed=anisofem.physics.metrics.end_vertices(mesh, 0, "min"),
+                       gravity=(0, 0, -9.81))
 notes = []
 rungs = anisofem.studies.rungs.registered_rungs(scene, 0.02, notes)
 result = anisofem.trade(scene, steps=10, rungs=[anisofem.studies.rungs.fem_rung("exact")] + rungs,

@@ -189,6 +189,7 @@ def test_trade_on_a_pressure_scene():
                       rungs=af.studies.rungs.fem_rungs()[:1] + [af.studies.rungs.reduced_rung(4)])
     assert [r["name"] for r in result["rungs"]][1:] == ["reduced m4"]
     notes = []
-    kept = af.studies.rungs.representable([af.studies.rungs.Rung("net", "surrogate", None)], scene, notes)
+    kept = af.studies.rungs.representable([af.studies.rungs.Rung("net", "surrogate", None)],
+                                          scene, notes)
     assert kept == [] and notes == ["surrogate rungs not run: the surrogates take nodal "
                                     "forces, not pressure"]

@@ -184,7 +184,8 @@ def test_failure_is_reported_not_hidden(model):
 
 def test_trade_lists_reduced_rungs_beside_the_exact_one():
     scene = cantilever()
-    result = af.trade(scene, steps=10, rungs=[ladder_rungs.fem_rung("exact"), ladder_rungs.reduced_rung(5)],
+    result = af.trade(scene, steps=10, rungs=[ladder_rungs.fem_rung("exact"),
+                                              ladder_rungs.reduced_rung(5)],
                       progress=False)
     row = result["rungs"][1]
     assert row["name"] == "reduced m5" and row["kind"] == "reduced" and row["stable"]
@@ -193,7 +194,8 @@ def test_trade_lists_reduced_rungs_beside_the_exact_one():
 
 def test_trade_leaves_reduced_rungs_out_of_neo_hookean_scenes():
     scene = cantilever(model="neohookean")
-    result = af.trade(scene, steps=2, rungs=[ladder_rungs.fem_rung("exact"), ladder_rungs.reduced_rung(4)],
+    result = af.trade(scene, steps=2, rungs=[ladder_rungs.fem_rung("exact"),
+                                             ladder_rungs.reduced_rung(4)],
                       progress=False)
     assert [r["name"] for r in result["rungs"]] == ["exact"]
     assert any("StVK" in note for note in result["notes"])

@@ -134,7 +134,8 @@ def test_surrogates_are_not_scored_against_an_inverted_or_foreign_reference():
 
     still = ladder_rungs.Rung("still", "surrogate",
                         lambda scene, dt: lambda x, v: (x, v, {"failed": False}))
-    rungs = [ladder_rungs.fem_rung("exact"), ladder_rungs.fem_rung("newton x1", iterations=1), still]
+    rungs = [ladder_rungs.fem_rung("exact"), ladder_rungs.fem_rung("newton x1", iterations=1),
+             still]
     stvk = ladder.trade(scene("stvk"), steps=10, rungs=list(rungs), progress=False)
     assert [r["name"] for r in stvk["rungs"]] == ["exact", "newton x1"]
     assert stvk["rungs"][0]["inverted"] > 0

@@ -11,7 +11,8 @@ async function module(url) {
   if (!runtime) {
     const response = await fetch(url);
     if (!response.ok) {
-      throw new Error(`runtime: ${url} not found (${response.status}); run \`make web\` to build it`);
+      throw new Error(`runtime: ${url} not found (${response.status}); ` +
+                      "run `make web` to build it");
     }
     const { instance } = await WebAssembly.instantiate(await response.arrayBuffer(), {});
     instance.exports._initialize();
@@ -68,7 +69,8 @@ export class ModelSimulation {
     const error = runtime.malloc(ERROR_SIZE);
     this.model = runtime.af_load_memory(text, header.length, bin, this.scene.buffer.byteLength,
                                         tag, error, ERROR_SIZE);
-    const message = this.model ? "" : cString(error).replace(/^the header/, `${this.scene.url}.json`);
+    const message = this.model ? ""
+      : cString(error).replace(/^the header/, `${this.scene.url}.json`);
     for (const ptr of [text, bin, tag, error]) runtime.free(ptr);
     if (!this.model) throw new Error(`reduced model: ${message}`);
     this.fiberAngle = angle;
@@ -79,7 +81,9 @@ export class ModelSimulation {
                      base: runtime.malloc(96), x: runtime.malloc(24 * this.n) };
     const masses = doubles(runtime.af_masses(this.model), this.n);
     const gravity = doubles(this.buffers.force, 3 * this.n);
-    for (let i = 0; i < 3 * this.n; i++) gravity[i] = masses[i / 3 | 0] * this.header.gravity[i % 3];
+    for (let i = 0; i < 3 * this.n; i++) {
+      gravity[i] = masses[Math.floor(i / 3)] * this.header.gravity[i % 3];
+    }
     this.check(runtime.af_set_constant_force(this.model, this.buffers.force), "gravity");
     this.x = new Float64Array(3 * this.n);
     this.reset();

@@ -1,15 +1,13 @@
 """The command line, `python -m anisofem {mesh,solve,trade,fit,design,bench}`: the shared
 arguments (`arguments`), the parser (`parser`, whose text is the usage), the forward commands
 (`commands`) and the inverse ones (`inverse`)."""
-import sys
-
 from .arguments import BODIES, Parser, add_scene_arguments, body_of, scene_of
 from .commands import bench_command, mesh_command, solve_command, trade_command
 from .inverse import design_command, fit_command
 from .parser import build_parser
 
-__all__ = ["main", "one_line_warning", "BAD_INPUT", "BODIES", "Parser", "add_scene_arguments", "body_of", "scene_of",
-           "build_parser"]
+__all__ = ["main", "one_line_warning", "BAD_INPUT", "BODIES", "Parser", "add_scene_arguments",
+           "body_of", "scene_of", "build_parser"]
 
 #: What a command's bad input raises: each ends it with one line and exit status 2
 BAD_INPUT = (ValueError, TypeError, FileNotFoundError, ImportError)
@@ -34,7 +32,3 @@ def main(argv=None):
 
 COMMANDS = {"mesh": mesh_command, "solve": solve_command, "trade": trade_command,
             "bench": bench_command, "fit": fit_command, "design": design_command}
-
-
-if __name__ == "__main__":
-    sys.exit(main())

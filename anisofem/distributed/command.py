@@ -13,7 +13,8 @@ from .output import write_xdmf
 
 def method_of(name, n_free):
     """The distributed method for the CLI's --method name ("auto": exact Newton up to
-    anisofem.solvers.methods.AUTO_MULTIGRID_MIN unknowns, CG + multigrid above, as the serial default)."""
+    anisofem.solvers.methods.AUTO_MULTIGRID_MIN unknowns, CG + multigrid above, as the serial
+    default)."""
     if name == "auto":
         return "newton" if n_free < methods.AUTO_MULTIGRID_MIN else "cg"
     if name not in ("newton", "cg"):

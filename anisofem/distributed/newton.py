@@ -245,8 +245,8 @@ class _Turned:
 
 def _line_search(system, x, energy, g, gnorm, p):
     """Backtracking to the Armijo condition on G from x along p (spread already), the serial
-    loop's rules (anisofem.solvers.newton): a trial with G = +inf or NaN is rejected, and a trial whose
-    energy change is round-off is taken where the gradient norm falls to NOISE_PROGRESS of its
+    loop's rules (anisofem.solvers.newton): a trial with G = +inf or NaN is rejected, and a trial
+    whose energy change is round-off is taken where the gradient norm falls to NOISE_PROGRESS of its
     value. Returns (x_new, G, gradient, its norm, step length t), or None below MIN_STEP."""
     slope = p.dot(g)
     t = 1.0

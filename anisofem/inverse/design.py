@@ -8,8 +8,8 @@ design minimizes
 
 L the mesh's size (its bounding box diagonal), alpha in radians, by L-BFGS-B within bounds
 (anisofem.inverse.lbfgsb); each evaluation is one static solve (warm-started from the last) and its
-gradient one adjoint solve (anisofem.inverse.sensitivity), chained from each tet's fiber direction to
-its segment's angle: dd/dalpha = -sin(alpha) a + cos(alpha) e_t.
+gradient one adjoint solve (anisofem.inverse.sensitivity), chained from each tet's fiber direction
+to its segment's angle: dd/dalpha = -sin(alpha) a + cos(alpha) e_t.
 """
 import math
 import time

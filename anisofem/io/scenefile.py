@@ -228,8 +228,8 @@ class _Reader:
         return d / norms[:, None]
 
     def helix(self, spec, tets, key):
-        """Fibers wound about an axis (anisofem.physics.fibers): the winding angle linear from angle to
-        angle_end along the axis over the tets, or constant in each of equal segments."""
+        """Fibers wound about an axis (anisofem.physics.fibers): the winding angle linear from angle
+        to angle_end along the axis over the tets, or constant in each of equal segments."""
         if "segments" in spec:
             if "angle" in spec or "angle_end" in spec:
                 raise self.error(key, "give segments, or angle (and angle_end), not both")

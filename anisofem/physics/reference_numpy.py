@@ -10,8 +10,8 @@ from .potential import Potential
 def _deformation(scene, x):
     el = scene.elements
     if scene.neohookean.any():
-        raise ValueError("scene: anisofem.physics.reference_numpy implements the StVK base material "
-                         "only, and this scene has Neo-Hookean elements")
+        raise ValueError("scene: anisofem.physics.reference_numpy implements the StVK base "
+                         "material only, and this scene has Neo-Hookean elements")
     F = np.einsum("eai,eaj->eij", x[el.tets], scene.mesh.shape_gradients)
     C = np.einsum("eki,ekj->eij", F, F)
     E = 0.5 * (C - np.eye(3))

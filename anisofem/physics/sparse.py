@@ -1,8 +1,8 @@
 """Sparse matrix-vector products on numba's threads, the block size compiled in: the
-operations of the "cg" method's iterations and of its multigrid V-cycle (anisofem.solvers.multigrid).
-scipy's products run on one core. A matrix with fewer than PARALLEL_MIN_ENTRIES stored entries
-is multiplied on the calling thread alone (a coarse multigrid level, a small mesh), a larger one
-on anisofem.threads.parallel_threads()."""
+operations of the "cg" method's iterations and of its multigrid V-cycle
+(anisofem.solvers.multigrid). scipy's products run on one core. A matrix with fewer than
+PARALLEL_MIN_ENTRIES stored entries is multiplied on the calling thread alone (a coarse multigrid
+level, a small mesh), a larger one on anisofem.threads.parallel_threads()."""
 import functools
 
 import numba as nb

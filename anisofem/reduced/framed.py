@@ -46,7 +46,8 @@ from . import framed_kernels as fk
 from .domains import split, tree
 from .framed_build import block_map, build_domain, rest_modes
 from .loads import Loads, default_loads, unseen_cases
-from .model import (HOLD_STEPS, REDRAWS, VALIDATION_CASES, VALIDATION_DT, NewtonReport, _count, check_polynomial_scene, validate_rollouts)
+from .model import (HOLD_STEPS, REDRAWS, VALIDATION_CASES, VALIDATION_DT, NewtonReport, _count,
+                    check_polynomial_scene, validate_rollouts)
 from .snapshots import static_states
 
 #: Default number of bands the body is cut into from its held nodes (each band's connected

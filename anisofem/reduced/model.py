@@ -163,7 +163,9 @@ class ReducedModel:
             credit = max(self.snapshots.seconds - (time.perf_counter() - t1), 0.0)
         self.basis = np.zeros((3 * scene.mesh.n_vertices, U.shape[1]))
         self.basis[free] = U
-        say(f"the energy's polynomial in r = {U.shape[1]} coordinates")
+        need = build_bytes(U.shape[1], scene.elements.weights.size)
+        say(f"the energy's polynomial in r = {U.shape[1]} coordinates (about "
+            f"{need / 2 ** 30:.2g} GiB at its peak; its quartic grows as r^4)")
         self.polynomial = with_pressure(polynomial(scene.elements, self.x0, self.basis),
                                         scene.pressures, self.x0, self.basis)
         self.external = self.project(scene.external_force)

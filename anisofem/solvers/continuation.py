@@ -35,8 +35,8 @@ def worth_ramping(potential, result):
 
 
 def ramp(potential, x0, method, spent=()):
-    """The minimizer of potential (an anisofem.physics.potential.Potential) by load continuation from
-    x0 (n, 3), m: each increment minimizes potential.loaded(share); x0's fixed components
+    """The minimizer of potential (an anisofem.physics.potential.Potential) by load continuation
+    from x0 (n, 3), m: each increment minimizes potential.loaded(share); x0's fixed components
     are set by each increment's scene. method: an anisofem.solvers.methods.Method
     that iterates to its tolerance. spent: NewtonResults of earlier attempts, whose
     iterations, counts and seconds the result includes.

@@ -1,7 +1,7 @@
 """The ways to minimize a step's (or a static scene's) potential G, from exact to fast.
 
-Every method is a source of search directions inside one loop (anisofem.solvers.newton.minimize): the
-loop tests convergence, asks the method for directions and runs the backtracking line search
+Every method is a source of search directions inside one loop (anisofem.solvers.newton.minimize):
+the loop tests convergence, asks the method for directions and runs the backtracking line search
 on G, so every method descends G, stops when the free-gradient norm meets the tolerance, and
 reports failure instead of returning NaN. The methods differ in what a direction costs:
 

@@ -15,8 +15,8 @@ saying why.
 Newton's Hessian choice (`projection`, see anisofem.solvers.methods.Newton): "adaptive" (default)
 first tries the true Hessian; it is used when it is positive definite (the Cholesky-type
 factorization succeeds) and its step makes progress in the line search; otherwise the
-iteration uses the PSD-projected Hessian (see anisofem.physics.kernels). Near a stable equilibrium the
-assembled true Hessian is positive definite even though compressed elements are indefinite on
+iteration uses the PSD-projected Hessian (see anisofem.physics.kernels). Near a stable equilibrium
+the assembled true Hessian is positive definite even though compressed elements are indefinite on
 their own, so convergence ends quadratically; and requiring definiteness keeps Newton from
 converging to saddle points (a buckled beam's straight state).
 """
@@ -69,8 +69,8 @@ class NewtonResult:
     iterations. method: the method's name. message: why it stopped. seconds: wall time.
     inversion: the anisofem.physics.inversion.Inversion of x (inverted and degenerate elements, the
     smallest det F); converged speaks of the equations, physical of the state. increments: the
-    load increments of a solve by load continuation (anisofem.solvers.continuation; 0 where the whole
-    load was solved at once).
+    load increments of a solve by load continuation (anisofem.solvers.continuation; 0 where the
+    whole load was solved at once).
     """
     x: np.ndarray
     converged: bool
@@ -89,9 +89,9 @@ class NewtonResult:
 
     @property
     def stability(self):
-        """For a static solve, the anisofem.solvers.stability.Stability of x, computed on first access:
-        the smallest eigenvalue of the free Hessian, .minimum False where x is a saddle. None
-        for a step."""
+        """For a static solve, the anisofem.solvers.stability.Stability of x, computed on first
+        access: the smallest eigenvalue of the free Hessian, .minimum False where x is a saddle.
+        None for a step."""
         if callable(self._stability):
             self._stability = self._stability()
         return self._stability

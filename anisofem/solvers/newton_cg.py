@@ -20,8 +20,8 @@ class NewtonCG(KeptFactor):
     multigrid hierarchy of an earlier Hessian, with the rigid-body modes at the current
     positions: no factorization, memory linear in the mesh, the rung for large meshes;
     anisofem.solvers.multigrid; applied in each vertex's frame rotated since it was
-    built, anisofem.solvers.frames). A kept factor or hierarchy is renewed at the current state when a
-    CG solve with it needs more than refactor_after iterations (default 10 with "factor", 60
+    built, anisofem.solvers.frames). A kept factor or hierarchy is renewed at the current state when
+    a CG solve with it needs more than refactor_after iterations (default 10 with "factor", 60
     with "amg"), unless it was built for that solve. linear_solver: for "factor".
     """
 
@@ -60,8 +60,9 @@ class NewtonCG(KeptFactor):
                             if scene.mesh.order == 2 else (None, scene.free_dofs))
 
     def threads(self):
-        """One BLAS thread unless a factorization is kept (anisofem.solvers.linsolve.one_blas_thread):
-        the iterations' vector products would otherwise slow the parallel assembly."""
+        """One BLAS thread unless a factorization is kept
+        (anisofem.solvers.linsolve.one_blas_thread): the iterations' vector products would
+        otherwise slow the parallel assembly."""
         if self.preconditioner == "factor":
             return super().threads()
         return linsolve.one_blas_thread()

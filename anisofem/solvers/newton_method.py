@@ -83,8 +83,8 @@ class Method:
         return self.iterations is not None
 
     def start(self, potential):
-        """Prepare to minimize potential (an anisofem.physics.potential.Potential); self.tolerance is
-        the free-gradient norm (N) at which the solve converges."""
+        """Prepare to minimize potential (an anisofem.physics.potential.Potential); self.tolerance
+        is the free-gradient norm (N) at which the solve converges."""
         self.potential = potential
         self.tolerance = gradient_tolerance(potential, self.rtol, self.atol)
         self.counts = {"factorizations": 0, "linear_iterations": 0, "projected": 0}

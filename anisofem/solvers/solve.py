@@ -22,8 +22,8 @@ def solve(scene, x0=None, method="auto", warn=True, continuation="auto", **optio
     positions). method: "auto" (default: exact Newton, or multigrid-preconditioned inexact
     Newton on large meshes; anisofem.solvers.methods.choose), "newton", "reuse", "lbfgs", "cg" or an
     anisofem.solvers.methods.Method; options: the method's (rtol, atol, max_iter, iterations,
-    projection, linear_solver, ...; see anisofem.solvers.methods). warn: a ConvergenceWarning when the
-    solve fails. continuation: "auto" (default) solves the whole load from x0 and, where that
+    projection, linear_solver, ...; see anisofem.solvers.methods). warn: a ConvergenceWarning when
+    the solve fails. continuation: "auto" (default) solves the whole load from x0 and, where that
     fails short of round-off or where only the prescribed positions turn Neo-Hookean
     elements of x0 inside out, ramps the load up from x0 in increments, each from the last
     equilibrium (anisofem.solvers.continuation); "always" ramps from the start; "never" does not.
@@ -93,8 +93,8 @@ def step(scene, x, v, dt, a_guess=None, method="auto", warn=True, **options):
     its factorizations from one call to the next). A step with an iteration budget that would
     end with more mechanical energy than it started with iterates on until it does not (or
     converges). Where the step's solve fails short of round-off, its external force is ramped
-    up in increments, each solved from the last (anisofem.solvers.continuation): the step is the same,
-    only the path to it changes. Returns StepResult with v_new = (x_new - x) / dt. Fixed
+    up in increments, each solved from the last (anisofem.solvers.continuation): the step is the
+    same, only the path to it changes. Returns StepResult with v_new = (x_new - x) / dt. Fixed
     components end at their prescribed positions.
     """
     check_scene(scene)

@@ -8,9 +8,9 @@ is a minimum, and the smallest eigenvalue comes from Lanczos on the inverse (shi
 itself (ARPACK through scipy; negative_curvature), started from a given vector or a fixed
 pseudo-random one, so that a solve is repeatable.
 
-Newton uses negative_curvature (anisofem.solvers.methods.Newton): where the true Hessian is indefinite
-and the projected iterations stall, the eigenvector is a direction of negative curvature to
-step along; and where a solve meets its tolerance at a state whose last true Hessian was
+Newton uses negative_curvature (anisofem.solvers.methods.Newton): where the true Hessian is
+indefinite and the projected iterations stall, the eigenvector is a direction of negative curvature
+to step along; and where a solve meets its tolerance at a state whose last true Hessian was
 indefinite, a negative eigenvalue means a saddle, which the solve leaves along the eigenvector."""
 import math
 from dataclasses import dataclass

@@ -1,8 +1,8 @@
 """`python -m anisofem bench --distributed [--huge]`: the petsc engine's multigrid path (CG +
 smoothed aggregation, anisofem.distributed.newton.multigrid_type) on 1 and 2 MPI ranks of this
 machine against the single-process multigrid path (`cg` with `preconditioner="amg"`,
-anisofem.studies.bench_large) on the box cantilever of 10^5 tets (and 10^6 with --huge), each run in its
-own processes: the static solve's wall time split into the partition, the assembly and the
+anisofem.studies.bench_large) on the box cantilever of 10^5 tets (and 10^6 with --huge), each run in
+its own processes: the static solve's wall time split into the partition, the assembly and the
 linear solves (the slowest rank's), Newton and Krylov iterations, the mean of 5 backward-Euler
 steps (dt 0.02 s, from rest), each rank's peak memory, and the answer's distance to the
 single-process one. Prints a table and writes JSON (atomically). Run alone."""

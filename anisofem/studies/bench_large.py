@@ -8,8 +8,8 @@ others (one method for the rollout, so the first step builds what the later ones
 hierarchies, factors). Prints a table, writes JSON (atomically).
 
 `python -m anisofem bench --crossover`: the same two paths around the size where method="auto"
-switches from one to the other (anisofem.solvers.methods.AUTO_MULTIGRID_MIN), at the paper's nu = 0.48
-and at a nearly incompressible nu = 0.499, where multigrid needs the most CG iterations."""
+switches from one to the other (anisofem.solvers.methods.AUTO_MULTIGRID_MIN), at the paper's nu =
+0.48 and at a nearly incompressible nu = 0.499, where multigrid needs the most CG iterations."""
 import json
 import os
 import resource

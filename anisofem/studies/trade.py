@@ -2,7 +2,7 @@
 rollout (`anisofem.trade`, `python -m anisofem trade`).
 
     table = anisofem.trade(scene, steps=100, dt=0.02)
-    print(anisofem.trade_table(table))          # the rungs: .rungs, the table and plot: .trade_report
+    print(anisofem.trade_table(table))     # the rungs: .rungs; the table, the plot: .trade_report
 
 A rung is one way of rolling the scene forward: the exact rollout (the reference: the default
 method to rtol 1e-8, exact Newton or, on large meshes, multigrid CG), Newton with a fixed

@@ -89,7 +89,8 @@ static int plan_joints(af_framed *m, const int *tets) {
         for (a = 0; a < m->k; a++)
             for (b = 0; b < m->k; b++) {
                 long key = (long)m->joint_tets[e * m->k + a] * m->nodes + m->joint_tets[e * m->k + b];
-                long *hit = (long *)bsearch(&key, keys, (size_t)unique, sizeof(long), compare_longs);
+                long *hit = (long *)bsearch(&key, keys, (size_t)unique, sizeof(long),
+                                            compare_longs);
                 m->element_pairs[(e * m->k + a) * m->k + b] = (int)(hit - keys);
             }
     free(keys);

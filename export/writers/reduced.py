@@ -1,6 +1,6 @@
 """`python -m export reduced SCENE -o PATH`: a scene's reduced model (anisofem.reduced) written
-as PATH.json + PATH.bin (export.writers.bake.write_arrays), which runtime.ReducedSimulator steps with
-numpy alone.
+as PATH.json + PATH.bin (export.writers.bake.write_arrays), which runtime.ReducedSimulator steps
+with numpy alone.
 
 The arrays (float64 unless said): rest_positions (n, 3) m, the positions the basis moves;
 basis (n, 3, r) m per unit of q, 0 on held components; c1 (r,), C2 (r, r), S3 (r, r, r) and
@@ -17,10 +17,10 @@ or on `cases` unseen loads), gravity (m/s^2) and material.
 framed_runtime.FramedSimulator and the C runtime's af_framed_step; export/README.md), for a
 display mesh too.
 
-`python -m export bake-reduced SCENE -o PATH` writes the models of a baked scene (export.writers.bake)
-at several fiber angles in one pair of files, for the browser page: the arrays that depend on
-the fiber once per angle A as NAME@A (runtime.ReducedSimulator(path, angle=A) reads them);
-with --framed the framed models (bake_framed).
+`python -m export bake-reduced SCENE -o PATH` writes the models of a baked scene
+(export.writers.bake) at several fiber angles in one pair of files, for the browser page: the arrays
+that depend on the fiber once per angle A as NAME@A (runtime.ReducedSimulator(path, angle=A) reads
+them); with --framed the framed models (bake_framed).
 """
 import dataclasses
 
@@ -101,9 +101,9 @@ def _display_masses(scene, display):
 
 
 def _angle_scenes(name, angles):
-    """(angles as floats, the baked scene `name` (export.writers.bake.SCENES) with the trained material
-    (Material.paper, fiber stiffness E) and gravity at each fiber angle, degrees from x towards
-    z); ValueError naming the scene or the angles."""
+    """(angles as floats, the baked scene `name` (export.writers.bake.SCENES) with the trained
+    material (Material.paper, fiber stiffness E) and gravity at each fiber angle, degrees from x
+    towards z); ValueError naming the scene or the angles."""
     if name not in SCENES:
         raise ValueError(f"scene: expected one of {sorted(SCENES)}, got {name!r}")
     angles = [float(a) for a in angles]

@@ -1,5 +1,5 @@
-"""The fiber term at a point (numba, inlined into anisofem.physics.kernels): one family of fibers along
-the unit material direction d, added to a base energy density.
+"""The fiber term at a point (numba, inlined into anisofem.physics.kernels): one family of fibers
+along the unit material direction d, added to a base energy density.
 
     psi = kappa (I4 - 1)^2,   I4 = d^T C d = |F d|^2                                 (J/m^3)
     S = 4 kappa (I4 - 1) d d^T                                         (2nd Piola-Kirchhoff, Pa)

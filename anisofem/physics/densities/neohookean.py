@@ -1,4 +1,5 @@
-"""Compressible Neo-Hookean energy density at a point (numba, inlined into anisofem.physics.kernels).
+"""Compressible Neo-Hookean energy density at a point (numba, inlined into
+anisofem.physics.kernels).
 
     psi = mu/2 (tr C - 3) - mu ln J + lam/2 (ln J)^2,   C = F^T F, J = det F     (J/m^3)
     psi = +inf for J <= 0
