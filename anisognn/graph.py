@@ -92,6 +92,9 @@ def from_scene(scene, dtype=torch.float32):
                          f"mesh has quadratic tets (order {scene.mesh.order})")
     if scene.pressures:
         raise ValueError("scene: the network takes nodal forces; this scene has pressure loads")
+    if (scene.elements.rest2 != 1.0).any():
+        raise ValueError("scene: the network was trained on passive fibers; this scene activates "
+                         "some (Material's activation)")
     mesh, el = scene.mesh, scene.elements
     t = runtime.mesh_tensors(mesh.vertices, mesh.tets, scene.masses, scene.fixed_mask,
                              scene.fixed_positions, el.fiber, el.kappa, el.mu, el.lam)

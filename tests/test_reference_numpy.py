@@ -6,13 +6,16 @@ import anisofem as af
 from anisofem.physics import reference_numpy as ref
 
 
-def test_numba_and_numpy_agree_with_per_element_fibers():
+@pytest.mark.parametrize("activated", [False, True])
+def test_numba_and_numpy_agree_with_per_element_fibers(activated):
+    """Per-element fibers and stiffnesses, passive or each contracting by its own activation."""
     rng = np.random.default_rng(5)
     mesh = af.box_beam(cells=(4, 2, 2))
     d = rng.standard_normal((mesh.n_tets, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    kappa = rng.uniform(0, 10e5, mesh.n_tets)
-    scene = af.Scene(mesh, af.Material(1e5, 0.45, 1000.0, d, kappa))
+    kappa = rng.uniform(0.1, 10, mesh.n_tets) * 1e5
+    activation = rng.uniform(0, 0.6, mesh.n_tets) if activated else 0.0
+    scene = af.Scene(mesh, af.Material(1e5, 0.45, 1000.0, d, kappa, activation=activation))
     x = mesh.vertices + 2e-3 * rng.standard_normal(mesh.vertices.shape)
     e_ref, g_ref = ref.elastic_energy_gradient(scene, x)
     split = af.metrics.energy_split(scene, x)

@@ -33,7 +33,7 @@ class RankSystem:
         self.elements = replace(
             full, tets=full.tets[e], grads=full.grads[e], weights=full.weights[e],
             model=full.model[e], mu=full.mu[e], lam=full.lam[e], kappa=full.kappa[e],
-            fiber=full.fiber[e], block_starts=starts, color_ptr=ptr)
+            rest2=full.rest2[e], fiber=full.fiber[e], block_starts=starts, color_ptr=ptr)
         self.owned = part.owned_nodes
         self.owned_free = part.dof[self.owned] >= 0                  # (k, 3)
         #: (N_r,) the flat index 3 i + c of each free DOF this rank owns, in its vector's order

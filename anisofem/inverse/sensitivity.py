@@ -12,14 +12,14 @@ P the first Piola stress. Every energy here is linear in mu, lam and kappa, so
 
     StVK:         dP/dmu = 2 F E,          dP/dlam = tr(E) F,
     Neo-Hookean:  dP/dmu = F - F^-T,       dP/dlam = ln J F^-T,
-    fiber:        dP/dkappa = 4 (I4 - 1) F d d^T,
+    fiber:        dP/dkappa = 4 (I4 - s^2) F d d^T   (s: the fibers' rest stretch),
 
 Young's modulus and Poisson's ratio follow by the chain rule through mu(E, nu) and
 lam(E, nu). The fiber direction d (unit, in the rest frame) is two angles, d = (cos a cos b,
 sin a cos b, sin b): azimuth a about z from x and elevation b toward z (so it stays unit; b =
 +-90 degrees is the angles' pole). With h = G_lambda d and u = F d,
 
-    lambda^T dg/dd = 4 kappa (2 (u . h) C d + (I4 - 1) (F^T h + G_lambda^T u)).
+    lambda^T dg/dd = 4 kappa (2 (u . h) C d + (I4 - s^2) (F^T h + G_lambda^T u)).
 
 A pressure's magnitude p: g holds p dW/dx (anisofem.physics.pressure), so lambda^T dg/dp is lambda
 against the cavity's force at unit pressure.
@@ -178,7 +178,7 @@ class _StateTerms:
         self.dP_lam = np.where(stvk, trE[..., None, None] * F,
                                np.log(safe)[..., None, None] * FinvT)
         d = el.fiber
-        self.I4m1 = np.einsum("ei,eqij,ej->eq", d, C, d) - 1.0
+        self.I4m1 = np.einsum("ei,eqij,ej->eq", d, C, d) - el.rest2[:, None]   # I4 - s^2
         self.u = np.einsum("eqij,ej->eqi", F, d)
         self.Cd = np.einsum("eqij,ej->eqi", C, d)
         a, b = fiber_angles(d).T

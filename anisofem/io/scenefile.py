@@ -139,7 +139,8 @@ class _Reader:
         values = {"law": np.full(m, default["model"], dtype=object),
                   "fiber": np.tile(np.array(default["fiber_direction"], float), (m, 1)),
                   "fiber_stiffness": np.full(m, float(default["fiber_stiffness"]))}
-        values |= {k: np.full(m, float(default[k])) for k in ("young", "poisson", "density")}
+        values |= {k: np.full(m, float(default[k]))
+                   for k in ("young", "poisson", "density", "activation")}
         self.assign(values, base, np.ones(m, bool), "material")
         regions = table.get("regions", {})
         if not isinstance(regions, dict):
@@ -155,7 +156,7 @@ class _Reader:
         fiber[kappa == 0] = default["fiber_direction"]  # unused where there is no fiber term
         try:
             return Material(values["young"], values["poisson"], values["density"], fiber, kappa,
-                            model=list(values["law"]))
+                            model=list(values["law"]), activation=values["activation"])
         except ValueError as err:
             raise self.error("material", str(err)) from None
 

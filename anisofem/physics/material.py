@@ -14,7 +14,7 @@ class Material:
     Every parameter is a scalar or a per-element array (one value per tet), so fibers, stiffness
     and even the base model may vary element by element.
 
-    The base model (same Lame parameters, same fiber term kappa (I4 - 1)^2):
+    The base model (same Lame parameters, same fiber term kappa (I4 - s^2)^2):
 
     - "stvk", Saint Venant-Kirchhoff, psi = lam/2 tr(E)^2 + mu tr(E^2): the paper's material
       and the one the network is trained on. It depends on F only through C = F^T F, so an
@@ -40,14 +40,19 @@ class Material:
     density : mass density, kg/m^3 (> 0).
     fiber_direction : unit fiber direction d in the rest (material) frame, (3,) or (m, 3).
         Required to be unit length wherever fiber_stiffness > 0; ignored elsewhere.
-    fiber_stiffness : kappa in psi_fiber = kappa (d^T C d - 1)^2, Pa (>= 0). The paper samples
+    fiber_stiffness : kappa in psi_fiber = kappa (d^T C d - s^2)^2, Pa (>= 0). The paper samples
         kappa in [0, 10 E].
     model : "stvk" (default) or "neohookean", or a per-element sequence of them (m,).
+    activation : the fibers' contraction a, in [0, 1): their rest stretch is s = 1 - a, so an
+        activated fiber pulls its element shorter along d (an artificial muscle, a contractile
+        fiber; Min et al. 2019). 0 (default): passive fibers, s = 1. Only where fibers are
+        (fiber_stiffness > 0).
     """
 
     def __init__(self, young=1e5, poisson=0.48, density=1000.0, fiber_direction=(1.0, 0.0, 0.0),
-                 fiber_stiffness=0.0, model="stvk"):
+                 fiber_stiffness=0.0, model="stvk", activation=0.0):
         self.model = _model_codes(model)
+        self.activation = as_float_array(activation, "activation")
         self.young = as_float_array(young, "young")
         self.poisson = as_float_array(poisson, "poisson")
         self.density = as_float_array(density, "density")
@@ -63,6 +68,20 @@ class Material:
         if (self.fiber_stiffness < 0).any():
             raise ValueError("fiber_stiffness: kappa must be >= 0 Pa, got min "
                              f"{self.fiber_stiffness.min()}")
+        if not ((self.activation >= 0) & (self.activation < 1)).all():
+            bad = self.activation[~((self.activation >= 0) & (self.activation < 1))].flat[0]
+            raise ValueError(f"activation: a share in [0, 1) (the fibers' rest stretch is 1 - "
+                             f"activation), got {bad}")
+        try:
+            unfibered = np.broadcast_arrays(self.activation > 0, self.fiber_stiffness == 0)
+        except ValueError:
+            raise ValueError("activation, fiber_stiffness: per-element arrays of different "
+                             "lengths") from None
+        if (unfibered[0] & unfibered[1]).any():
+            count = int((unfibered[0] & unfibered[1]).sum())
+            raise ValueError(f"activation: {count} element{'s are' if count > 1 else ' is'} "
+                             f"activated with no fibers (fiber_stiffness 0): only fibers "
+                             f"contract")
         if self.fiber_direction.shape[-1:] != (3,) or self.fiber_direction.ndim > 2:
             raise ValueError("fiber_direction: expected shape (3,) or (m, 3), got "
                              f"{self.fiber_direction.shape}")
@@ -92,7 +111,9 @@ class Material:
         return (f"Material(young={show(self.young)}, poisson={show(self.poisson)}, "
                 f"density={show(self.density)}, fiber_direction="
                 f"{self.fiber_direction.tolist() if self.fiber_direction.ndim == 1 else 'array'}"
-                f", fiber_stiffness={show(self.fiber_stiffness)}, model={model!r})")
+                f", fiber_stiffness={show(self.fiber_stiffness)}, model={model!r}"
+                + (f", activation={show(self.activation)}" if self.activation.any() else "")
+                + ")")
 
     def replaced(self, **changes):
         """The same material with some parameters changed (the constructor's names)."""
@@ -100,17 +121,20 @@ class Material:
                  else MODELS[int(self.model)])
         given = {"young": self.young, "poisson": self.poisson, "density": self.density,
                  "fiber_direction": self.fiber_direction,
-                 "fiber_stiffness": self.fiber_stiffness, "model": model}
+                 "fiber_stiffness": self.fiber_stiffness, "model": model,
+                 "activation": self.activation}
         unknown = set(changes) - set(given)
         if unknown:
             raise TypeError(f"changes: unknown material parameter {sorted(unknown)[0]!r}")
         return Material(**(given | changes))
 
     def per_element(self, m):
-        """Broadcast to m elements: dict of young, poisson, mu, lam, kappa, density (m,), fiber
-        (m, 3) and model (m,) int8 (index into MODELS)."""
+        """Broadcast to m elements: dict of young, poisson, mu, lam, kappa, density, activation,
+        rest2 (the fibers' squared rest stretch) (m,), fiber (m, 3) and model (m,) int8 (index
+        into MODELS)."""
         young = per_element(self.young, "young", m)
         nu = per_element(self.poisson, "poisson", m)
+        activation = per_element(self.activation, "activation", m)
         return {
             "young": young, "poisson": nu,
             "mu": young / (2.0 * (1.0 + nu)),
@@ -119,6 +143,8 @@ class Material:
             "fiber": per_element(self.fiber_direction, "fiber_direction", m, width=3),
             "density": per_element(self.density, "density", m),
             "model": _per_element_model(self.model, m),
+            "activation": activation,
+            "rest2": (1.0 - activation) ** 2,
         }
 
 

@@ -17,7 +17,7 @@ def _deformation(scene, x):
     E = 0.5 * (C - np.eye(3))
     trE = np.trace(E, axis1=1, axis2=2)
     d = el.fiber
-    I4m1 = np.einsum("ei,eij,ej->e", d, C, d) - 1.0
+    I4m1 = np.einsum("ei,eij,ej->e", d, C, d) - el.rest2   # I4 - s^2, s the rest stretch
     S = (2 * el.mu[:, None, None] * E + (el.lam * trE)[:, None, None] * np.eye(3)
          + (4 * el.kappa * I4m1)[:, None, None] * np.einsum("ei,ej->eij", d, d))
     psi = 0.5 * el.lam * trE ** 2 + el.mu * np.einsum("eij,eij->e", E, E) + el.kappa * I4m1 ** 2

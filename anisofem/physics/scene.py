@@ -31,6 +31,7 @@ class ElementData:
     mu: np.ndarray            # (m,) Pa
     lam: np.ndarray           # (m,) Pa
     kappa: np.ndarray         # (m,) Pa
+    rest2: np.ndarray         # (m,) the fibers' squared rest stretch (1 - activation)^2
     fiber: np.ndarray         # (m, 3) unit fiber directions
     has_fiber: bool           # False: the fiber term is skipped entirely
     block_starts: np.ndarray  # (blocks,) int64 first tet of each assembly block, by color
@@ -48,7 +49,7 @@ class ElementData:
             starts, ptr = np.zeros(0, np.int64), np.zeros(1, np.int64)
         return replace(self, tets=tets, grads=self.grads[rows], weights=self.weights[rows],
                        model=self.model[rows], mu=self.mu[rows], lam=self.lam[rows],
-                       kappa=self.kappa[rows], fiber=self.fiber[rows],
+                       kappa=self.kappa[rows], rest2=self.rest2[rows], fiber=self.fiber[rows],
                        has_fiber=bool((self.kappa[rows] > 0).any()), block_starts=starts,
                        color_ptr=ptr)
 
@@ -378,7 +379,8 @@ def element_data(mesh, params):
     return ElementData(
         tets=np.ascontiguousarray(mesh.cells, dtype=np.int64), grads=mesh.point_gradients,
         weights=mesh.rest_volumes[:, None] * element.weights, model=params["model"],
-        mu=params["mu"], lam=params["lam"], kappa=kappa, fiber=params["fiber"],
+        mu=params["mu"], lam=params["lam"], kappa=kappa, rest2=params["rest2"],
+        fiber=params["fiber"],
         has_fiber=bool((kappa > 0).any()), block_starts=starts, color_ptr=ptr)
 
 

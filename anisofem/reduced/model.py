@@ -376,12 +376,18 @@ def full_rollout(scene, phases, dt, base=None):
 
 def check_polynomial_scene(scene, model):
     """TypeError unless scene is a Scene; ValueError unless every element has the StVK base,
-    whose energy is a polynomial in a reduced model's coordinates (`model` names the model)."""
+    whose energy is a polynomial in a reduced model's coordinates, and passive fibers (`model`
+    names the model)."""
     check_scene(scene)
     if (scene.elements.model != STVK).any():
         raise ValueError(f"scene: the {model} needs the StVK base material (its energy is a "
                          f"polynomial in the reduced coordinates); this scene has Neo-Hookean "
                          f"elements")
+    active = int((scene.elements.rest2 != 1.0).sum())
+    if active:
+        raise ValueError(f"scene: the {model} is built for passive fibers, and this scene "
+                         f"activates the fibers of {active} elements (Material's activation); "
+                         f"step it with the FEM")
 
 
 def _count(value, name, smallest):

@@ -28,9 +28,10 @@ def point_stress(model, F, mu, lam, S):
 
 
 @njit(cache=True, inline="always")
-def point_hessian(model, G, n, w, mu, lam, kappa, d, F, S, Fd, project, work, He):
+def point_hessian(model, G, n, w, mu, lam, kappa, s2, d, F, S, Fd, project, work, He):
     """Add the point's Hessian blocks (base law and fiber term) to He; S is the total stress
-    (base and fiber) and Fd = F d (read only where kappa != 0). StVK projects the total stress
+    (base and fiber), Fd = F d and s2 the fibers' squared rest stretch (read only where kappa
+    != 0). StVK projects the total stress
     in its geometric part, so the fiber adds only its material part there; Neo-Hookean's
     eigenmodes leave the fiber's geometric part to the fiber."""
     if model == NEOHOOKEAN:
@@ -38,4 +39,4 @@ def point_hessian(model, G, n, w, mu, lam, kappa, d, F, S, Fd, project, work, He
     else:
         stvk.hessian(G, n, w, mu, lam, F, S, project, work, He)
     if kappa != 0.0:
-        fiber.hessian(G, n, w, kappa, d, Fd, model == NEOHOOKEAN, project, He)
+        fiber.hessian(G, n, w, kappa, s2, d, Fd, model == NEOHOOKEAN, project, He)
