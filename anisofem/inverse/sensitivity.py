@@ -12,7 +12,8 @@ P the first Piola stress. Every energy here is linear in mu, lam and kappa, so
 
     StVK:         dP/dmu = 2 F E,          dP/dlam = tr(E) F,
     Neo-Hookean:  dP/dmu = F - F^-T,       dP/dlam = ln J F^-T,
-    fiber:        dP/dkappa = 4 (I4 - s^2) F d d^T   (s: the fibers' rest stretch),
+    fiber:        dP/dkappa = 4 (I4 - s^2) F d d^T   (s = 1 - a: the fibers' rest stretch),
+    activation:   dP/da = 8 kappa (1 - a) F d d^T,
 
 Young's modulus and Poisson's ratio follow by the chain rule through mu(E, nu) and
 lam(E, nu). The fiber direction d (unit, in the rest frame) is two angles, d = (cos a cos b,
@@ -36,7 +37,7 @@ from ..physics.potential import Potential, check_positions
 from ..solvers.stability import stability
 
 #: The parameter kinds: per element, except pressure (one per Scene.pressures entry).
-KINDS = ("young", "poisson", "kappa", "fiber_angles", "pressure")
+KINDS = ("young", "poisson", "kappa", "fiber_angles", "pressure", "activation")
 
 
 @dataclass
@@ -45,7 +46,9 @@ class Sensitivity:
     fiber_angles (m, 2) per element, d/d(azimuth, elevation) in J per radian;
     fiber_direction (m, 3) per element, d/dd of the direction taken as free (its part along d
     is no change of a unit direction; any other parametrization chains through it); pressure (k,)
-    one per scene pressure, J per Pa; adjoint (n, 3) the solution lambda of H lambda = dJ/dx
+    one per scene pressure, J per Pa; activation (m,) per element, J per unit activation (at
+    the scene's activations: a fiber's rest stretch s = 1 - a); adjoint (n, 3) the solution
+    lambda of H lambda = dJ/dx
     (zero on fixed components), m/N times the objective's unit. Sum a per-element array over
     a region's elements for a parameter shared by the region."""
     young: np.ndarray
@@ -54,6 +57,7 @@ class Sensitivity:
     fiber_angles: np.ndarray
     fiber_direction: np.ndarray
     pressure: np.ndarray
+    activation: np.ndarray
     adjoint: np.ndarray
 
 
@@ -195,13 +199,15 @@ class _StateTerms:
 
     def contract(self, lam):
         """(young, poisson, kappa (m,), fiber_angles (m, 2), fiber_direction (m, 3), pressure
-        (k,)): lambda^T dg/dp for lam (n, 3)."""
+        (k,), activation (m,)): lambda^T dg/dp for lam (n, 3)."""
         el, w = self.el, self.el.weights
         Gl = np.einsum("eai,eqaj->eqij", lam[el.tets], el.grads)
         s_mu = np.einsum("eq,eqij,eqij->e", w, self.dP_mu, Gl)
         s_lam = np.einsum("eq,eqij,eqij->e", w, self.dP_lam, Gl)
         h = np.einsum("eqij,ej->eqi", Gl, el.fiber)
         s_kappa = np.einsum("eq,eq,eqi,eqi->e", w, 4.0 * self.I4m1, self.u, h)
+        s_activation = 8.0 * el.kappa * np.sqrt(el.rest2) * np.einsum("eq,eqi,eqi->e", w,
+                                                                      self.u, h)
         g_d = 4.0 * el.kappa[:, None, None] * (
             2.0 * np.einsum("eqi,eqi->eq", self.u, h)[..., None] * self.Cd
             + self.I4m1[..., None] * (np.einsum("eqki,eqk->eqi", self.F, h)
@@ -209,4 +215,4 @@ class _StateTerms:
         s_d = np.einsum("eq,eqi->ei", w, g_d)                                # (m, 3)
         s_young, s_poisson = lame_slopes(el.mu, el.lam, s_mu, s_lam)
         return (s_young, s_poisson, s_kappa, np.einsum("ei,eki->ek", s_d, self.dd), s_d,
-                np.array([float(np.sum(unit * lam)) for unit in self.units]))
+                np.array([float(np.sum(unit * lam)) for unit in self.units]), s_activation)
