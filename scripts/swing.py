@@ -6,7 +6,7 @@ up to half the weight at the free end in any direction; the swing's drag is with
 not one of the static cases the fitted bases were built from), and framed (anisofem.reduced
 .framed, fitted to the same declaration).
 
-    python scripts/swing.py [--json results/swing.json]
+    python scripts/swing.py [--json results/swing.json]   (by default out/swing.json)
 
 For each rollout: the largest sideways tip displacement (the mean over the free end's
 vertices), the largest tip error over the whole rollout and over the release alone (the tip
@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 import anisofem as af
-from anisofem.io.output import publish, result_path
+from anisofem.io.output import publish, scratch_path
 from anisofem.reduced import FramedModel, ReducedModel
 from anisofem.reduced.model import full_rollout
 
@@ -57,7 +57,7 @@ def timed(rollout, phases):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--json", default=result_path("swing.json"))
+    p.add_argument("--json", default=scratch_path("swing.json"))
     args = p.parse_args(argv)
     s = scene()
     force = pull(s)

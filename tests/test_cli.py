@@ -248,3 +248,28 @@ def test_a_static_solve_that_fails_writes_nothing(tmp_path):
     r = run("solve", "p.toml", "--continuation", "never", "-o", "p.vtu", cwd=tmp_path)
     assert r.returncode == 1 and "converged: False" in r.stdout
     assert "nothing written to p.vtu" in r.stdout and not (tmp_path / "p.vtu").exists()
+
+
+def test_runs_made_to_look_write_beside_the_examples_not_over_the_published_results():
+    """The swing and the robustness grid, which the README invites a reader to run, write to
+    out/ by default; results/, whose files the docs quote, only when told to."""
+    import argparse
+    import inspect
+    import runpy
+
+    from anisofem.studies import robustness
+    assert inspect.signature(robustness.run).parameters["out"].default == os.path.join(
+        "out", "robustness.json")
+    parsers = []
+
+    def capture(self, *args, **kwargs):   # scripts/swing.py's parser, caught before it runs
+        parsers.append(self)
+        raise SystemExit(0)
+    original, argparse.ArgumentParser.parse_args = argparse.ArgumentParser.parse_args, capture
+    try:
+        with pytest.raises(SystemExit):
+            runpy.run_path(os.path.join(ROOT, "scripts", "swing.py"))["main"]([])
+    finally:
+        argparse.ArgumentParser.parse_args = original
+    assert [a.default for a in parsers[0]._actions if a.dest == "json"] == [
+        os.path.join("out", "swing.json")]

@@ -169,7 +169,7 @@ def build_parser():
                    help="where to write the results (default: results/bench_anisofem.json, "
                         "with --large results/bench_large.json, with --crossover "
                         "results/bench_crossover.json, with --robustness "
-                        "results/robustness.json, with --convergence results/convergence.json, "
+                        "out/robustness.json, with --convergence results/convergence.json, "
                         "with --distributed results/bench_distributed.json, with --under-load "
                         "results/bench_under_load.json)")
     return p

@@ -8,11 +8,19 @@ import os
 import tempfile
 
 RESULTS = "results"
+SCRATCH = "out"
 
 
 def result_path(name):
     """The default path of a result file `name` (e.g. "bench_anisofem.json"): results/name."""
     return os.path.join(RESULTS, name)
+
+
+def scratch_path(name):
+    """The default path of what a run made to look at a result writes (a swing, the robustness
+    grid): out/name, beside the examples' pictures; the copy in results/ that the docs quote is
+    rewritten only when a run is told to (--json results/NAME)."""
+    return os.path.join(SCRATCH, name)
 
 
 @contextlib.contextmanager

@@ -15,7 +15,7 @@ import warnings
 
 import numpy as np
 
-from ..io.output import publish, result_path
+from ..io.output import publish, scratch_path
 from ..physics.material import Material
 from ..physics.meshgen import box_beam
 from ..physics.metrics import end_vertices
@@ -77,7 +77,7 @@ def dynamic_row(length, cells, fiber, base, load, dt):
             "seconds": time.perf_counter() - t0, "message": last.message}
 
 
-def run(dynamics=False, out=result_path("robustness.json")):
+def run(dynamics=False, out=scratch_path("robustness.json")):
     """Every static case (and with dynamics every rollout) of the grid; prints the tables,
     writes JSON to out (if given)."""
     cases = list(_cases(LOADS))
