@@ -142,3 +142,52 @@ def test_a_scene_file_activates_a_region(tmp_path):
     _, volumes = two_halves(tmp_path)
     assert np.array_equal(scene.elements.rest2 != 1.0, volumes == 2)
     assert np.allclose(scene.elements.rest2[volumes == 2], 0.64)
+
+
+def test_activation_follows_a_load_curve():
+    """A Timed activation part: Scene.at(t) activates its elements by curve(t) times the
+    written activation, and each state solves to the closed form at that activation; a curve
+    that would take it to 1 or more is refused."""
+    from anisofem.physics.curves import LoadCurve, Timed
+    scene = bar(1, "neohookean", 10 * E, 0.4)
+    ramp = LoadCurve([0.0, 1.0], [0.0, 1.0], name="ramp")
+    timed = scene.following([Timed(ramp, activation=np.full(scene.mesh.n_tets, 0.4))])
+    for t in (0.0, 0.25, 1.0, 2.0):   # the curve holds its last value after its last point
+        now = timed.at(t)
+        a = 0.4 * min(t, 1.0)
+        assert np.allclose(now.elements.rest2, (1 - a) ** 2)
+        result = af.solve(now, rtol=1e-12)
+        X, x = now.mesh.vertices, result.x
+        far = X[:, 0] > X[:, 0].max() - 1e-12
+        stretch = (x[far, 0] - X[:, 0].min()).mean() / np.ptp(X[:, 0])
+        assert abs(stretch - contracted_stretch("neohookean", 10 * E, a)) <= 1e-8
+    rollout = af.simulate(timed, 10, 0.1)
+    assert rollout.converged
+    tip = rollout.positions[:, :, 0].max(axis=1)
+    assert tip[-1] < tip[1] < tip[0] + 1e-12   # the bar shortens as the activation ramps up
+    with pytest.raises(ValueError, match=r"timed\[0\].activation: its curve 'ramp' takes it "
+                                         r"outside \[0, 1\)"):
+        scene.following([Timed(LoadCurve([0.0, 1.0], [0.0, 3.0], name="ramp"),
+                               activation=np.full(scene.mesh.n_tets, 0.4))])
+
+
+def test_a_scene_file_puts_a_regions_activation_on_a_curve(tmp_path):
+    from test_scenefile import scene_file, two_halves
+    _, volumes = two_halves(tmp_path)
+    text = ('mesh = "bar.msh"\n[material]\nfiber = [1, 0, 0]\nfiber_stiffness = 1e5\n'
+            '[regions.stiff]\nactivation = 0.3\nactivation_curve = "pulse"\n'
+            '[curves.pulse]\ntimes = [0, 1, 2]\nvalues = [0, 1, 0]\n'
+            '[[boundary]]\nwhere = "base"\nheld = true\n')
+    scene = af.load_scene(scene_file(tmp_path, text))
+    assert np.allclose(scene.elements.rest2[volumes == 2], 0.49)   # statics: the factor 1
+    for t, a in ((0.0, 0.0), (0.5, 0.15), (1.0, 0.3), (1.5, 0.15)):
+        rest2 = scene.at(t).elements.rest2
+        assert np.allclose(rest2[volumes == 2], (1 - a) ** 2) and (rest2[volumes == 1] == 1).all()
+    for bad, message in (('activation_curve = "pulse"', "no curve 'nowhere'"),):
+        with pytest.raises(ValueError, match=message):
+            af.load_scene(scene_file(tmp_path, text.replace(bad, 'activation_curve = "nowhere"'),
+                                     "bad.toml"))
+    with pytest.raises(ValueError, match="material.activation_curve: a region's activation"):
+        af.load_scene(scene_file(tmp_path, text.replace(
+            "fiber_stiffness = 1e5\n", 'fiber_stiffness = 1e5\nactivation_curve = "pulse"\n'),
+            "base.toml"))

@@ -23,6 +23,8 @@ SCHEMA = {
         "fiber_stiffness": "kappa, Pa (default 0: no fiber term)",
         "activation": "the fibers' contraction a in [0, 1): their rest stretch is 1 - a "
                       "(default 0: passive fibers); only where fiber_stiffness > 0",
+        "activation_curve": "in [regions.NAME]: the load curve the region's activation "
+                            "follows in time, a factor of activation (statics take it at 1)",
         "fiber": "the fiber direction: [dx, dy, dz]; {cell_data = NAME}, a 3-vector field per "
                  "tet of the mesh file (normalized, with a warning where not unit length); or "
                  "{helix = {...}}, wound about an axis",

@@ -116,8 +116,10 @@ class _Reader:
         if order not in (1, 2) or isinstance(order, bool):
             raise self.error("order", f"1 or 2, got {order!r}")
         self.mesh, self.tags = of_order(mesh, order), tags
-        material = self.material(table)
-        held, positions, parts, loads = self.boundaries(table)
+        curves = self.curves(table.get("curves", {}))
+        material, parts = self.material(table, curves)
+        held, positions, timed, loads = self.boundaries(table, curves)
+        parts += timed
         gravity = _vector(self, table["gravity"], "gravity") if "gravity" in table else None
         body = _vector(self, table["body_force"], "body_force") if "body_force" in table else None
         try:
@@ -130,8 +132,9 @@ class _Reader:
 
     # materials and fibers
 
-    def material(self, table):
-        """The Material of every tet: [material], then each region's changes."""
+    def material(self, table, curves):
+        """(the Material of every tet: [material], then each region's changes; the Timed parts
+        of the activations that follow a curve)."""
         m = self.mesh.n_tets
         base = table.get("material", {})
         _keys(self, base, "material", "material")
@@ -142,6 +145,10 @@ class _Reader:
         values |= {k: np.full(m, float(default[k]))
                    for k in ("young", "poisson", "density", "activation")}
         self.assign(values, base, np.ones(m, bool), "material")
+        timed = []
+        if "activation_curve" in base:
+            raise self.error("material.activation_curve", "a region's activation follows a "
+                                                          "curve: give it in [regions.NAME]")
         regions = table.get("regions", {})
         if not isinstance(regions, dict):
             raise self.error("regions", "expected [regions.NAME] tables")
@@ -151,12 +158,18 @@ class _Reader:
                 raise self.error(key, "expected a table of material keys")
             _keys(self, changes, "material", key)
             self.assign(values, changes, self.region(name, key), key)
+            if "activation_curve" in changes:
+                curve = self.curve_named(changes["activation_curve"], curves,
+                                         f"{key}.activation_curve")
+                part = np.where(self.region(name, key), values["activation"], 0.0)
+                timed.append(Timed(curve, activation=part))
         kappa = values["fiber_stiffness"]
         fiber = values["fiber"]
         fiber[kappa == 0] = default["fiber_direction"]  # unused where there is no fiber term
         try:
-            return Material(values["young"], values["poisson"], values["density"], fiber, kappa,
-                            model=list(values["law"]), activation=values["activation"])
+            return (Material(values["young"], values["poisson"], values["density"], fiber, kappa,
+                             model=list(values["law"]), activation=values["activation"]),
+                    timed)
         except ValueError as err:
             raise self.error("material", str(err)) from None
 
@@ -182,6 +195,8 @@ class _Reader:
                 values["law"][tets] = value
             elif name == "fiber":
                 values["fiber"][tets] = self.fiber(value, tets, where)
+            elif name == "activation_curve":
+                continue  # the region's Timed part (material)
             else:
                 values[name][tets] = _number(self, value, where)
 
@@ -262,14 +277,13 @@ class _Reader:
 
     # boundary conditions and loads
 
-    def boundaries(self, table):
+    def boundaries(self, table, curves):
         """(held (n, 3) bool, positions (n, 3), timed parts, loads {"force", "pressure"})."""
         n = self.mesh.n_vertices
         X = self.mesh.vertices
         held, positions = np.zeros((n, 3), bool), X.copy()
         moved_by = np.full(n, -1)
         force, pressures, parts = np.zeros((n, 3)), [], []
-        curves = self.curves(table.get("curves", {}))
         entries = table.get("boundary", [])
         if not isinstance(entries, list):
             raise self.error("boundary", "expected [[boundary]] tables")
@@ -285,11 +299,7 @@ class _Reader:
                 raise self.error(key, "nothing is done there: give held, traction or pressure")
             curve = None
             if "curve" in entry:
-                name = _string(self, entry["curve"], f"{key}.curve")
-                if name not in curves:
-                    raise self.error(f"{key}.curve", f"no curve {name!r}; the file has: "
-                                     f"{', '.join(sorted(curves)) or 'none'}")
-                curve = curves[name]
+                curve = self.curve_named(entry["curve"], curves, f"{key}.curve")
             where = entry["where"]
             if "held" in entry:
                 vertices = self.vertices(where, f"{key}.where")
@@ -325,6 +335,14 @@ class _Reader:
                 if curve is not None:
                     parts.append(Timed(curve, pressure=len(pressures) - 1))
         return held, positions, parts, {"force": force, "pressure": pressures}
+
+    def curve_named(self, value, curves, key):
+        """The LoadCurve a key names; SceneFileError listing the file's curves otherwise."""
+        name = _string(self, value, key)
+        if name not in curves:
+            raise self.error(key, f"no curve {name!r}; the file has: "
+                                  f"{', '.join(sorted(curves)) or 'none'}")
+        return curves[name]
 
     def motion(self, entry, vertices, key):
         """motion(c) -> (k, 3) displacement of the vertices at factor c of the entry's

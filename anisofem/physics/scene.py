@@ -329,6 +329,17 @@ class Scene:
                                  f"scene's {len(self.pressures)}")
             if part.force is not None:
                 as_float_array(part.force, f"timed[{k}].force", shape=(n, 3))
+            if part.activation is not None:
+                a = as_float_array(part.activation, f"timed[{k}].activation",
+                                   shape=(self.mesh.n_tets,))
+                if ((a > 0) & (self.elements.kappa == 0)).any():
+                    raise ValueError(f"timed[{k}].activation: it activates elements with no "
+                                     f"fibers (fiber_stiffness 0): only fibers contract")
+                top = a.max() * max(part.curve.values.max(), 0.0)
+                if part.curve.values.min() < 0 or not top < 1.0:
+                    raise ValueError(f"timed[{k}].activation: its curve {part.curve.name!r} "
+                                     f"takes it outside [0, 1) (up to {top:g}): the fibers' "
+                                     f"rest stretch must stay above 0")
         moved = self.held_at(self.fixed_positions)
         moved.timed = timed
         return moved
@@ -341,6 +352,7 @@ class Scene:
         force = self.external_force.copy()
         held = self.fixed_positions.copy()
         pressures = list(self.pressures)
+        activation = None
         for part in self.timed:
             c = part.curve(t) - 1.0
             if part.force is not None:
@@ -349,7 +361,14 @@ class Scene:
                 held += (part.motion(c + 1.0) - part.motion(1.0)) * self.fixed_mask
             if part.pressure is not None:
                 pressures[part.pressure] = pressures[part.pressure].scaled(c + 1.0)
+            if part.activation is not None:
+                if activation is None:
+                    activation = self._params["activation"].copy()
+                activation += c * np.asarray(part.activation)
         moved = self.held_at(held)
+        if activation is not None:
+            moved = moved.with_material(self.material.replaced(
+                activation=np.clip(activation, 0.0, None)))
         force.setflags(write=False)
         moved.external_force, moved.pressures, moved.timed = force, tuple(pressures), ()
         return moved
