@@ -5,6 +5,7 @@ SCENE -o PATH` (a scene's constant tensors for an engine), `python -m export red
 `python -m export bench-reduced` (its build, size and step times)."""
 import argparse
 import sys
+import time
 
 from anisofem.cli import BAD_INPUT, Parser
 from anisofem.cli.arguments import ShowDefaults
@@ -170,12 +171,12 @@ def _reduced(argv):
 
 def _declared_loads(args, scene):
     """The Loads of --drag, --cone and --carry, or None where none is given."""
-    from anisofem.cli.arguments import is_scene_file
+    from anisofem.cli.arguments import fixed_vertices, is_scene_file
     from anisofem.io.scenefile import SceneFile
-    from anisofem.physics.metrics import end_vertices
     from anisofem.reduced import Carry, Drag, Loads
     if not (args.drag or args.cone or args.carry):
         return None
+    places = SceneFile(args.scene) if is_scene_file(args.scene) and args.drag else None
     drags = []
     for entry in args.drag:
         if len(entry) not in (2, 5):
@@ -186,14 +187,8 @@ def _declared_loads(args, scene):
         except ValueError:
             raise ValueError(f"--drag {where}: N and DX DY DZ are numbers, got "
                              f"{' '.join(numbers)!r}") from None
-        if is_scene_file(args.scene):
-            vertices = SceneFile(args.scene).vertices(where)
-        else:
-            axis, _, side = where.partition("-")
-            if axis not in ("x", "y", "z") or side not in ("min", "max"):
-                raise ValueError(f"--drag: WHERE is AXIS-SIDE like x-max for a shape or a mesh "
-                                 f"file (a scene file names its surfaces), got {where!r}")
-            vertices = end_vertices(scene.mesh, "xyz".index(axis), side)
+        vertices = (places.vertices(where) if places else
+                    fixed_vertices(scene.mesh, where, "--drag"))
         drags.append(Drag(vertices, magnitude, (direction,) if direction else None))
     carry = Carry(*args.carry) if args.carry else None
     loads = Loads(drags=tuple(drags), cone=args.cone, carry=carry)
@@ -204,7 +199,6 @@ def _declared_loads(args, scene):
 def _progress(headline):
     """progress(stage) for a model's build: the headline on stderr at the first stage, then
     each stage with the seconds since (a build of a few thousand tets takes a minute)."""
-    import time
     start = []
 
     def progress(stage):

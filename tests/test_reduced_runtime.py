@@ -312,7 +312,7 @@ def test_the_command_builds_for_the_loads_it_is_given_and_says_what_it_holds(tmp
                                           "directions": [[0.0, 1.0, 0.0]]}],
                                "cone": 10.0, "carry": None}
     assert header["validation"]["cases"] == 3
-    for flags, message in ((["--drag", "x-mid", "1"], "--drag: WHERE is AXIS-SIDE"),
+    for flags, message in ((["--drag", "x-mid", "1"], "--drag: expected AXIS-SIDE like x-min"),
                            (["--drag", "x-max", "one"], "--drag x-max: N and DX DY DZ"),
                            (["--drag", "x-max"], "--drag: WHERE N or WHERE N DX DY DZ"),
                            (["--drag", "x-min", "1"], r"drags\[0\].vertices: every one"),

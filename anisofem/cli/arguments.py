@@ -50,13 +50,14 @@ def of_order(mesh, order):
     return mesh.raised()
 
 
-def fixed_vertices(mesh, spec):
-    """'x-min', 'y-max', ...: the vertices on that end of the mesh."""
+def fixed_vertices(mesh, spec, flag="--fixed"):
+    """'x-min', 'y-max', ...: the vertices on that end of the mesh (ValueError naming `flag`
+    where spec is not one)."""
     try:
         axis, side = spec.split("-")
         return end_vertices(mesh, "xyz".index(axis), side)
     except ValueError:
-        raise ValueError(f"--fixed: expected AXIS-SIDE like x-min or z-max, got {spec!r}") \
+        raise ValueError(f"{flag}: expected AXIS-SIDE like x-min or z-max, got {spec!r}") \
             from None
 
 
