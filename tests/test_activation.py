@@ -144,18 +144,26 @@ def test_a_scene_file_activates_a_region(tmp_path):
     assert np.allclose(scene.elements.rest2[volumes == 2], 0.64)
 
 
+def active_bar(order, model, kappa, value):
+    """bar()'s body with passive fibers and its whole activation a control "squeeze"."""
+    scene = bar(order, model, kappa, 0.0)
+    return af.Scene(scene.mesh, scene.material, fixed=scene.fixed_mask,
+                    activation=af.Activation(np.arange(scene.mesh.n_tets), value, "squeeze"))
+
+
 def test_activation_follows_a_load_curve():
-    """A Timed activation part: Scene.at(t) activates its elements by curve(t) times the
-    written activation, and each state solves to the closed form at that activation; a curve
-    that would take it to 1 or more is refused."""
+    """An activation control on a load curve: Scene.at(t) sets it to curve(t) times the
+    written value, and each state solves to the closed form at that activation; a curve that
+    would take it to 1 or more is refused."""
     from anisofem.physics.curves import LoadCurve, Timed
-    scene = bar(1, "neohookean", 10 * E, 0.4)
+    scene = active_bar(1, "neohookean", 10 * E, 0.4)
     ramp = LoadCurve([0.0, 1.0], [0.0, 1.0], name="ramp")
-    timed = scene.following([Timed(ramp, activation=np.full(scene.mesh.n_tets, 0.4))])
+    timed = scene.following([Timed(ramp, control="squeeze")])
     for t in (0.0, 0.25, 1.0, 2.0):   # the curve holds its last value after its last point
         now = timed.at(t)
         a = 0.4 * min(t, 1.0)
         assert np.allclose(now.elements.rest2, (1 - a) ** 2)
+        assert now.control_values.tolist() == [a]
         result = af.solve(now, rtol=1e-12)
         X, x = now.mesh.vertices, result.x
         far = X[:, 0] > X[:, 0].max() - 1e-12
@@ -165,29 +173,35 @@ def test_activation_follows_a_load_curve():
     assert rollout.converged
     tip = rollout.positions[:, :, 0].max(axis=1)
     assert tip[-1] < tip[1] < tip[0] + 1e-12   # the bar shortens as the activation ramps up
-    with pytest.raises(ValueError, match=r"timed\[0\].activation: its curve 'ramp' takes it "
-                                         r"outside \[0, 1\)"):
+    with pytest.raises(ValueError, match=r"timed\[0\].control: the curve 'ramp' takes "
+                                         r"activation 'squeeze' outside \[0, 1\)"):
         scene.following([Timed(LoadCurve([0.0, 1.0], [0.0, 3.0], name="ramp"),
-                               activation=np.full(scene.mesh.n_tets, 0.4))])
+                               control="squeeze")])
 
 
 def test_a_scene_file_puts_a_regions_activation_on_a_curve(tmp_path):
     from test_scenefile import scene_file, two_halves
     _, volumes = two_halves(tmp_path)
     text = ('mesh = "bar.msh"\n[material]\nfiber = [1, 0, 0]\nfiber_stiffness = 1e5\n'
-            '[regions.stiff]\nactivation = 0.3\nactivation_curve = "pulse"\n'
+            '[controls.squeeze]\nactivation = "stiff"\nvalue = 0.3\ncurve = "pulse"\n'
             '[curves.pulse]\ntimes = [0, 1, 2]\nvalues = [0, 1, 0]\n'
             '[[boundary]]\nwhere = "base"\nheld = true\n')
     scene = af.load_scene(scene_file(tmp_path, text))
+    assert scene.controls == ("squeeze",)
     assert np.allclose(scene.elements.rest2[volumes == 2], 0.49)   # statics: the factor 1
     for t, a in ((0.0, 0.0), (0.5, 0.15), (1.0, 0.3), (1.5, 0.15)):
         rest2 = scene.at(t).elements.rest2
         assert np.allclose(rest2[volumes == 2], (1 - a) ** 2) and (rest2[volumes == 1] == 1).all()
-    for bad, message in (('activation_curve = "pulse"', "no curve 'nowhere'"),):
+    for bad, good, message in (
+            ('curve = "pulse"', 'curve = "nowhere"', "controls.squeeze.curve: no curve "
+                                                     "'nowhere'"),
+            ('activation = "stiff"', 'activation = "hard"', "controls.squeeze.activation: the "
+                                                            "mesh has no physical volume 'hard'"),
+            ("value = 0.3", "value = 1.2", r"controls.squeeze.value: control 'squeeze': an "
+                                           r"activation must be in \[0, 1\)"),
+            ('activation = "stiff"', 'activation = "stiff"\npressure = "end"',
+             "controls.squeeze: give one of pressure"),
+            ("fiber_stiffness = 1e5\n", "fiber_stiffness = 0\n",
+             "controls: activation 'squeeze': 80 of its elements have no fibers")):
         with pytest.raises(ValueError, match=message):
-            af.load_scene(scene_file(tmp_path, text.replace(bad, 'activation_curve = "nowhere"'),
-                                     "bad.toml"))
-    with pytest.raises(ValueError, match="material.activation_curve: a region's activation"):
-        af.load_scene(scene_file(tmp_path, text.replace(
-            "fiber_stiffness = 1e5\n", 'fiber_stiffness = 1e5\nactivation_curve = "pulse"\n'),
-            "base.toml"))
+            af.load_scene(scene_file(tmp_path, text.replace(bad, good), "bad.toml"))

@@ -13,7 +13,10 @@ SCHEMA = {
         "regions": "[regions.NAME] tables, NAME a physical volume of the mesh file (its name, or "
                    "its number in quotes): [material] keys that change there",
         "boundary": "[[boundary]] tables, each a place (where) and what is done there",
-        "curves": "[curves.NAME] tables: load curves that boundary entries follow in time",
+        "controls": "[controls.NAME] tables: the scene's controls, named inputs a controller "
+                    "sets every step",
+        "curves": "[curves.NAME] tables: load curves that boundary entries and controls "
+                  "follow in time",
     },
     "material": {
         "law": f"the base law: {' or '.join(MODELS)} (default stvk)",
@@ -22,9 +25,8 @@ SCHEMA = {
         "density": "kg/m^3 (default 1000)",
         "fiber_stiffness": "kappa, Pa (default 0: no fiber term)",
         "activation": "the fibers' contraction a in [0, 1): their rest stretch is 1 - a "
-                      "(default 0: passive fibers); only where fiber_stiffness > 0",
-        "activation_curve": "in [regions.NAME]: the load curve the region's activation "
-                            "follows in time, a factor of activation (statics take it at 1)",
+                      "(default 0: passive fibers); only where fiber_stiffness > 0 (a "
+                      "contraction that changes in time: [controls.NAME])",
         "fiber": "the fiber direction: [dx, dy, dz]; {cell_data = NAME}, a 3-vector field per "
                  "tet of the mesh file (normalized, with a warning where not unit length); or "
                  "{helix = {...}}, wound about an axis",
@@ -55,6 +57,14 @@ SCHEMA = {
         "curve": "the name of the load curve its loads and motion follow in time (statics take "
                  "them as written)",
     },
+    "controls": {
+        "pressure": "a place, as a [[boundary]]'s where: the walls of a cavity, pushed by the "
+                    "control's value in Pa",
+        "activation": "a region, as [regions.NAME]'s NAME: its fibers contract by the "
+                      "control's value, in [0, 1) (the region needs fiber_stiffness > 0)",
+        "value": "the control's value (default 0), times its curve's factor where it has one",
+        "curve": "the name of the load curve its value follows in time (statics take it at 1)",
+    },
     "rotation": {
         "axis": "[ax, ay, az]",
         "origin": "[ox, oy, oz] m (default 0)",
@@ -72,6 +82,7 @@ def schema_markdown():
     """SCHEMA as the Markdown tables of docs/scenes.md."""
     titles = {"scene": "Top level", "material": "[material] and [regions.NAME]",
               "helix": "fiber = {helix = {...}}", "boundary": "[[boundary]]",
+              "controls": "[controls.NAME]",
               "rotation": "rotation = {...} of a [[boundary]]", "curves": "[curves.NAME]"}
     lines = []
     for kind, keys in SCHEMA.items():

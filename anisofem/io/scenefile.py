@@ -1,5 +1,6 @@
 """Scenes from files: a TOML scene file names a mesh file, the materials and fibers of its
-regions, what is held, moved and loaded on its named surfaces, and the loads' curves in time.
+regions, what is held, moved and loaded on its named surfaces, its controls (named pressures
+and fiber activations), and the curves loads and controls follow in time.
 
 Names come from the mesh file (Gmsh's physical volumes and surfaces); an unknown name is an
 error that lists the ones the file has, and an unknown key names the nearest valid one. The
@@ -15,6 +16,7 @@ import warnings
 
 import numpy as np
 
+from ..physics.controls import Activation
 from ..physics.curves import LoadCurve, Timed
 from ..physics.fibers import helix_directions, helix_frame, segments
 from ..physics.material import MODELS, Material
@@ -117,24 +119,26 @@ class _Reader:
             raise self.error("order", f"1 or 2, got {order!r}")
         self.mesh, self.tags = of_order(mesh, order), tags
         curves = self.curves(table.get("curves", {}))
-        material, parts = self.material(table, curves)
-        held, positions, timed, loads = self.boundaries(table, curves)
+        material = self.material(table)
+        held, positions, parts, loads = self.boundaries(table, curves)
+        pressures, activations, timed = self.controls(table.get("controls", {}), curves)
         parts += timed
         gravity = _vector(self, table["gravity"], "gravity") if "gravity" in table else None
         body = _vector(self, table["body_force"], "body_force") if "body_force" in table else None
         try:
             scene = Scene(self.mesh, material, fixed=held, fixed_positions=positions,
-                          gravity=gravity, body_force=body, pressure=loads["pressure"],
+                          gravity=gravity, body_force=body,
+                          pressure=loads["pressure"] + pressures, activation=activations,
                           nodal_force=loads["force"])
         except ValueError as err:
-            raise self.error("boundary", str(err)) from None
+            raise self.error("controls" if str(err).startswith(("activation", "controls"))
+                             else "boundary", str(err)) from None
         return scene.following(parts) if parts else scene
 
     # materials and fibers
 
-    def material(self, table, curves):
-        """(the Material of every tet: [material], then each region's changes; the Timed parts
-        of the activations that follow a curve)."""
+    def material(self, table):
+        """The Material of every tet: [material], then each region's changes."""
         m = self.mesh.n_tets
         base = table.get("material", {})
         _keys(self, base, "material", "material")
@@ -145,10 +149,6 @@ class _Reader:
         values |= {k: np.full(m, float(default[k]))
                    for k in ("young", "poisson", "density", "activation")}
         self.assign(values, base, np.ones(m, bool), "material")
-        timed = []
-        if "activation_curve" in base:
-            raise self.error("material.activation_curve", "a region's activation follows a "
-                                                          "curve: give it in [regions.NAME]")
         regions = table.get("regions", {})
         if not isinstance(regions, dict):
             raise self.error("regions", "expected [regions.NAME] tables")
@@ -158,18 +158,12 @@ class _Reader:
                 raise self.error(key, "expected a table of material keys")
             _keys(self, changes, "material", key)
             self.assign(values, changes, self.region(name, key), key)
-            if "activation_curve" in changes:
-                curve = self.curve_named(changes["activation_curve"], curves,
-                                         f"{key}.activation_curve")
-                part = np.where(self.region(name, key), values["activation"], 0.0)
-                timed.append(Timed(curve, activation=part))
         kappa = values["fiber_stiffness"]
         fiber = values["fiber"]
         fiber[kappa == 0] = default["fiber_direction"]  # unused where there is no fiber term
         try:
-            return (Material(values["young"], values["poisson"], values["density"], fiber, kappa,
-                             model=list(values["law"]), activation=values["activation"]),
-                    timed)
+            return Material(values["young"], values["poisson"], values["density"], fiber, kappa,
+                            model=list(values["law"]), activation=values["activation"])
         except ValueError as err:
             raise self.error("material", str(err)) from None
 
@@ -195,8 +189,6 @@ class _Reader:
                 values["law"][tets] = value
             elif name == "fiber":
                 values["fiber"][tets] = self.fiber(value, tets, where)
-            elif name == "activation_curve":
-                continue  # the region's Timed part (material)
             else:
                 values[name][tets] = _number(self, value, where)
 
@@ -335,6 +327,37 @@ class _Reader:
                 if curve is not None:
                     parts.append(Timed(curve, pressure=len(pressures) - 1))
         return held, positions, parts, {"force": force, "pressure": pressures}
+
+    def controls(self, table, curves):
+        """([controls.NAME] tables) -> (named Pressures, Activations, Timed parts of the
+        controls that follow a curve)."""
+        if not isinstance(table, dict):
+            raise self.error("controls", "expected [controls.NAME] tables")
+        pressures, activations, parts = [], [], []
+        for name, spec in table.items():
+            key = f"controls.{name}"
+            if not isinstance(spec, dict):
+                raise self.error(key, "expected a table: pressure or activation, and value")
+            _keys(self, spec, "controls", key)
+            kinds = [k for k in ("pressure", "activation") if k in spec]
+            if len(kinds) != 1:
+                raise self.error(key, "give one of pressure (a place: the cavity's walls) or "
+                                      "activation (a region: its fibers)")
+            value = _number(self, spec.get("value", 0.0), f"{key}.value")
+            if kinds == ["pressure"]:
+                faces = self.faces(spec["pressure"], f"{key}.pressure")
+                pressures.append(Pressure(faces, value, name=name))
+            else:
+                region = _string(self, spec["activation"], f"{key}.activation")
+                try:
+                    activations.append(Activation(self.region(region, f"{key}.activation"),
+                                                  value, name=name))
+                except ValueError as err:
+                    raise self.error(f"{key}.value", str(err)) from None
+            if "curve" in spec:
+                parts.append(Timed(self.curve_named(spec["curve"], curves, f"{key}.curve"),
+                                   control=name))
+        return pressures, activations, parts
 
     def curve_named(self, value, curves, key):
         """The LoadCurve a key names; SceneFileError listing the file's curves otherwise."""

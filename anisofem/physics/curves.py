@@ -2,8 +2,8 @@
 
 A LoadCurve is piecewise linear in time, constant before its first point and after its last.
 A Timed part is a load that follows a curve: nodal forces (n, 3) N, a pressure of the scene
-(its index in Scene.pressures), a motion of held components or the fibers' activation of some
-elements, each as written at the factor 1. Scene.at(t) is the scene with each part at factor
+(its index in Scene.pressures), a motion of held components or a control's value (its name in
+Scene.controls), each as written at the factor 1. Scene.at(t) is the scene with each part at factor
 curve(t).
 """
 from dataclasses import dataclass
@@ -45,10 +45,10 @@ class LoadCurve:
 class Timed:
     """A load that follows `curve`: force (n, 3) N, pressure (an index into Scene.pressures),
     motion, a function of the factor c giving the displacement (n, 3) m of the held
-    components (c times a displacement; a rotation by c times an angle), or activation (m,)
-    the fibers' activation of each element (0 where the part does not act)."""
+    components (c times a displacement; a rotation by c times an angle), or control (a name in
+    Scene.controls: its value as the scene has it, times c)."""
     curve: LoadCurve
     force: object = None
     pressure: object = None
     motion: object = None
-    activation: object = None
+    control: object = None

@@ -52,16 +52,22 @@ class Pressure:
         (TetMesh.faces_where selects them). Together they close a cavity, or their rim lies on
         held vertices or vertices sliding in planes normal to an axis (see the module).
     magnitude : p, Pa: positive inflates the cavity.
+    name : None (a load), or a name that makes the pressure one of the scene's controls
+        (anisofem.physics.controls): a controller sets it every step.
     """
 
-    def __init__(self, faces, magnitude):
+    def __init__(self, faces, magnitude, name=None):
         self.faces = as_index_array(faces, "pressure faces", shape=(None, 3))
         if self.faces.shape[0] == 0:
             raise ValueError("pressure faces: no face given")
         self.magnitude = as_scalar(magnitude, "pressure magnitude")
+        if name is not None and (not isinstance(name, str) or not name):
+            raise ValueError(f"pressure name: expected a non-empty string, got {name!r}")
+        self.name = name
 
     def __repr__(self):
-        return f"Pressure({self.faces.shape[0]} faces, {self.magnitude:g} Pa)"
+        named = f"{self.name!r}, " if self.name else ""
+        return f"Pressure({named}{self.faces.shape[0]} faces, {self.magnitude:g} Pa)"
 
 
 class CavityLoad:
@@ -70,7 +76,8 @@ class CavityLoad:
     Attributes: nodes (k, s) each face's nodes (3 corners, then the midside nodes of its edges
     (0,1), (1,2), (2,0) on quadratic tets), ordered outward from the body; owner (k,) the tet
     each face bounds and local (k, s) the face's nodes among that tet's; scale (3,) and origin
-    (3,) the field F = scale (x - origin); magnitude p, Pa; rest_volume V(X), m^3.
+    (3,) the field F = scale (x - origin); magnitude p, Pa; name (a control's, or None);
+    rest_volume V(X), m^3.
     """
 
     def __init__(self, mesh, pressure, fixed_mask):
@@ -83,7 +90,7 @@ class CavityLoad:
         cells = mesh.cells[self.owner]
         self.local = np.argmax(cells[:, None, :] == self.nodes[:, :, None], axis=2)
         self.scale, self.origin = _closing_field(mesh, corners, fixed_mask)
-        self.magnitude = pressure.magnitude
+        self.magnitude, self.name = pressure.magnitude, pressure.name
         points, self.weights = RULES[mesh.order]
         self.shapes, self.slopes = _triangle_shapes(mesh.order, points)
         self._positions = {}   # per Hessian layout: where each face block lands (add_hessian)

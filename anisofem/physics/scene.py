@@ -13,6 +13,7 @@ from .kernels import MAX_NODES
 from .densities import STVK
 from .material import Material
 from .mesh import TetMesh, block_coloring
+from .controls import Activation, control_mapping, control_number
 from .curves import Timed
 from .pressure import CavityLoad, Pressure
 
@@ -76,7 +77,13 @@ class Scene:
         TetMesh.faces_where).
     pressure : an anisofem.Pressure or a sequence of them: uniform pressures on the walls of
         cavities, follower loads whose potential is -p times the change of the enclosed volume
-        (anisofem.physics.pressure); `pressures` holds them bound to the mesh.
+        (anisofem.physics.pressure); `pressures` holds them bound to the mesh. A named one is a
+        control.
+    activation : an anisofem.Activation or a sequence of them: the fibers' activation of sets
+        of elements, each a control (anisofem.physics.controls); `activations` holds them.
+
+    Controls (`controls`, their names; `control_values`) are set by with_controls, by load
+    curves (following) and by simulate's `controls`.
 
     Vertices that no tet uses are held in place. The other loads are dead loads: the external
     force vector is constant, f_ext (n, 3), and enters the potential as -f_ext . x.
@@ -84,7 +91,7 @@ class Scene:
 
     def __init__(self, mesh, material=None, *, fixed=None, fixed_positions=None, gravity=None,
                  body_force=None, nodal_force=None, traction=None, traction_faces=None,
-                 pressure=None):
+                 pressure=None, activation=None):
         if not isinstance(mesh, TetMesh):
             raise TypeError(f"mesh: expected an anisofem.TetMesh, got {type(mesh).__name__}")
         material = Material.paper() if material is None else material
@@ -114,6 +121,8 @@ class Scene:
             f += traction_force(mesh, traction, traction_faces)
         self.external_force = f
         self.pressures = _cavity_loads(mesh, pressure, self.fixed_mask)
+        self.activations = _activations(activation, self._params)
+        _check_names(self.pressures, self.activations)
         self.timed = ()
         for arr in (self.fixed_mask, self.fixed_positions, self.masses, self.external_force,
                     self.gravity):
@@ -217,7 +226,37 @@ class Scene:
 
     @cached_property
     def elements(self):
-        return element_data(self.mesh, self._params)
+        data = element_data(self.mesh, self._params)
+        return _activated(data, self.activations) if self.activations else data
+
+    @property
+    def controls(self):
+        """The names of the scene's controls: its named pressures, then its activations."""
+        return tuple(p.name for p in self.pressures if p.name) + tuple(
+            a.name for a in self.activations)
+
+    @property
+    def control_values(self):
+        """(k,) the controls' values now, in the order of `controls` (Pa, activation)."""
+        return np.array([p.magnitude for p in self.pressures if p.name]
+                        + [a.value for a in self.activations], dtype=float)
+
+    def with_controls(self, values):
+        """The same scene with controls set: values, a mapping name -> value (the others
+        keep theirs) or one value per control in the order of `controls`. Pressures in Pa,
+        activations in [0, 1). Shares what held_at shares; ValueError naming the control
+        for an unknown name, a value that is not a finite number or an activation outside
+        [0, 1)."""
+        values = control_mapping(values, self.controls)
+        moved = self.held_at(self.fixed_positions)
+        moved.pressures = tuple(
+            p.at(control_number(values[p.name], p.name)) if p.name in values else p
+            for p in self.pressures)
+        moved.activations = tuple(a.at(values[a.name]) if a.name in values else a
+                                  for a in self.activations)
+        if any(a.name in values for a in self.activations):
+            moved.elements = _activated(self.elements, moved.activations)
+        return moved
 
     def layout(self, kind):
         """The Hessian layout over the free DOFs: kind "csr", "dense" or "banded" (cached)."""
@@ -308,6 +347,7 @@ class Scene:
             getattr(self, shared)
         moved = copy.copy(self)
         moved.material, moved._params = material, params
+        moved.activations = _activations(self.activations, params)
         for cached in ("elements", "full_layout", "force_unit", "gradient_roundoff",
                        "neohookean"):
             moved.__dict__.pop(cached, None)
@@ -316,8 +356,9 @@ class Scene:
     def following(self, timed):
         """The same scene with loads that follow load curves: timed, a sequence of
         anisofem.physics.curves.Timed, each a part of this scene's loads as written (its force in
-        external_force, its pressure in pressures, its motion in fixed_positions).
-        Scene.at(t) scales each part by its curve. Shares what held_at shares."""
+        external_force, its pressure in pressures, its motion in fixed_positions, its control's
+        value in control_values). Scene.at(t) scales each part by its curve. Shares what
+        held_at shares."""
         timed = tuple(timed)
         n = self.mesh.n_vertices
         for k, part in enumerate(timed):
@@ -329,20 +370,25 @@ class Scene:
                                  f"scene's {len(self.pressures)}")
             if part.force is not None:
                 as_float_array(part.force, f"timed[{k}].force", shape=(n, 3))
-            if part.activation is not None:
-                a = as_float_array(part.activation, f"timed[{k}].activation",
-                                   shape=(self.mesh.n_tets,))
-                if ((a > 0) & (self.elements.kappa == 0)).any():
-                    raise ValueError(f"timed[{k}].activation: it activates elements with no "
-                                     f"fibers (fiber_stiffness 0): only fibers contract")
-                top = a.max() * max(part.curve.values.max(), 0.0)
-                if part.curve.values.min() < 0 or not top < 1.0:
-                    raise ValueError(f"timed[{k}].activation: its curve {part.curve.name!r} "
-                                     f"takes it outside [0, 1) (up to {top:g}): the fibers' "
-                                     f"rest stretch must stay above 0")
+            if part.control is not None:
+                self._check_timed_control(part, f"timed[{k}].control")
         moved = self.held_at(self.fixed_positions)
         moved.timed = timed
         return moved
+
+    def _check_timed_control(self, part, where):
+        """ValueError unless part.control names a control, and an activation's curve keeps it
+        in [0, 1)."""
+        if part.control not in self.controls:
+            raise ValueError(f"{where}: no control {part.control!r}; the scene has: "
+                             f"{', '.join(self.controls) or 'none'}")
+        written = dict(zip(self.controls, self.control_values))[part.control]
+        if part.control in {a.name for a in self.activations}:
+            top = written * max(part.curve.values.max(), 0.0)
+            if part.curve.values.min() < 0 or not top < 1.0:
+                raise ValueError(f"{where}: the curve {part.curve.name!r} takes activation "
+                                 f"{part.control!r} outside [0, 1) (up to {top:g}): the "
+                                 f"fibers' rest stretch must stay above 0")
 
     def at(self, t):
         """The scene at time t, s: each timed part (following) at its curve's value at t;
@@ -352,7 +398,8 @@ class Scene:
         force = self.external_force.copy()
         held = self.fixed_positions.copy()
         pressures = list(self.pressures)
-        activation = None
+        written = dict(zip(self.controls, self.control_values))
+        controls = {}
         for part in self.timed:
             c = part.curve(t) - 1.0
             if part.force is not None:
@@ -361,17 +408,12 @@ class Scene:
                 held += (part.motion(c + 1.0) - part.motion(1.0)) * self.fixed_mask
             if part.pressure is not None:
                 pressures[part.pressure] = pressures[part.pressure].scaled(c + 1.0)
-            if part.activation is not None:
-                if activation is None:
-                    activation = self._params["activation"].copy()
-                activation += c * np.asarray(part.activation)
+            if part.control is not None:
+                controls[part.control] = (c + 1.0) * written[part.control]
         moved = self.held_at(held)
-        if activation is not None:
-            moved = moved.with_material(self.material.replaced(
-                activation=np.clip(activation, 0.0, None)))
         force.setflags(write=False)
         moved.external_force, moved.pressures, moved.timed = force, tuple(pressures), ()
-        return moved
+        return moved.with_controls(controls) if controls else moved
 
     @cached_property
     def neohookean(self):
@@ -420,6 +462,45 @@ def _to_nodes(mesh, per_tet, shares):
     out = np.zeros(mesh.n_vertices)
     np.add.at(out, mesh.cells.ravel(), np.outer(per_tet, shares).ravel())
     return out
+
+
+def _activations(activation, params):
+    """The Activations (a tuple, elements as indices) of `activation`: None, an Activation or a
+    sequence of them, on elements with fibers (params: Material.per_element's), none shared."""
+    if activation is None:
+        return ()
+    given = (activation,) if isinstance(activation, Activation) else tuple(activation)
+    out, owner = [], np.full(params["kappa"].size, -1)
+    for a in given:
+        if not isinstance(a, Activation):
+            raise TypeError(f"activation: expected anisofem.Activation objects, got "
+                            f"{type(a).__name__}")
+        a = a.bound(params["kappa"].size, params["kappa"], params["activation"])
+        shared = a.elements[owner[a.elements] >= 0]
+        if shared.size:
+            raise ValueError(f"activation {a.name!r}: {shared.size} of its elements are "
+                             f"activation {out[owner[shared[0]]].name!r}'s too (first "
+                             f"{int(shared[0])}); an element follows one activation")
+        owner[a.elements] = len(out)
+        out.append(a)
+    return tuple(out)
+
+
+def _activated(elements, activations):
+    """ElementData elements with the fibers' squared rest stretch set by each Activation."""
+    rest2 = elements.rest2.copy()
+    for a in activations:
+        rest2[a.elements] = (1.0 - a.value) ** 2
+    return replace(elements, rest2=rest2)
+
+
+def _check_names(pressures, activations):
+    """ValueError where two controls share a name."""
+    names = [p.name for p in pressures if p.name] + [a.name for a in activations]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"controls: the name {twice[0]!r} is given to two controls; each "
+                         f"needs its own")
 
 
 def _cavity_loads(mesh, pressure, fixed_mask):

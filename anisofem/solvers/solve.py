@@ -7,6 +7,7 @@ from . import methods
 from .._validate import as_count, as_scalar
 from .continuation import ramp, worth_ramping
 from .newton import NewtonResult, minimize, report
+from ..physics.curves import LoadCurve
 from ..physics.potential import Potential, check_positions
 from ..physics.scene import check_scene
 from .stability import stability
@@ -202,26 +203,31 @@ class Stepper:
 
 
 def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, method="auto",
-             warn=True, **options):
+             warn=True, controls=None, **options):
     """Roll out `steps` backward-Euler steps from x0 (default rest), v0 (default 0).
 
     method, options: how each step is solved (see step); one Method serves the whole rollout
     (a Stepper), so "reuse" and "lbfgs" keep their factorizations and curvature pairs from
     step to step. A scene whose loads follow load curves (Scene.following) is taken at the end
-    of each step, Scene.at((k + 1) dt). callback(k, StepResult) is called after each step. Stops early, with
-    completed=False, at the first step whose solve fails (a step that spends a fixed iteration
-    budget does not fail); what came before is kept.
+    of each step, Scene.at((k + 1) dt). controls: the scene's controls in time, over what
+    its curves give them: a callable t -> values (a mapping name -> value, or one value per
+    control; a controller), or a mapping name -> anisofem.LoadCurve or (times, values) whose
+    values are the control's (Pa, activation); each step takes them at its end.
+    callback(k, StepResult) is called after each step. Stops early, with completed=False, at
+    the first step whose solve fails (a step that spends a fixed iteration budget does not
+    fail); what came before is kept.
     """
     check_scene(scene)
     steps = as_count(steps, "steps")
-    start = scene.at(0.0)
+    set_controls = controls_in_time(scene, controls)
+    start = set_controls(scene.at(0.0), 0.0)
     x = start.with_fixed(start.initial_positions() if x0 is None
                          else check_positions(scene, x0, "x0"))
     v = np.zeros_like(x) if v0 is None else check_positions(scene, v0, "v0")
     stepper = Stepper(scene, dt, method, warn, **options)
     xs, vs, results = [x], [v], []
     for k in range(steps):
-        stepper.scene = scene.at((k + 1) * dt)
+        stepper.scene = set_controls(scene.at((k + 1) * dt), (k + 1) * dt)
         res = stepper(x, v)
         results.append(res)
         if res.newton.failed:
@@ -232,3 +238,38 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, method="aut
         if callback is not None:
             callback(k, res)
     return Rollout(np.stack(xs), np.stack(vs), results, len(xs) == steps + 1)
+
+
+def controls_in_time(scene, controls):
+    """set(scene_at_t, t) -> that scene with simulate's `controls` at time t (the scene as it
+    is where controls is None); its values at t = 0 checked here, so that an unknown name or
+    a bad value fails before the first step."""
+    if controls is None:
+        return lambda at, t: at
+    if callable(controls):
+        def values(t):
+            return controls(t)
+    elif isinstance(controls, dict):
+        unknown = [k for k in controls if k not in scene.controls]
+        if unknown:
+            raise ValueError(f"controls: no control {unknown[0]!r}; the scene has: "
+                             f"{', '.join(scene.controls) or 'none'}")
+        curves = {name: _control_curve(name, c) for name, c in controls.items()}
+
+        def values(t):
+            return {name: curve(t) for name, curve in curves.items()}
+    else:
+        raise TypeError(f"controls: expected a callable t -> values or a mapping name -> "
+                        f"curve, got {type(controls).__name__}")
+    scene.with_controls(values(0.0))
+    return lambda at, t: at.with_controls(values(t))
+
+
+def _control_curve(name, curve):
+    """A control's LoadCurve from a LoadCurve or (times, values)."""
+    if isinstance(curve, LoadCurve):
+        return curve
+    if not isinstance(curve, (tuple, list)) or len(curve) != 2:
+        raise ValueError(f"controls: {name}: expected an anisofem.LoadCurve or (times, "
+                         f"values), got {curve!r}")
+    return LoadCurve(*curve, name=f"controls: {name}")
