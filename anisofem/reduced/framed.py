@@ -300,7 +300,7 @@ class FramedModel:
         """rollout()'s FramedStates (k + 1,), and whether every step converged."""
         now = before = self.rest()
         states, ok, k = [now], True, 0
-        for force, steps in phases:
+        for force, steps, *_ in phases:   # controls: the framed model takes none
             for _ in range(steps):
                 k += 1
                 at = None if base is None else base(k * dt)
@@ -324,7 +324,7 @@ class FramedModel:
         m, k = self._joint_elements.tets.shape
         own = self._joint_elements.subset(np.arange(m), np.arange(m * k).reshape(m, k))
         blocks = []
-        for _, force, base in unseen_cases(self.scene, self.loads, CUBATURE_CASES,
+        for _, force, base, _ in unseen_cases(self.scene, self.loads, CUBATURE_CASES,
                                            CUBATURE_SEED):
             states, _ = self._states(((force, HOLD_STEPS), (zero, HOLD_STEPS)), VALIDATION_DT,
                                      base)
@@ -538,9 +538,13 @@ class FramedModel:
 
 def refusal(scene):
     """Why the framed model cannot take a StVK scene (a message naming the field), or None:
-    pressures (a cavity's volume spans domains), and nodes held along some axes only."""
+    pressures (a cavity's volume spans domains), activated fibers and controls, and nodes held
+    along some axes only."""
     if scene.pressures:
         return "scene: the framed model does not take pressures; use ReducedModel"
+    if scene.activations or (scene.elements.rest2 != 1.0).any():
+        return ("scene: the framed model takes passive fibers (no activation, no activation "
+                "control); use ReducedModel")
     partial = scene.fixed_mask.any(axis=1) & ~scene.fixed_mask.all(axis=1)
     if partial.any():
         return (f"fixed: the framed model holds whole nodes; {int(partial.sum())} nodes are "

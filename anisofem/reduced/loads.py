@@ -7,7 +7,8 @@ validate it.
 A Drag is a force of up to `magnitude` N on a set of vertices, spread over them in proportion
 to their mass (a hand or a hook grabbing a region, a controller's actuator), in any direction
 or in given ones. `cone` lets the scene's gravity turn by up to that many degrees (a body
-carried around). A Carry moves the held vertices rigidly (the framed model's base): a turn,
+carried around). `controls` gives the range of each of the scene's controls a model must
+follow: {"inflate": (0.0, 20e3)}. A Carry moves the held vertices rigidly (the framed model's base): a turn,
 a move, and the shortest time either takes. Without a declaration (default_loads) a model
 handles the scene's own loads and a drag of half the body's weight at each free end.
 """
@@ -135,10 +136,12 @@ class Carry:
 class Loads:
     """What a reduced model must handle beyond the scene's own dead loads: drags (Drag, any
     number), a gravity cone (degrees, 0 to 180: the scene's gravity may turn by up to this
-    angle) and a carry (Carry: the held vertices moved rigidly; the framed model only)."""
+    angle), a carry (Carry: the held vertices moved rigidly; the framed model only) and the
+    ranges of the scene's controls (a mapping name -> (low, high), held as sorted pairs)."""
     drags: tuple = field(default_factory=tuple)
     cone: float = 0.0
     carry: Carry = None
+    controls: tuple = ()
 
     def __post_init__(self):
         drags = tuple(self.drags)
@@ -151,6 +154,11 @@ class Loads:
         object.__setattr__(self, "cone", float(self.cone))
         if self.carry is not None and not isinstance(self.carry, Carry):
             raise TypeError(f"carry: expected a Carry, got {type(self.carry).__name__}")
+        ranges = dict(self.controls)
+        for name, span in ranges.items():
+            low, high = _span(name, span)
+            ranges[name] = (low, high)
+        object.__setattr__(self, "controls", tuple(sorted(ranges.items())))
 
     def check(self, scene):
         """ValueError unless every drag names vertices of the scene's mesh of which at least one
@@ -172,12 +180,32 @@ class Loads:
                              f"has no gravity")
         if self.carry is not None and not scene.fixed_mask.any():
             raise ValueError("carry: the scene holds no vertex to carry")
+        activations = {a.name for a in scene.activations}
+        for name, (low, high) in self.controls:
+            if name not in scene.controls:
+                raise ValueError(f"controls: no control {name!r}; the scene has: "
+                                 f"{', '.join(scene.controls) or 'none'}")
+            if name in activations and not 0.0 <= low < high < 1.0:
+                raise ValueError(f"controls: {name!r} is an activation, its range must lie in "
+                                 f"[0, 1), got ({low:g}, {high:g})")
 
 
 def _real(value):
     """Whether value is a finite real number (not a bool)."""
     return (isinstance(value, (int, float, np.integer, np.floating))
             and not isinstance(value, bool) and math.isfinite(value))
+
+
+def _span(name, span):
+    """(low, high) of a control's declared range; ValueError naming it otherwise."""
+    try:
+        low, high = (float(v) for v in span)
+    except (TypeError, ValueError):
+        raise ValueError(f"controls: {name!r}: expected a range (low, high), got "
+                         f"{span!r}") from None
+    if not (math.isfinite(low) and math.isfinite(high) and low < high):
+        raise ValueError(f"controls: {name!r}: expected finite low < high, got {span!r}")
+    return low, high
 
 
 def _unit_rows(directions):
@@ -232,12 +260,15 @@ def _cone_direction(g, angle, azimuth):
 
 
 def build_cases(scene, loads):
-    """The static load cases a basis is fitted to, as chains of extra nodal forces (n, 3), N,
-    over the scene's own: each drag along each candidate direction at SHARES of its magnitude
-    (a chain, solved in order), and gravity turned to CONE_DIRECTIONS points on the cone's rim
-    and on the cone at half its angle (one-case chains); a carry widens the cone to its turn
-    and adds its inertia (Carry.inertia) at SHARES."""
-    chains = [[s * d.force(scene, direction) for s in SHARES]
+    """The static load cases a basis is fitted to, as chains of (extra nodal force (n, 3) N
+    over the scene's own, controls {name: value} over the scene's own): each drag along each
+    candidate direction at SHARES of its magnitude (a chain, solved in order); gravity turned
+    to CONE_DIRECTIONS points on the cone's rim and on the cone at half its angle (one-case
+    chains); a carry widens the cone to its turn and adds its inertia (Carry.inertia) at
+    SHARES; each declared control from its written value toward each end of its range, and
+    each pair of them together toward each pair of ends, at SHARES."""
+    none = {}
+    chains = [[(s * d.force(scene, direction), none) for s in SHARES]
               for d in loads.drags for direction in d.candidate_directions]
     cone = loads.cone
     if loads.carry is not None:
@@ -245,13 +276,24 @@ def build_cases(scene, loads):
         # body force of up to its largest acceleration, any direction
         if np.any(scene.gravity):
             cone = max(cone, loads.carry.turn)
-        chains += [[s * f for s in SHARES] for f in loads.carry.inertia(scene)]
+        chains += [[(s * f, none) for s in SHARES] for f in loads.carry.inertia(scene)]
     if cone > 0:
         for angle in (cone, cone / 2):
             for k in range(CONE_DIRECTIONS):
                 direction = _cone_direction(scene.gravity, math.radians(angle),
                                             2 * math.pi * k / CONE_DIRECTIONS)
-                chains.append([gravity_change(scene, direction)])
+                chains.append([(gravity_change(scene, direction), none)])
+    written = dict(zip(scene.controls, scene.control_values))
+    zero = np.zeros((scene.mesh.n_vertices, 3))
+    away = {name: [end for end in span if end != written[name]]
+            for name, span in loads.controls}
+    names = list(away)
+    ends = [{name: end} for name in names for end in away[name]]
+    ends += [{a: x, b: y} for i, a in enumerate(names) for b in names[i + 1:]
+             for x in away[a] for y in away[b]]
+    for end in ends:
+        chains.append([(zero, {name: written[name] + s * (value - written[name])
+                               for name, value in end.items()}) for s in SHARES])
     return chains
 
 
@@ -260,8 +302,9 @@ def unseen_cases(scene, loads, count, seed=0):
     none of the build's: a random drag along a random direction (uniform on the sphere, or one
     of its declared directions) at SMALLEST_UNSEEN to 1 of its magnitude, with gravity turned
     to a random direction within the cone, and with a carry, the held vertices carried along
-    a random axis and direction at SMALLEST_UNSEEN to 1 of its turn and move. Returns
-    [(drag index or None, force (n, 3), N, base (t -> (3, 4)) or None)]."""
+    a random axis and direction at SMALLEST_UNSEEN to 1 of its turn and move, and each
+    declared control at a uniform draw from its range. Returns [(drag index or None, force
+    (n, 3), N, base (t -> (3, 4)) or None, controls {name: value})]."""
     rng = np.random.default_rng(seed)
     cases = []
     for _ in range(count):
@@ -280,7 +323,9 @@ def unseen_cases(scene, loads, count, seed=0):
             angle = math.radians(loads.cone) * math.sqrt(rng.uniform())
             f += gravity_change(scene, _cone_direction(scene.gravity, angle,
                                                        rng.uniform(0, 2 * math.pi)))
-        cases.append((which, f, _drawn_carry(scene, loads.carry, rng)))
+        base = _drawn_carry(scene, loads.carry, rng)
+        controls = {name: float(rng.uniform(low, high)) for name, (low, high) in loads.controls}
+        cases.append((which, f, base, controls))
     return cases
 
 

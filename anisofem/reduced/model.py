@@ -32,6 +32,8 @@ from .display import interpolate
 from .loads import Loads, default_loads, unseen_cases
 from .snapshots import static_states, principal_directions
 from .polynomial import build_bytes, polynomial, with_pressure
+from .controls import (control_parts, control_responses, control_values, controlled,
+                       passive)
 
 #: Default number of vibration modes; the basis holds them and their m (m + 1) / 2 modal
 #: derivatives, less dependent directions (6 modes: r = 27).
@@ -87,10 +89,12 @@ class ReducedModel:
 
     Parameters
     ----------
-    scene : the Scene (mesh, material, fixed vertices, loads). The basis moves its initial
-        positions x0, its external force is projected on the basis and its pressures enter
-        the polynomial (exact: a cavity's volume is cubic in the positions). Loads on load
-        curves are taken as written.
+    scene : the Scene (mesh, material, fixed vertices, loads, controls). The basis moves its
+        initial positions x0, its external force is projected on the basis and its pressures
+        and activated fibers enter the polynomial (exact: a cavity's volume is cubic in the
+        positions, an activation adds a quadratic). Its controls (named pressures,
+        activations) keep their parts apart (anisofem.reduced.controls): step and solve take
+        their values. Loads on load curves are taken as written.
     modes : vibration modes m of the rest Hessian with the lumped mass (default MODES).
     derivatives : add the modes' m (m + 1) / 2 modal derivatives (default: when snapshots is
         0). Linear modes alone do not follow large rotations.
@@ -109,7 +113,9 @@ class ReducedModel:
 
     Attributes: basis (3n, r) over all vertex components (0 on fixed ones) in m per unit of q,
     with basis^T M basis = I; frequencies (m,) of the vibration modes, Hz; polynomial (the
-    reduced energy); external (r,) the scene's projected load, N; loads (the Loads, or None);
+    reduced energy, the controls at 0); parts (anisofem.reduced.controls.ControlPart, one per
+    control); controls (their names); external (r,) the scene's projected load, N; loads (the
+    Loads, or None);
     snapshots (a SnapshotReport, or None); fitted (how many of the r directions are fitted to
     the loads); build_seconds (basis and polynomial, with the snapshots' solves even where
     another model of the scene solved them); validation (a Validation, or None).
@@ -150,9 +156,11 @@ class ReducedModel:
         factor = spla.splu(K)
         omega2, phi = _basis.vibration_modes(K, factor, mass, modes)
         self.frequencies = np.sqrt(np.maximum(omega2, 0.0)) / (2.0 * math.pi)
-        columns = [phi]
+        responses = control_responses(scene, self.x0, factor, free)
+        columns = [phi, responses]
         if derivatives:
-            columns.append(_basis.modal_derivatives(potential, self.x0, layout, factor, phi,
+            both = _basis.mass_orthonormal(np.hstack(columns), mass)
+            columns.append(_basis.modal_derivatives(potential, self.x0, layout, factor, both,
                                                     free))
         U = _basis.mass_orthonormal(np.hstack(columns), mass)
         credit = 0.0  # the static solves' time where another model of this scene ran them
@@ -166,8 +174,7 @@ class ReducedModel:
         need = build_bytes(U.shape[1], scene.elements.weights.size)
         say(f"the energy's polynomial in r = {U.shape[1]} coordinates (about "
             f"{need / 2 ** 30:.2g} GiB at its peak; its quartic grows as r^4)")
-        self.polynomial = with_pressure(polynomial(scene.elements, self.x0, self.basis),
-                                        scene.pressures, self.x0, self.basis)
+        self._energy_polynomial(scene)
         self.external = self.project(scene.external_force)
         self.build_seconds = time.perf_counter() - t0 + credit
         if validate:
@@ -193,11 +200,30 @@ class ReducedModel:
         moved.scene = self.scene.with_material(material)
         if (moved.scene.elements.model != STVK).any():
             raise ValueError("material: the reduced model needs the StVK base material")
-        moved.polynomial = with_pressure(polynomial(moved.scene.elements, self.x0, self.basis),
-                                         moved.scene.pressures, self.x0, self.basis)
+        moved._energy_polynomial(moved.scene)
         moved.validation = None
         moved.__dict__.pop("_stiffness_parts", None)  # reduced.sensitivity's, of the old one
         return moved
+
+    def _energy_polynomial(self, scene):
+        """Set polynomial (the energy with the controls at 0) and parts (each control's)."""
+        unset = passive(scene)
+        self.polynomial = with_pressure(polynomial(unset.elements, self.x0, self.basis),
+                                        [p for p in unset.pressures if not p.name], self.x0,
+                                        self.basis)
+        self.parts = control_parts(scene, self.x0, self.basis)
+        self.controls = tuple(p.name for p in self.parts)
+
+    def control_values(self, values=None):
+        """(k,) the controls' values: as the scene wrote them, replaced by values (a mapping
+        name -> value or one value per control, in the order of `controls`)."""
+        return control_values(self.parts, values)
+
+    def polynomial_at(self, values=None):
+        """The energy's Polynomial with the controls at values (control_values)."""
+        if not self.parts:
+            return self.polynomial
+        return controlled(self.polynomial, self.parts, self.control_values(values))
 
     def validate(self, cases=None, seed=0):
         """The model against the full FEM on cases it was not built from (a Validation): with
@@ -224,12 +250,14 @@ class ReducedModel:
 
     def rollout(self, phases, dt):
         """Positions (k + 1, n, 3) from rest through phases ((extra nodal force (n, 3) N or
-        None, steps), ...) of dt s, and whether every step converged."""
+        None, steps[, controls {name: value}]), ...) of dt s, and whether every step
+        converged."""
         q, w = np.zeros(self.r), np.zeros(self.r)
         xs, ok = [self.positions(q)], True
-        for force, steps in phases:
+        for force, steps, *controls in phases:
             for _ in range(steps):
-                q, w, report = self.step(q, w, dt, force=force)
+                q, w, report = self.step(q, w, dt, force=force,
+                                         controls=controls[0] if controls else None)
                 ok &= report.converged
                 xs.append(self.positions(q))
         return np.array(xs), ok
@@ -254,41 +282,46 @@ class ReducedModel:
         f = as_float_array(force, "force", shape=(self.scene.mesh.n_vertices, 3))
         return self.basis.T @ f.ravel()
 
-    def energy(self, q):
-        """The elastic energy V(q), J."""
-        return self.polynomial.energy(q)
+    def energy(self, q, controls=None):
+        """The energy V(q), J: elastic, with the pressures' and activations' (controls: see
+        control_values)."""
+        return self.polynomial_at(controls).energy(q)
 
-    def force(self, q, hessian=False):
-        """dV/dq (r,) in N (U^T of the full elastic gradient at x0 + U q), and with
-        hessian=True also d2V/dq2 (r, r) in N/m."""
-        return self.polynomial.gradient(q, hessian)
+    def force(self, q, hessian=False, controls=None):
+        """dV/dq (r,) in N (U^T of the full gradient of the elastic and pressure energy at
+        x0 + U q), and with hessian=True also d2V/dq2 (r, r) in N/m."""
+        return self.polynomial_at(controls).gradient(q, hessian)
 
-    def solve(self, force=None, q0=None, rtol=1e-8, max_iter=50):
+    def solve(self, force=None, q0=None, rtol=1e-8, max_iter=50, controls=None):
         """The static equilibrium under the scene's loads plus nodal forces `force` (n, 3), N,
-        from q0 (default 0): returns (q, NewtonReport)."""
+        with controls (see control_values), from q0 (default 0): returns (q, NewtonReport)."""
         q = np.zeros(self.r) if q0 is None else as_float_array(q0, "q0", shape=(self.r,))
         load = self._load(force)
-        return self._newton(load, q, None, 0.0, rtol * _norm(load), rtol, max_iter)
+        return self._newton(self.polynomial_at(controls), load, q, None, 0.0,
+                            rtol * _norm(load), rtol, max_iter)
 
-    def step(self, q, v, dt, force=None, rtol=1e-8, max_iter=50):
+    def step(self, q, v, dt, force=None, rtol=1e-8, max_iter=50, controls=None):
         """One backward-Euler step of dt s from the reduced state (q, v) under the scene's
-        loads plus nodal forces `force` (n, 3), N: returns (q_next, v_next, NewtonReport)."""
+        loads plus nodal forces `force` (n, 3), N, with the controls at the step's end set to
+        `controls` (a mapping name -> value or one value per control; None: as the scene
+        wrote them): returns (q_next, v_next, NewtonReport)."""
         if not dt > 0:
             raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
         q_hat = q + dt * v
         load = self._load(force)
-        q_next, report = self._newton(load, q_hat.copy(), q_hat, 1.0 / dt ** 2,
-                                      rtol * (_norm(load) + _norm(v) / dt), rtol, max_iter)
+        q_next, report = self._newton(self.polynomial_at(controls), load, q_hat.copy(), q_hat,
+                                      1.0 / dt ** 2, rtol * (_norm(load) + _norm(v) / dt),
+                                      rtol, max_iter)
         return q_next, (q_next - q) / dt, report
 
     def _load(self, force):
         return self.external if force is None else self.external + self.project(force)
 
-    def _newton(self, load, q, q_hat, inertia, tolerance, rtol, max_iter):
-        """Minimize V(q) - load . q + inertia |q - q_hat|^2 / 2 from q (inertia 1/dt^2, or 0
-        for statics) to a gradient norm of tolerance + rtol |dV/dq(q)| (N: rtol times the
-        problem's force size) or the round-off floor (anisofem.reduced.kernels.newton)."""
-        P = self.polynomial
+    def _newton(self, P, load, q, q_hat, inertia, tolerance, rtol, max_iter):
+        """Minimize V(q) - load . q + inertia |q - q_hat|^2 / 2, V the Polynomial P, from q
+        (inertia 1/dt^2, or 0 for statics) to a gradient norm of tolerance + rtol |dV/dq(q)|
+        (N: rtol times the problem's force size) or the round-off floor
+        (anisofem.reduced.kernels.newton)."""
         q_hat = q if q_hat is None else q_hat
         q, iterations, residual, status = kernels.newton(
             P.c1, P.C2, P.S3.reshape(self.r ** 2, self.r), P.W4, load, q,
@@ -304,17 +337,18 @@ _MESSAGES = {kernels.CONVERGED: "converged", kernels.SPENT: "{} iterations spent
 
 def validate_rollouts(model, drawn, cases):
     """A reduced model's Validation over rollouts of the first `cases` of `drawn` [(drag index or
-    None, extra force (n, 3), base (t -> (3, 4)) or None)] whose full rollout turns no element
-    inside out: `model` has scene, x0, loads and rollout(phases, dt[, base]) -> (positions
-    (k + 1, n, 3), converged). Displacements are taken from where the base carries the rest
-    shape."""
+    None, extra force (n, 3), base (t -> (3, 4)) or None, controls {name: value})] whose full
+    rollout turns no element inside out (each case's loads and controls held, then released to
+    the scene's own): `model` has scene, x0, loads and rollout(phases, dt[, base]) ->
+    (positions (k + 1, n, 3), converged). Displacements are taken from where the base carries
+    the rest shape."""
     tip_error = field_error = seconds = 0.0
     converged, used, inverted = True, 0, 0
     zero = np.zeros_like(model.x0)
-    for which, force, base in drawn:
+    for which, force, base, controls in drawn:
         if used == cases:
             break
-        phases = ((force, HOLD_STEPS), (zero, HOLD_STEPS))
+        phases = ((force, HOLD_STEPS, controls), (zero, HOLD_STEPS, {}))
         t0 = time.perf_counter()
         full, full_ok = full_rollout(model.scene, phases, VALIDATION_DT, base)
         seconds += time.perf_counter() - t0
@@ -352,15 +386,17 @@ def carried(x0, base, count, dt):
 
 def full_rollout(scene, phases, dt, base=None):
     """The full FEM's positions (k + 1, n, 3) from rest through phases ((extra nodal force (n,
-    3) N, steps), ...) of dt s, exact backward Euler, the held vertices carried by base (t ->
+    3) N, steps[, controls {name: value}]), ...) of dt s, exact backward Euler, the held vertices carried by base (t ->
     (3, 4) [R_g | c_g], or None), and whether every step converged (a failed step ends the
     rollout there): what ReducedModel.rollout is compared with."""
     x = scene.initial_positions()
     v = np.zeros_like(x)
     xs = [x]
     k = 0
-    for force, steps in phases:
+    for force, steps, *controls in phases:
         loaded = scene.plus_force(force)
+        if controls and controls[0]:
+            loaded = loaded.with_controls(controls[0])
         stepper = Stepper(loaded, dt, warn=False)
         for _ in range(steps):
             k += 1
@@ -376,18 +412,13 @@ def full_rollout(scene, phases, dt, base=None):
 
 def check_polynomial_scene(scene, model):
     """TypeError unless scene is a Scene; ValueError unless every element has the StVK base,
-    whose energy is a polynomial in a reduced model's coordinates, and passive fibers (`model`
-    names the model)."""
+    whose energy is a polynomial in a reduced model's coordinates (`model` names the
+    model)."""
     check_scene(scene)
     if (scene.elements.model != STVK).any():
         raise ValueError(f"scene: the {model} needs the StVK base material (its energy is a "
                          f"polynomial in the reduced coordinates); this scene has Neo-Hookean "
                          f"elements")
-    active = int((scene.elements.rest2 != 1.0).sum())
-    if active:
-        raise ValueError(f"scene: the {model} is built for passive fibers, and this scene "
-                         f"activates the fibers of {active} elements (Material's activation); "
-                         f"step it with the FEM")
 
 
 def _count(value, name, smallest):

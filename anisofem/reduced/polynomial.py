@@ -23,6 +23,11 @@ sorted triple a <= b <= c, so X costs one pass over W4 (anisofem.reduced.kernels
 
 A pressure on a cavity (anisofem.physics.pressure) adds -p times the cavity's volume, a cubic of the
 positions: its part is summed into c0 to S3 (with_pressure), exact too.
+
+Activated fibers (rest stretch s, b = 1 - s^2) add to the passive fiber term
+kappa (I4 - 1)^2 the term kappa (2 b (I4 - 1) + b^2) = 4 kappa b d^T E d + kappa b^2, a
+quadratic of q scaled by b (activation_terms): polynomial() sums it in for the elements'
+own activation, and a model's activation controls keep it apart (anisofem.reduced.controls).
 """
 import itertools
 import math
@@ -105,7 +110,36 @@ def polynomial(elements, x0, basis):
         Q4 += M.T @ M
     C2 = np.triu(C2) + np.triu(C2, 1).T  # the M part was summed on the upper triangle
     S3, W4 = _symmetric(T3, Q4, r, pi, pj, multiplicity)
+    share = 1.0 - elements.rest2
+    if share.any():
+        (a0, a1, A2), constant = activation_terms(elements, share, x0, basis)
+        c0, c1, C2 = c0 + a0 + constant, c1 + a1, C2 + A2
     return Polynomial(c0, c1, C2, S3, W4)
+
+
+def activation_terms(elements, share, x0, basis):
+    """The activated fibers' part of the energy at x0 + basis q with b = share (m,) per element
+    (b = 1 - s^2): ((c0 J, c1 (r,) N, C2 (r, r) N/m) of sum 4 w kappa b d^T E(q) d, and the
+    constant sum w kappa b^2, J). With F0 d = f and B_j d = g_j at a quadrature point,
+    d^T E d = (|f|^2 - 1) / 2 + q_j f . g_j + q_j q_k g_j . g_k / 2."""
+    r = basis.shape[1]
+    U = basis.reshape(-1, 3, r)
+    rows = np.flatnonzero(share * elements.kappa)
+    c0, c1, C2 = 0.0, np.zeros(r), np.zeros((r, r))
+    nq = elements.weights.shape[1]
+    block = max(1, CHUNK // nq)
+    for lo in range(0, rows.size, block):
+        e = rows[lo:lo + block]
+        tets = elements.tets[e]
+        gd = np.einsum("eqaj,ej->eqa", elements.grads[e], elements.fiber[e])   # grad N_a . d
+        f = np.einsum("eai,eqa->eqi", x0[tets], gd)                            # F0 d
+        g = np.einsum("eair,eqa->eqri", U[tets], gd)                           # B_j d
+        weight = 4.0 * elements.weights[e] * (elements.kappa[e] * share[e])[:, None]
+        c0 += 0.5 * float((weight * ((f * f).sum(-1) - 1.0)).sum())
+        c1 += np.einsum("eq,eqi,eqri->r", weight, f, g)
+        C2 += np.einsum("eq,eqri,eqsi->rs", weight, g, g)
+    constant = float((elements.weights.sum(1) * elements.kappa * share ** 2).sum())
+    return (c0, c1, C2), constant
 
 
 def _symmetric(T3, Q4, r, pi, pj, multiplicity):
@@ -185,23 +219,31 @@ def _whitening(elements, block):
 
 def with_pressure(poly, cavities, x0, basis):
     """poly with the pressures' energy -p (V(x0 + basis q) - V(X)) of cavities (CavityLoads)
-    added: V = -sum_K w a . (b x c) with each slot linear in q (CavityLoad.reduced_slots)."""
+    added, each at its magnitude (pressure_terms)."""
     c0, c1, C2, S3 = poly.c0, poly.c1.copy(), poly.C2.copy(), poly.S3.copy()
     for cavity in cavities:
-        w, a0, b0, c00, A, B, C = cavity.reduced_slots(x0, basis)
-        p = cavity.magnitude * w                                     # (K,) energy = p w f
-        bc = np.cross(b0, c00)
-        c0 += float(p @ np.einsum("ki,ki->k", a0, bc)) + cavity.magnitude * cavity.rest_volume
-        Bc = np.cross(B, c00[:, :, None], axis=1)                    # B_j x c0 (K, 3, r)
-        bC = np.cross(b0[:, :, None], C, axis=1)                     # b0 x C_j
-        c1 += np.einsum("k,kir,ki->r", p, A, bc) + np.einsum("k,ki,kir->r", p, a0, Bc + bC)
-        quadratic = (np.einsum("k,kir,kis->rs", p, A, Bc + bC)
-                     + np.einsum("k,ki,kirs->rs", p, a0,
-                                 np.cross(B[:, :, :, None], C[:, :, None, :], axis=1)))
-        C2 += quadratic + quadratic.T                                # 1/2 q C2 q
-        cubic = np.einsum("k,kir,kist->rst", p, A,
-                          np.cross(B[:, :, :, None], C[:, :, None, :], axis=1))
-        S3 += (cubic + cubic.transpose(0, 2, 1) + cubic.transpose(1, 0, 2)
-               + cubic.transpose(1, 2, 0) + cubic.transpose(2, 0, 1)
-               + cubic.transpose(2, 1, 0)) / 6.0
+        d0, d1, D2, D3 = pressure_terms(cavity, x0, basis)
+        p = cavity.magnitude
+        c0, c1, C2, S3 = c0 + p * d0, c1 + p * d1, C2 + p * D2, S3 + p * D3
     return Polynomial(c0, c1, C2, S3, poly.W4)
+
+
+def pressure_terms(cavity, x0, basis):
+    """The polynomial (c0 m^3, c1 (r,), C2 (r, r), S3 (r, r, r)) of a cavity's
+    -(V(x0 + basis q) - V(X)), the energy of a unit pressure (times p, Pa, in J): V = -sum_K
+    w a . (b x c) with each slot linear in q (CavityLoad.reduced_slots)."""
+    w, a0, b0, c00, A, B, C = cavity.reduced_slots(x0, basis)
+    bc = np.cross(b0, c00)
+    c0 = float(w @ np.einsum("ki,ki->k", a0, bc)) + cavity.rest_volume
+    Bc = np.cross(B, c00[:, :, None], axis=1)                    # B_j x c0 (K, 3, r)
+    bC = np.cross(b0[:, :, None], C, axis=1)                     # b0 x C_j
+    c1 = np.einsum("k,kir,ki->r", w, A, bc) + np.einsum("k,ki,kir->r", w, a0, Bc + bC)
+    BC = np.cross(B[:, :, :, None], C[:, :, None, :], axis=1)    # B_j x C_k (K, 3, r, r)
+    quadratic = (np.einsum("k,kir,kis->rs", w, A, Bc + bC)
+                 + np.einsum("k,ki,kirs->rs", w, a0, BC))
+    C2 = quadratic + quadratic.T                                 # 1/2 q C2 q
+    cubic = np.einsum("k,kir,kist->rst", w, A, BC)
+    S3 = (cubic + cubic.transpose(0, 2, 1) + cubic.transpose(1, 0, 2)
+          + cubic.transpose(1, 2, 0) + cubic.transpose(2, 0, 1)
+          + cubic.transpose(2, 1, 0)) / 6.0
+    return c0, c1, C2, S3

@@ -49,8 +49,10 @@ def _solve_states(scene, loads):
     states, inverted, failed = [own.x], 0, 0
     for chain in build_cases(scene, loads):
         x = own.x
-        for k, extra in enumerate(chain):
-            result = solve(scene.plus_force(extra), x0=x, warn=False)
+        for k, (extra, controls) in enumerate(chain):
+            loaded = scene.plus_force(extra)
+            result = solve(loaded.with_controls(controls) if controls else loaded, x0=x,
+                           warn=False)
             if not result.converged:
                 failed += len(chain) - k
                 break

@@ -212,7 +212,7 @@ def physical_reference_only(rungs, inverted, notes):
 def representable(rungs, scene, notes):
     """rungs without those that cannot model the scene, saying so in notes: the reduced ones
     where it has Neo-Hookean elements (the reduced model's energy is exact only for the StVK
-    base), load curves or activated fibers; the surrogates where it has pressure, load curves or
+    base) or load curves; the surrogates where it has pressure, load curves or
     activated fibers; any rung its own refusal turns away (Rung.refusal)."""
     left = {}
     if scene.neohookean.any():
@@ -223,7 +223,6 @@ def representable(rungs, scene, notes):
         left["reduced"] = "the reduced rungs hold the loads constant, not on their curves"
         left["surrogate"] = "the surrogates take constant nodal forces, not load curves"
     if (scene.elements.rest2 != 1.0).any():
-        left["reduced"] = "the reduced models are built for passive fibers, not activated ones"
         left["surrogate"] = "the surrogates were trained on passive fibers, not activated ones"
     for kind, why in left.items():
         if any(r.kind == kind for r in rungs):

@@ -1,0 +1,186 @@
+"""Controls: named pressures and activations a controller sets every step, in the FEM and the
+reduced model. The reduced energy under any controls equals the FEM's at the same positions
+(exact, independently of the basis); a rollout whose controls change every step follows the
+FEM's; bad control input is named."""
+import numpy as np
+import pytest
+
+import anisofem as af
+from anisofem.reduced import Loads, ReducedModel
+
+E = 1e5
+
+
+def finger(order=1):
+    """A 6 cm pneumatic finger (anisofem.actuator: a body around a cavity on a flat layer)
+    held at its base, fibers along it in its layer and across it (along x) in its body: the
+    pressure in its cavity a control "push", the activation of its layer's fibers a control
+    "curl" and of its body's a control "squeeze"; gravity along -y."""
+    mesh, volumes, surfaces, _ = af.actuator(cells=(4, 2, 8), cavity=0.5, length=0.06,
+                                             order=order)
+    fibers = np.where((volumes == 2)[:, None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    material = af.Material(E, 0.45, 1000.0, fibers, 5 * E)
+    base = np.unique(surfaces[4])
+    if order == 2:
+        base = np.flatnonzero(np.abs(mesh.vertices[:, 2]) < 1e-12)
+    return af.Scene(mesh, material, fixed=base, gravity=(0, -9.81, 0),
+                    pressure=af.Pressure(surfaces[3], 0.0, name="push"),
+                    activation=[af.Activation(volumes == 2, 0.0, "curl"),
+                                af.Activation(volumes == 1, 0.0, "squeeze")])
+
+
+def test_controls_are_named_and_set():
+    scene = finger()
+    assert scene.controls == ("push", "curl", "squeeze")
+    assert scene.control_values.tolist() == [0.0, 0.0, 0.0]
+    now = scene.with_controls({"curl": 0.3, "push": 200.0})
+    assert now.control_values.tolist() == [200.0, 0.3, 0.0]
+    assert scene.control_values.tolist() == [0.0, 0.0, 0.0]   # the scene itself is unchanged
+    layer = scene.activations[0].elements
+    assert np.allclose(now.elements.rest2[layer], 0.49)
+    assert (np.delete(now.elements.rest2, layer) == 1.0).all()
+    assert np.array_equal(scene.with_controls([200.0, 0.3, 0.0]).elements.rest2,
+                          now.elements.rest2)
+    # the layer's fibers (y < 0) contract, or the cavity inflates above the layer: either way
+    # the tip curls toward the layer
+    tip = scene.mesh.vertices[:, 2] > 0.06 - 1e-9
+    rest = scene.mesh.vertices[tip, 1].mean()
+    weightless = scene.plus_force(-scene.external_force)
+    curled = af.solve(weightless.with_controls({"curl": 0.1})).x
+    pushed = af.solve(weightless.with_controls({"push": 2e4})).x
+    assert curled[tip, 1].mean() - rest < -0.005 and pushed[tip, 1].mean() - rest < -0.003
+
+
+@pytest.mark.parametrize("values, message", [
+    ({"sideways": 0.1}, "controls: no control 'sideways'; the scene has: push, curl, "
+                        "squeeze"),
+    ({"curl": 1.0}, r"control 'curl': an activation must be in \[0, 1\)"),
+    ({"curl": -0.1}, r"control 'curl': an activation must be in \[0, 1\)"),
+    ({"push": float("nan")}, "control 'push': expected a finite number, got nan"),
+    ({"push": "high"}, "control 'push': expected a number, got 'high'"),
+    ([0.1, 0.2], r"controls: expected a mapping of names to values or 3 values"),
+])
+def test_bad_controls_are_named(values, message):
+    with pytest.raises(ValueError, match=message):
+        finger().with_controls(values)
+
+
+def test_bad_control_declarations_are_named():
+    scene = finger()
+    mesh, material = scene.mesh, scene.material
+    bare = af.Material(E, 0.45, 1000.0, (1, 0, 0), np.where(np.arange(mesh.n_tets) < 4, 0.0,
+                                                             5 * E))
+    for make, message in (
+            (lambda: af.Scene(mesh, bare, activation=af.Activation([0, 1, 9], 0.1, "a")),
+             "activation 'a': 2 of its elements have no fibers"),
+            (lambda: af.Scene(mesh, material, activation=[af.Activation([5, 6], 0.1, "a"),
+                                                          af.Activation([6, 7], 0.1, "b")]),
+             "activation 'b': 1 of its elements are activation 'a''s too"),
+            (lambda: af.Scene(mesh, material, activation=[af.Activation([5], 0.1, "a"),
+                                                          af.Activation([6], 0.1, "a")]),
+             "controls: the name 'a' is given to two controls"),
+            (lambda: af.Scene(mesh, material, activation=af.Activation([mesh.n_tets], 0.1)),
+             "activation 'activation': elements: index out of range"),
+            (lambda: af.Activation([1], 1.5, "a"), r"an activation must be in \[0, 1\)"),
+            (lambda: af.Scene(mesh, af.Material(E, 0.45, 1000.0, (1, 0, 0), 5 * E,
+                                                activation=0.1),
+                              activation=af.Activation([3], 0.1, "a")),
+             "activation 'a': 1 of its elements have an activation of their Material too")):
+        with pytest.raises(ValueError, match=message):
+            make()
+
+
+def test_simulate_takes_controls_as_curves_or_a_controller():
+    """simulate's controls, as (times, values) or as a callable, set each step's scene: the
+    same rollout as stepping the scene with the controls set by hand."""
+    scene = finger()
+    dt, steps = 0.02, 6
+
+    def controller(t):
+        return {"curl": 0.1 * t / (steps * dt), "push": 500.0 * np.sin(20 * t)}
+    by_callable = af.simulate(scene, steps, dt, controls=controller)
+    times = (np.arange(steps + 1) * dt).tolist()
+    table = {name: (times, [controller(t)[name] for t in times]) for name in ("curl", "push")}
+    by_table = af.simulate(scene, steps, dt, controls=table)
+    x, v = scene.initial_positions(), np.zeros_like(scene.initial_positions())
+    for k in range(steps):
+        result = af.step(scene.with_controls(controller((k + 1) * dt)), x, v, dt)
+        x, v = result.x, result.v
+    assert by_callable.converged and by_table.converged
+    scale = np.abs(x - scene.mesh.vertices).max()
+    assert np.abs(by_callable.positions[-1] - x).max() <= 1e-9 * scale
+    assert np.abs(by_table.positions[-1] - x).max() <= 1e-9 * scale
+    with pytest.raises(ValueError, match="controls: no control 'left'"):
+        af.simulate(scene, 2, dt, controls={"left": ([0, 1], [0, 1])})
+    with pytest.raises(ValueError, match=r"control 'curl': an activation must be in \[0, 1\)"):
+        af.simulate(scene, 2, dt, controls=lambda t: {"curl": 2.0})
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_the_reduced_energy_under_controls_is_the_fems(order):
+    """At any reduced coordinates and any controls, the reduced model's energy and force equal
+    the FEM's (elastic + pressure) at x0 + U q, projected: exact, whatever the basis."""
+    scene = finger(order)
+    model = ReducedModel(scene, modes=4, validate=False)
+    rng = np.random.default_rng(3)
+    for values in ({"push": 0.0, "curl": 0.0, "squeeze": 0.0}, {"push": 800.0, "curl": 0.4,
+                                                           "squeeze": 0.0},
+                   {"push": -300.0, "curl": 0.05, "squeeze": 0.6}):
+        q = 0.05 * rng.normal(size=model.r)
+        x = model.positions(q)
+        fem = af.physics.potential.Potential(scene.with_controls(values))
+        terms = fem.terms(x)
+        elastic = terms["isotropic"] + terms["fiber"] + terms["pressure"]
+        _, gradient = fem.energy_gradient(x)
+        gradient = gradient + scene.external_force   # the external part: f_ext, taken out
+        assert abs(model.energy(q, values) - elastic) <= 1e-10 * abs(elastic)
+        force = model.force(q, controls=values)
+        assert np.abs(force - model.basis.T @ gradient.ravel()).max() <= \
+            1e-9 * np.abs(force).max()
+
+
+#: The controls' ranges the finger's reduced model is built for.
+RANGES = {"curl": (0.0, 0.15), "squeeze": (0.0, 0.1), "push": (-2e4, 2e4)}
+
+
+def test_a_reduced_rollout_follows_controls_that_change_every_step():
+    """The reduced model fitted to its controls' declared ranges (anisofem.reduced.Loads)
+    against the FEM, the three controls changing every step: the tip's path within 1% of its
+    largest displacement, and the model's own validation on unseen controls within 1%."""
+    scene = finger()
+    model = ReducedModel(scene, modes=6, snapshots=24, loads=Loads(controls=RANGES))
+    assert model.validation.cases == 3 and model.validation.tip_error < 0.01
+    dt, steps = 0.02, 25
+
+    def controller(t):
+        return {"curl": 0.15 * (1 - np.cos(8 * t)) / 2, "squeeze": 0.2 * t,
+                "push": 1.5e4 * np.sin(12 * t)}
+    full = af.simulate(scene, steps, dt, controls=controller)
+    q, w = np.zeros(model.r), np.zeros(model.r)
+    tip = scene.mesh.vertices[:, 2] > 0.06 - 1e-9
+    worst = 0.0
+    for k in range(steps):
+        q, w, report = model.step(q, w, dt, controls=controller((k + 1) * dt))
+        assert report.converged
+        gap = model.positions(q)[tip].mean(0) - full.positions[k + 1][tip].mean(0)
+        worst = max(worst, float(np.linalg.norm(gap)))
+    travel = np.linalg.norm(full.positions[:, tip].mean(1) - full.positions[0, tip].mean(0),
+                            axis=1).max()
+    assert full.converged and travel > 0.01
+    assert worst <= 0.01 * travel, (worst, travel)
+    with pytest.raises(ValueError, match="controls: no control 'left'"):
+        model.step(q, w, dt, controls={"left": 0.1})
+    with pytest.raises(ValueError, match=r"control 'squeeze': an activation must be in \[0, 1\)"):
+        model.solve(controls={"squeeze": 1.0})
+
+
+def test_declared_control_ranges_are_checked():
+    scene = finger()
+    for loads, message in (
+            (dict(controls={"left": (0, 1)}), "controls: no control 'left'"),
+            (dict(controls={"curl": (0, 1.0)}), r"controls: 'curl' is an activation, its range "
+                                                 r"must lie in \[0, 1\)"),
+            (dict(controls={"push": (5, 1)}), "controls: 'push': expected finite low < high"),
+            (dict(controls={"push": 5}), r"controls: 'push': expected a range \(low, high\)")):
+        with pytest.raises(ValueError, match=message):
+            ReducedModel(scene, modes=2, snapshots=2, loads=Loads(**loads), validate=False)
