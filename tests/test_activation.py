@@ -129,7 +129,7 @@ def test_models_of_passive_fibers_refuse_an_activated_scene():
     result = af.trade(scene, steps=10, progress=False)
     assert any("passive fibers" in note for note in result["notes"])
     kinds = {r["name"]: r["kind"] for r in result["rungs"]}
-    assert "reduced m4" in kinds and not any(n.startswith("framed") for n in kinds)
+    assert "reduced m5" in kinds and not any(n.startswith("framed") for n in kinds)
 
 
 def test_a_scene_file_activates_a_region(tmp_path):

@@ -76,10 +76,10 @@ def test_build_cases_cover_every_direction_share_and_the_cone(long_beam):
     cone = 2 * loads_module.CONE_DIRECTIONS
     assert len(chains) == len(loads_module.ANY_DIRECTION) + 1 + cone
     assert all(len(c) == len(loads_module.SHARES) for c in chains[:-cone])
-    last = chains[len(loads_module.ANY_DIRECTION)][-1]
-    assert np.allclose(last.sum(axis=0), [0, 0.2, 0])
+    last, controls = chains[len(loads_module.ANY_DIRECTION)][-1]
+    assert np.allclose(last.sum(axis=0), [0, 0.2, 0]) and controls == {}
     weight = long_beam.masses.sum() * 9.81
-    for (f,) in chains[-cone:]:  # gravity turned by 30 or 15 degrees
+    for ((f, _),) in chains[-cone:]:  # gravity turned by 30 or 15 degrees
         total = (long_beam.external_force + f).sum(axis=0)
         angle = math.degrees(math.acos(-total[2] / np.linalg.norm(total)))
         assert np.linalg.norm(total) == pytest.approx(weight)
@@ -94,8 +94,8 @@ def test_unseen_cases_stay_within_the_declaration_and_repeat(long_beam):
     assert all(np.array_equal(a[1], b[1]) for a, b in zip(cases, again))
     others = np.setdiff1d(np.arange(long_beam.mesh.n_vertices), end)
     m = long_beam.masses
-    for which, f, carry in cases:
-        assert which == 0 and carry is None
+    for which, f, carry, controls in cases:
+        assert which == 0 and carry is None and controls == {}
         turn = f[others].sum(axis=0) / m[others].sum()  # gravity's change, m/s^2
         g = long_beam.gravity + turn
         pull = f[end].sum(axis=0) - m[end].sum() * turn
@@ -206,12 +206,12 @@ def test_a_carry_adds_its_inertia_to_the_build_and_draws_carries_within_it(long_
     chains = loads_module.build_cases(long_beam, Loads(carry=carry))
     assert len(chains) == 8 + 14 + 6 and all(len(c) == 3 for c in chains[:20])
     peak = math.pi ** 2 / (2 * 0.4 ** 2)
-    move = chains[0][-1]
+    move, _ = chains[0][-1]
     assert move.sum(axis=0) == pytest.approx(long_beam.masses.sum() * 0.05 * peak
                                              * np.array(loads_module.ANY_DIRECTION[0]))
     held = long_beam.fixed_mask.any(axis=1)
     h = long_beam.mesh.vertices[held].mean(axis=0)
-    for _, _, base in loads_module.unseen_cases(long_beam, Loads(carry=carry), 10, seed=2):
+    for _, _, base, _ in loads_module.unseen_cases(long_beam, Loads(carry=carry), 10, seed=2):
         assert np.allclose(base(0.0), np.eye(3, 4))
         for t in (0.1, 0.4, 1.0):
             R, c = base(t)[:, :3], base(t)[:, 3]
