@@ -115,6 +115,10 @@ def library(lib=None):
                                                        ctypes.POINTER(ctypes.c_int)]),
             "af_gravity": (ctypes.c_int, [handle, _DOUBLE_P]),
             "af_time_step": (ctypes.c_double, [handle]),
+            "af_controls": (ctypes.c_int, [handle]),
+            "af_control_name": (char_p, [handle, ctypes.c_int]),
+            "af_control_value": (ctypes.c_double, [handle, ctypes.c_int]),
+            "af_set_controls": (ctypes.c_int, [handle, _DOUBLE_P]),
         }
         for name, (restype, argtypes) in types.items():
             function = getattr(c, name)
@@ -154,6 +158,35 @@ class CModel:
         self.time_step = c.af_time_step(h) or None
         self._solver = (1e-8, 50)
         self._force_buffer = None
+        self.controls = tuple(c.af_control_name(h, i).decode() for i in range(c.af_controls(h)))
+
+    @property
+    def control_values(self):
+        """(k,) the controls' values now."""
+        return np.array([self._c.af_control_value(self._handle, i)
+                         for i in range(len(self.controls))])
+
+    def set_controls(self, values):
+        """Set the controls for every later step: a mapping name -> value (the others keep
+        theirs) or one value per control. ValueError for an unknown name or a wrong count;
+        RuntimeError with the runtime's message for a bad value."""
+        now = self.control_values
+        if isinstance(values, dict):
+            for name, value in values.items():
+                if name not in self.controls:
+                    raise ValueError(f"controls: no control {name!r}; the model has: "
+                                     f"{', '.join(self.controls) or 'none'}")
+                now[self.controls.index(name)] = value
+        else:
+            given = np.asarray(values, dtype=float).ravel()
+            if given.size != len(self.controls):
+                raise ValueError(f"controls: expected {len(self.controls)} values "
+                                 f"({', '.join(self.controls)}), got {given.size}")
+            now = given
+        now = np.ascontiguousarray(now, dtype=np.float64)
+        if not self.controls:
+            return
+        self._check(self._c.af_set_controls(self._handle, _pointer(now)), "af_set_controls")
 
     def __del__(self):
         if getattr(self, "_handle", None):
@@ -223,11 +256,14 @@ class CReducedSimulator(CModel):
         """(q, w): zeros (r,), float64."""
         return np.zeros(self.r), np.zeros(self.r)
 
-    def step(self, q, w, force, dt, rtol=1e-8, max_iter=50):
+    def step(self, q, w, force, dt, rtol=1e-8, max_iter=50, controls=None):
         """One backward-Euler step of q, w (float64 (r,)) in place under the constant force plus
-        nodal forces (n, 3), N (None: none); RuntimeError with the runtime's message where it
+        nodal forces (n, 3), N (None: none), with the controls set to `controls` first (see
+        set_controls; None: as they are); RuntimeError with the runtime's message where it
         fails (q and w unchanged)."""
         self.set_solver(rtol, max_iter)
+        if controls is not None:
+            self.set_controls(controls)
         state = self._state
         state[:self.r], state[self.r:] = q, w
         self.advance(state, force, dt)

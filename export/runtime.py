@@ -442,6 +442,9 @@ class ReducedSimulator:
     float64 (the library's numbers) or float32 (the coefficients and the state rounded to it).
     angle: for a file of models at several fiber angles (`python -m export bake-reduced`),
     the one to step, degrees.
+    controls: the names of the model's controls (named pressures, Pa; activations, in [0,
+    1)), and control_values their values now (the file's until set_controls, or a step's
+    controls, sets them for every later step).
     A step is Newton on the reduced backward-Euler potential with the Hessian's negative
     eigenvalues clamped and an Armijo search on the exact quartic along the step, to a reduced
     gradient of rtol times the step's force size; it raises where it fails.
@@ -480,6 +483,75 @@ class ReducedSimulator:
         self.S3 = np.array(arrays["S3" + tag], dtype=dtype).reshape(r * r, r)
         self.W4 = np.array(arrays["W4" + tag], dtype=dtype)
         self.triples = _triple_rows(r)
+        self._read_controls(path, header, arrays, r)
+
+    def _read_controls(self, path, header, arrays, r):
+        """The control arrays (export.writers.reduced), checked; none where the header lists
+        no controls."""
+        names = header.get("controls") or []
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+            raise ValueError(f"path: {path}.json: controls: expected a list of names")
+        self.controls = tuple(names)
+        k = len(names)
+        self._kinds = np.zeros(0, bool)
+        self.control_values = np.zeros(0)
+        self._coefficients = self.c1, self.C2, self.S3
+        if not k:
+            return
+        checked(path, header, arrays, {"control_kinds": ("uint8", (k,)),
+                                       "control_values": ("float64", (k,)),
+                                       "control_c1": ("float64", (k, r)),
+                                       "control_C2": ("float64", (k, r, r))})
+        self._kinds = arrays["control_kinds"].astype(bool)
+        pressures = int((~self._kinds).sum())
+        if self._kinds[:pressures].any():
+            raise ValueError(f"path: {path}.json: array control_kinds: the pressures (0) must "
+                             f"come before the activations (1)")
+        checked(path, header, arrays, {"control_S3": ("float64", (pressures, r, r, r))})
+        self._parts = tuple(np.array(arrays[key], dtype=self.dtype) for key in
+                            ("control_c1", "control_C2", "control_S3"))
+        self._parts = self._parts[:2] + (self._parts[2].reshape(pressures, r * r, r),)
+        self.control_values = np.zeros(k)
+        self.set_controls(np.array(arrays["control_values"]))
+
+    def _check_control(self, i, value):
+        """Control i's value as a float; ValueError naming it where it is not finite, or an
+        activation outside [0, 1)."""
+        value = float(value)
+        if self._kinds[i] and not 0.0 <= value < 1.0:
+            raise ValueError(f"controls: {self.controls[i]!r} is an activation, in [0, 1); "
+                             f"got {value!r}")
+        if not np.isfinite(value):
+            raise ValueError(f"controls: {self.controls[i]!r} is a pressure, a finite number "
+                             f"of Pa; got {value!r}")
+        return value
+
+    def set_controls(self, values):
+        """Set the controls for every later step: a mapping name -> value (the others keep
+        theirs) or one value per control, in the order of `controls`. ValueError naming the
+        control for an unknown name, a value that is not finite or an activation outside
+        [0, 1) (the controls unchanged)."""
+        now = self.control_values.copy()
+        if isinstance(values, dict):
+            for name, value in values.items():
+                if name not in self.controls:
+                    raise ValueError(f"controls: no control {name!r}; the model has: "
+                                     f"{', '.join(self.controls) or 'none'}")
+                now[self.controls.index(name)] = value
+        else:
+            given = np.asarray(values, dtype=float).ravel()
+            if given.size != len(self.controls):
+                raise ValueError(f"controls: expected {len(self.controls)} values "
+                                 f"({', '.join(self.controls)}), got {given.size}")
+            now = given
+        now = np.array([self._check_control(i, v) for i, v in enumerate(now)])
+        if not self.controls:
+            return
+        beta = np.where(self._kinds, now * (2.0 - now), now).astype(self.dtype)
+        c1p, C2p, S3p = self._parts
+        self._coefficients = (self.c1 + beta @ c1p, self.C2 + np.tensordot(beta, C2p, axes=1),
+                              self.S3 + np.tensordot(beta[:len(S3p)], S3p, axes=1))
+        self.control_values = now
 
     def rest_state(self):
         """(q, w): the reduced coordinates and velocities of the rest state, zeros (r,)."""
@@ -494,11 +566,16 @@ class ReducedSimulator:
         force = _real(force, "force", self.rest_positions.shape)
         return np.tensordot(force, self.basis, axes=([0, 1], [0, 1])).astype(self.dtype)
 
-    def step(self, q, w, force, dt, rtol=1e-8, max_iter=50):
-        """One backward-Euler step of dt s from (q, w) under nodal forces `force` (n, 3), N:
-        returns (q_next, w_next); the last step's Newton iterations are in self.iterations."""
+    def step(self, q, w, force, dt, rtol=1e-8, max_iter=50, controls=None):
+        """One backward-Euler step of dt s from (q, w) under nodal forces `force` (n, 3), N,
+        with the controls set to `controls` first (see set_controls; None: as they are):
+        returns (q_next, w_next); the last step's Newton iterations are in
+        self.iterations."""
         if not dt > 0:
             raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
+        if controls is not None:
+            self.set_controls(controls)
+        c1, C2, S3 = self._coefficients
         q = np.asarray(q, dtype=self.dtype)
         w = np.asarray(w, dtype=self.dtype)
         load = self.project(force)
@@ -511,16 +588,16 @@ class ReducedSimulator:
         for it in range(max_iter + 1):
             gathered = A[self.triples].reshape(self.r * self.r, self.r)  # S4[a, b, c, x]
             X = (gathered @ x).reshape(self.r, self.r)
-            Y = (self.S3 @ x).reshape(self.r, self.r)
-            g = self.c1 + (self.C2 + 3.0 * Y + 4.0 * X) @ x
+            Y = (S3 @ x).reshape(self.r, self.r)
+            g = c1 + (C2 + 3.0 * Y + 4.0 * X) @ x
             if it == 0:
                 tolerance += rtol * _norm(g)
             g += inertia * (x - q_hat) - load
-            H = self.C2 + 6.0 * Y + 12.0 * X + inertia * np.eye(self.r, dtype=self.dtype)
+            H = C2 + 6.0 * Y + 12.0 * X + inertia * np.eye(self.r, dtype=self.dtype)
             residual = _norm(g)
             if not np.isfinite(residual):
                 raise FloatingPointError("step: the reduced force is not finite")
-            terms = np.abs(H) @ np.abs(x) + np.abs(load) + np.abs(self.c1)
+            terms = np.abs(H) @ np.abs(x) + np.abs(load) + np.abs(c1)
             if residual <= max(tolerance, FLOOR * eps * self.r * _norm(terms)):
                 self.iterations = it
                 return x, (x - q) / dt
@@ -535,7 +612,7 @@ class ReducedSimulator:
             mixed = float(((gathered @ p).reshape(self.r, self.r) @ p) @ p)
             pure = float(((Ap[self.triples].reshape(self.r * self.r, self.r) @ p)
                           .reshape(self.r, self.r) @ p) @ p)
-            a3 = float(p @ (self.S3 @ p).reshape(self.r, self.r) @ p) + 4.0 * mixed
+            a3 = float(p @ (S3 @ p).reshape(self.r, self.r) @ p) + 4.0 * mixed
             t = 1.0
             while t * (a2 + t * (a3 + t * pure)) > -(1.0 - 1e-4) * a1 and t >= 1e-12:
                 t *= 0.5

@@ -184,3 +184,88 @@ def test_declared_control_ranges_are_checked():
             (dict(controls={"push": 5}), r"controls: 'push': expected a range \(low, high\)")):
         with pytest.raises(ValueError, match=message):
             ReducedModel(scene, modes=2, snapshots=2, loads=Loads(**loads), validate=False)
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    """The finger's reduced model fitted to its controls, written to a file."""
+    from export.writers.reduced import write
+    folder = tmp_path_factory.mktemp("controls")
+    model = ReducedModel(finger(), modes=6, snapshots=24, loads=Loads(controls=RANGES),
+                         validate=False)
+    write(model, str(folder / "finger"))
+    return model, str(folder / "finger"), folder
+
+
+def controls_at(k):
+    """Controls that change every step k: the three at once, within RANGES."""
+    return [1.5e4 * np.sin(0.4 * k), 0.075 * (1 - np.cos(0.3 * k)), 0.05 * (1 + np.sin(0.5 * k))]
+
+
+def test_the_runtimes_step_with_controls_like_the_model(written):
+    """numpy runtime against ReducedModel (1e-10), the C runtime against the numpy one (1e-9),
+    over 60 steps under gravity with the three controls changing every step."""
+    from export import native
+    from export.runtime import ReducedSimulator
+    model, path, folder = written
+    py = ReducedSimulator(path)
+    assert py.controls == model.controls == ("push", "curl", "squeeze")
+    assert py.control_values.tolist() == [0.0, 0.0, 0.0]
+    gravity = model.scene.external_force
+    q_model, v_model = np.zeros(model.r), np.zeros(model.r)
+    q_py, w_py = py.rest_state()
+    c = None
+    if native.compiler() is not None:
+        c = native.CReducedSimulator(path, native.build(str(folder / "lib")))
+        assert c.controls == model.controls
+        c.set_constant_force(gravity)
+        q_c, w_c = c.rest_state()
+    scale = 0.0
+    for k in range(60):
+        values = controls_at(k)
+        q_model, v_model, _ = model.step(q_model, v_model, 0.02, controls=values)
+        q_py, w_py = py.step(q_py, w_py, gravity, 0.02, controls=values)
+        x = model.positions(q_model)
+        scale = max(scale, np.abs(x - model.x0).max())
+        assert np.abs(py.positions(q_py) - x).max() <= 1e-10 * scale
+        if c is not None:
+            c.step(q_c, w_c, None, 0.02, controls=values)
+            assert np.abs(c.positions(q_c) - py.positions(q_py)).max() <= 1e-9 * scale
+    assert scale > 0.01
+    assert py.control_values.tolist() == pytest.approx(controls_at(59))
+
+
+def test_the_runtimes_name_bad_controls_and_bad_control_arrays(written, tmp_path):
+    from corrupt_files import corrupt, nan_at, set_spec
+    from export import native
+    from export.runtime import ReducedSimulator
+    _, path, folder = written
+    runtimes = [ReducedSimulator]
+    if native.compiler() is not None:
+        lib = native.build(str(folder / "lib"))
+        runtimes.append(lambda p: native.CReducedSimulator(p, lib))
+    for make in runtimes:
+        sim = make(path)
+        for values, error, message in (
+                ({"left": 0.1}, ValueError, "controls: no control 'left'; the model has: push, "
+                                            "curl, squeeze"),
+                ([0.1, 0.2], ValueError, r"controls: expected 3 values \(push, curl, squeeze\)"),
+                ({"curl": 1.0}, (ValueError, RuntimeError), r"'curl'.* an activation, in "
+                                                             r"\[0, 1\); got 1"),
+                ({"push": np.nan}, (ValueError, RuntimeError), "'push'.* a pressure, a finite "
+                                                               "number of Pa; got nan")):
+            with pytest.raises(error, match=message):
+                sim.set_controls(values)
+        assert sim.control_values.tolist() == [0.0, 0.0, 0.0]   # unchanged by a refusal
+        sim.set_controls({"curl": 0.1})
+        assert sim.control_values.tolist() == [0.0, 0.1, 0.0]
+        for edit, message in (
+                (dict(edit_bin=nan_at("control_C2")), "array control_C2 holds a non-finite"),
+                (dict(edit_header=set_spec("control_S3", "shape", lambda s: [2] + s[1:])),
+                 "control_S3"),
+                (dict(edit_header=lambda h: h.update(controls=["push", "curl"])),
+                 r"control_kinds has shape \(3,\), expected \(2\)|\"controls\" is not a list of 3 "
+                 r"names")):
+            bad = corrupt(path, str(tmp_path / "bad"), **edit)
+            with pytest.raises(ValueError, match=message):
+                make(bad)

@@ -310,7 +310,7 @@ def test_the_command_builds_for_the_loads_it_is_given_and_says_what_it_holds(tmp
     assert header["loads"] == {"drags": [{"vertices": 9, "magnitude": 0.3, "directions": None},
                                          {"vertices": 9, "magnitude": 0.1,
                                           "directions": [[0.0, 1.0, 0.0]]}],
-                               "cone": 10.0, "carry": None}
+                               "cone": 10.0, "carry": None, "controls": {}}
     assert header["validation"]["cases"] == 3
     for flags, message in ((["--drag", "x-mid", "1"], "--drag: expected AXIS-SIDE like x-min"),
                            (["--drag", "x-max", "one"], "--drag x-max: N and DX DY DZ"),

@@ -8,8 +8,8 @@ A Drag is a force of up to `magnitude` N on a set of vertices, spread over them 
 to their mass (a hand or a hook grabbing a region, a controller's actuator), in any direction
 or in given ones. `cone` lets the scene's gravity turn by up to that many degrees (a body
 carried around). `controls` gives the range of each of the scene's controls a model must
-follow: {"inflate": (0.0, 20e3)}. A Carry moves the held vertices rigidly (the framed model's base): a turn,
-a move, and the shortest time either takes. Without a declaration (default_loads) a model
+follow: {"inflate": (0.0, 20e3)}. A Carry moves the held vertices rigidly (the framed model's
+base): a turn, a move, and the shortest time either takes. Without a declaration (default_loads) a model
 handles the scene's own loads and a drag of half the body's weight at each free end.
 """
 import math

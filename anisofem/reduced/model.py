@@ -386,9 +386,10 @@ def carried(x0, base, count, dt):
 
 def full_rollout(scene, phases, dt, base=None):
     """The full FEM's positions (k + 1, n, 3) from rest through phases ((extra nodal force (n,
-    3) N, steps[, controls {name: value}]), ...) of dt s, exact backward Euler, the held vertices carried by base (t ->
-    (3, 4) [R_g | c_g], or None), and whether every step converged (a failed step ends the
-    rollout there): what ReducedModel.rollout is compared with."""
+    3) N, steps[, controls {name: value}]), ...) of dt s, exact backward Euler, the held
+    vertices carried by base (t -> (3, 4) [R_g | c_g], or None), and whether every step
+    converged (a failed step ends the rollout there): what ReducedModel.rollout is compared
+    with."""
     x = scene.initial_positions()
     v = np.zeros_like(x)
     xs = [x]

@@ -30,6 +30,9 @@ const char *af_value_of(const char *start, const char *key);
 const char *af_top_value(const char *json, const char *key);
 /* A JSON string value (at its opening quote) copied into out; 0 if it is not one. */
 int af_string_value(const char *v, char *out, size_t size);
+/* A JSON list of strings (at its '['): its strings packed one after another, each ended by a
+ * NUL, in a new buffer (the caller frees it), their number in count; NULL if it is not one. */
+char *af_string_list(const char *v, int *count);
 /* Whether the file has array `name` (with the angle's tag where tagged). */
 int af_has_array(const af_file *f, const char *name, int tagged);
 /* A new copy of array `name` (+ the angle's tag where tagged) of dtype `type` ("float64",
@@ -65,6 +68,10 @@ int af_reduced_set_force(af_reduced *m, const double *force);
 int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force, double dt,
                        double rtol, int max_iter, char *error, size_t error_size);
 void af_reduced_place(const af_reduced *m, const double *q, double *x);
+int af_reduced_controls(const af_reduced *m);
+double af_reduced_control(const af_reduced *m, int i);
+int af_reduced_set_controls(af_reduced *m, const double *values, const char *names, char *error,
+                            size_t error_size);
 
 typedef struct af_framed af_framed;
 af_framed *af_framed_open(const af_file *f, int n, const double *rest, const double *masses);

@@ -83,6 +83,18 @@ AF_API int af_set_solver(af_model *model, double tolerance, int max_iter);
  * and af_error saying why. */
 AF_API int af_step(af_model *model, double *state, const double *force, const double *base,
                    double dt);
+/* The model's controls, named inputs a controller sets every step: pressures in cavities (Pa)
+ * and fiber activations (in [0, 1): the fibers' rest stretch is 1 - a). Their number (0 for
+ * a model without, and a framed model), the name of control i (NULL out of range) and its
+ * value now (the file's until set). */
+AF_API int af_controls(const af_model *model);
+AF_API const char *af_control_name(const af_model *model, int i);
+AF_API double af_control_value(const af_model *model, int i);
+/* The controls' values (af_controls doubles, in their order) for every later step until set
+ * again; forming the energy's coefficients costs about r^2 per control and r^3 per pressure.
+ * AF_OK, or AF_BAD_INPUT with the controls unchanged and af_error naming the control whose
+ * value is not finite, or is an activation outside [0, 1). */
+AF_API int af_set_controls(af_model *model, const double *values);
 /* Newton iterations of the last step. */
 AF_API int af_iterations(const af_model *model);
 /* Why the last af_step or af_set_* failed, "" if it did not. */

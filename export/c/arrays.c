@@ -90,6 +90,33 @@ int af_string_value(const char *v, char *out, size_t size) {
     return *v == '"';
 }
 
+char *af_string_list(const char *v, int *count) {
+    const char *p, *end;
+    char *out, *w;
+    *count = 0;
+    if (!v || *v != '[') return NULL;
+    for (p = v + 1; blank(*p); p++) continue;
+    if (!(out = (char *)malloc(strlen(v) + 1))) return NULL;
+    w = out;
+    while (*p == '"') {
+        end = string_end(p);
+        if (!*end) break;
+        memcpy(w, p + 1, (size_t)(end - p - 1));
+        w += end - p - 1;
+        *w++ = '\0';
+        ++*count;
+        for (p = end + 1; blank(*p); p++) continue;
+        if (*p == ',')
+            for (p++; blank(*p); p++) continue;
+    }
+    if (*p != ']') {
+        free(out);
+        *count = 0;
+        return NULL;
+    }
+    return out;
+}
+
 typedef struct { long shape[4]; int dims; long offset; char dtype[16]; } spec;
 
 /* The spec of `key` in the arrays table; 0 if it is missing or not an array spec. */

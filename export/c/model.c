@@ -17,6 +17,8 @@ struct af_model {
     double *rest, *masses, *next;       /* next: a framed step's result before it is kept */
     unsigned char *held;
     int *surface, *tets;
+    char *control_names;                /* the controls' names, each ended by a NUL */
+    int controls;
     af_reduced *reduced;
     af_framed *framed;
     char error[ERROR_SIZE];
@@ -27,7 +29,7 @@ void af_free(af_model *m) {
     af_reduced_close(m->reduced);
     af_framed_close(m->framed);
     free(m->rest); free(m->masses); free(m->next); free(m->held); free(m->surface);
-    free(m->tets);
+    free(m->tets); free(m->control_names);
     free(m);
 }
 
@@ -151,6 +153,21 @@ index:
     return 0;
 }
 
+/* The header's controls (a list of names), as many as the model's control arrays hold. */
+static int read_control_names(af_model *m, const af_file *f) {
+    const char *v = af_top_value(f->json, "controls");
+    m->controls = af_reduced_controls(m->reduced);
+    if (!v && !m->controls) return 1;
+    m->control_names = af_string_list(v, &m->controls);
+    if (!m->control_names || m->controls != af_reduced_controls(m->reduced)) {
+        af_say(f->error, f->error_size, "%s: the header's \"controls\" is not a list of %d "
+               "names, one per entry of array control_kinds", f->name,
+               af_reduced_controls(m->reduced));
+        return 0;
+    }
+    return 1;
+}
+
 af_model *af_load_named(const char *header, size_t header_size, const void *bin,
                             size_t bin_size, const char *angle, const char *name, char *error,
                             size_t error_size) {
@@ -193,6 +210,7 @@ af_model *af_load_named(const char *header, size_t header_size, const void *bin,
     if (!read_body(m, &f)) goto fail;
     if (m->kind == AF_REDUCED) {
         if (!(m->reduced = af_reduced_open(&f, m->n, m->rest))) goto fail;
+        if (!read_control_names(m, &f)) goto fail;
     } else {
         if (!(m->framed = af_framed_open(&f, m->n, m->rest, m->masses))) goto fail;
         if (!(m->next = (double *)malloc((size_t)af_framed_size(m->framed) * sizeof(double)))) {
@@ -328,6 +346,29 @@ int af_step(af_model *m, double *state, const double *force, const double *base,
     }
     m->iterations = result;
     return AF_OK;
+}
+
+int af_controls(const af_model *m) { return m->controls; }
+
+const char *af_control_name(const af_model *m, int i) {
+    const char *name = m->control_names;
+    if (i < 0 || i >= m->controls) return NULL;
+    while (i--) name += strlen(name) + 1;
+    return name;
+}
+
+double af_control_value(const af_model *m, int i) {
+    return i >= 0 && i < m->controls ? af_reduced_control(m->reduced, i) : NAN;
+}
+
+int af_set_controls(af_model *m, const double *values) {
+    m->error[0] = '\0';
+    if (!m->controls) return AF_OK;
+    if (!values) {
+        af_say(m->error, ERROR_SIZE, "controls: NULL; give %d values", m->controls);
+        return AF_BAD_INPUT;
+    }
+    return af_reduced_set_controls(m->reduced, values, m->control_names, m->error, ERROR_SIZE);
 }
 
 void af_positions(const af_model *m, const double *state, double *x) {

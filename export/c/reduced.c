@@ -3,7 +3,12 @@
  * for the sorted triples a <= b <= c. A step minimizes |q - q_hat|^2 / (2 dt^2) + V(q) - f.q
  * (q_hat = q + dt w, f = basis^T force, the basis mass-orthonormal) by Newton with the
  * Hessian's negative eigenvalues clamped and an Armijo search on the exact quartic along the
- * step, as export/runtime.py's ReducedSimulator does. */
+ * step, as export/runtime.py's ReducedSimulator does.
+ *
+ * Controls (named pressures, activations): c1, C2 and S3 are the file's plus each control's
+ * part (control_c1, control_C2, control_S3; pressures first, only they have a cubic part)
+ * times its coefficient, a pressure's value or an activation a's a (2 - a), formed when the
+ * controls are set. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -21,13 +26,108 @@ struct af_reduced {
     double *basis, *c1, *C2, *S3, *W4;
     double *constant;            /* (r,) the projected constant force */
     double *work;                /* scratch for a step */
+    int controls, pressures;     /* k controls, the first `pressures` of them pressures */
+    unsigned char *kinds;        /* (k,) 0 a pressure, 1 an activation */
+    double *values;              /* (k,) the controls' values now */
+    double *part1, *part2, *part3;  /* (k, r), (k, r, r), (pressures, r, r, r) */
+    double *base1, *base2, *base3;  /* the file's c1, C2, S3 (c1, C2, S3: with the controls) */
 };
 
 void af_reduced_close(af_reduced *m) {
     if (!m) return;
     free(m->basis); free(m->c1); free(m->C2); free(m->S3); free(m->W4); free(m->work);
-    free(m->constant);
+    free(m->constant); free(m->kinds); free(m->values); free(m->part1); free(m->part2);
+    free(m->part3); free(m->base1); free(m->base2); free(m->base3);
     free(m);
+}
+
+/* A copy of n doubles, or NULL. */
+static double *copy_of(const double *a, long n) {
+    double *out = (double *)malloc((size_t)n * sizeof(double));
+    if (out) memcpy(out, a, (size_t)n * sizeof(double));
+    return out;
+}
+
+/* The control arrays, where the file has them; 0 with a message where they are wrong. */
+static int open_controls(af_reduced *m, const af_file *f) {
+    long shape[4], r = m->r, k, i;
+    double *defaults;
+    int ok;
+    if (!af_has_array(f, "control_kinds", 0)) return 1;
+    if (!(m->kinds = (unsigned char *)af_array(f, "control_kinds", 0, "uint8", 1, shape)))
+        return 0;
+    k = m->controls = (int)shape[0];
+    for (i = 0; i < k; i++) {
+        if (m->kinds[i] > 1 || (i > 0 && m->kinds[i] < m->kinds[i - 1])) {
+            af_say(f->error, f->error_size, "%s: array control_kinds: 0 (pressures) then 1 "
+                   "(activations) expected, entry %ld is %d", f->name, i, m->kinds[i]);
+            return 0;
+        }
+        if (!m->kinds[i]) m->pressures++;
+    }
+    if (!(m->values = (double *)af_array(f, "control_values", 0, "float64", 1, shape)))
+        return 0;
+    if (shape[0] != k) goto shape;
+    if (!(m->part1 = (double *)af_array(f, "control_c1", 0, "float64", 2, shape))) return 0;
+    if (shape[0] != k || shape[1] != r) goto shape;
+    if (!(m->part2 = (double *)af_array(f, "control_C2", 0, "float64", 3, shape))) return 0;
+    if (shape[0] != k || shape[1] != r || shape[2] != r) goto shape;
+    if (!(m->part3 = (double *)af_array(f, "control_S3", 0, "float64", 4, shape))) return 0;
+    if (shape[0] != m->pressures || shape[1] != r || shape[2] != r || shape[3] != r) goto shape;
+    m->base1 = copy_of(m->c1, r);
+    m->base2 = copy_of(m->C2, r * r);
+    m->base3 = copy_of(m->S3, r * r * r);
+    defaults = copy_of(m->values, k);
+    if (!m->base1 || !m->base2 || !m->base3 || !defaults) {
+        free(defaults);
+        af_say(f->error, f->error_size, "no memory for a model's controls");
+        return 0;
+    }
+    ok = af_reduced_set_controls(m, defaults, NULL, f->error, f->error_size) == AF_OK;
+    free(defaults);
+    return ok;
+shape:
+    af_say(f->error, f->error_size, "%s: the arrays control_values (k,), control_c1 (k, r), "
+           "control_C2 (k, r, r) and control_S3 (pressures, r, r, r) do not fit %ld controls "
+           "(%d pressures) and r = %ld", f->name, k, m->pressures, r);
+    return 0;
+}
+
+int af_reduced_controls(const af_reduced *m) { return m->controls; }
+
+double af_reduced_control(const af_reduced *m, int i) { return m->values[i]; }
+
+int af_reduced_set_controls(af_reduced *m, const double *values, const char *names,
+                            char *error, size_t error_size) {
+    long r = m->r, i, j, c;
+    const char *name = names;
+    for (c = 0; c < m->controls; c++) {
+        double v = values[c];
+        if (!isfinite(v) || (m->kinds[c] && !(v >= 0.0 && v < 1.0))) {
+            for (i = 0; names && i < c; i++) name += strlen(name) + 1;
+            af_say(error, error_size, "controls: %s%s%scontrol %ld is %s; got %g",
+                   names ? "'" : "", names ? name : "", names ? "', " : "", c,
+                   m->kinds[c] ? "an activation, in [0, 1)" : "a pressure, a finite number "
+                   "of Pa", v);
+            return AF_BAD_INPUT;
+        }
+    }
+    memcpy(m->c1, m->base1, (size_t)r * sizeof(double));
+    memcpy(m->C2, m->base2, (size_t)(r * r) * sizeof(double));
+    memcpy(m->S3, m->base3, (size_t)(r * r * r) * sizeof(double));
+    for (c = 0; c < m->controls; c++) {
+        double v = m->values[c] = values[c];
+        double beta = m->kinds[c] ? v * (2.0 - v) : v;
+        const double *p1 = m->part1 + c * r, *p2 = m->part2 + c * r * r;
+        if (beta == 0.0) continue;
+        for (i = 0; i < r; i++) m->c1[i] += beta * p1[i];
+        for (i = 0; i < r * r; i++) m->C2[i] += beta * p2[i];
+        if (c < m->pressures) {
+            const double *p3 = m->part3 + c * r * r * r;
+            for (j = 0; j < r * r * r; j++) m->S3[j] += beta * p3[j];
+        }
+    }
+    return AF_OK;
 }
 
 af_reduced *af_reduced_open(const af_file *f, int n, const double *rest) {
@@ -63,6 +163,7 @@ af_reduced *af_reduced_open(const af_file *f, int n, const double *rest) {
         af_say(f->error, f->error_size, "no memory for a model of r = %ld", r);
         goto fail;
     }
+    if (!open_controls(m, f)) goto fail;
     return m;
 shape:
     af_say(f->error, f->error_size, "%s: the arrays c1, C2, S3 and W4%s do not fit a basis of "

@@ -7,7 +7,13 @@ basis (n, 3, r) m per unit of q, 0 on held components; c1 (r,), C2 (r, r), S3 (r
 W4 (T, r), T = r (r + 1) (r + 2) / 6, the coefficients of the energy (runtime.ReducedSimulator);
 masses (n,) kg; held (n, 3) uint8; tets (m, 4) int32, the mesh it was built on; surface (k, 3)
 int32, the boundary triangles; with a display mesh, the basis interpolated at its vertices
-(physics on the model's mesh, drawing on the display's). The header: model_format
+(physics on the model's mesh, drawing on the display's). A model with controls (named
+pressures, activations; anisofem.reduced.controls) adds control_kinds (k,) uint8 (0 a
+pressure, 1 an activation), control_values (k,) their values as the scene wrote them,
+control_c1 (k, r), control_C2 (k, r, r) and control_S3 (p, r, r, r), p the pressures (which
+come first): each control's part of the energy per unit of its coefficient (a pressure's
+value, an activation a's a (2 - a)); the header's controls lists their names. The header:
+model_format
 REDUCED_FORMAT, title, n, m, r, modes, snapshots (the principal directions fitted to declared
 loads, 0 for a modal basis), frequencies (Hz), c0 (J), build_seconds, validation
 (anisofem.reduced.model.Validation: the tip and field errors against the full FEM, statically
@@ -61,8 +67,10 @@ def write(model, path, title="", gravity=None, display=None):
               "held": held.astype(np.uint8),
               "tets": mesh.tets.astype(np.int32),
               "surface": runtime.surface_triangles(mesh.vertices, mesh.tets).astype(np.int32)}
+    arrays.update(control_arrays(model.parts, r))
     material = scene.material
     header = {"model_format": runtime.REDUCED_FORMAT, "title": title, "n": mesh.n_vertices,
+              "controls": [p.name for p in model.parts],
               "m": mesh.n_tets, "physics_tets": scene.mesh.n_tets, "r": r,
               "modes": len(model.frequencies), "snapshots": model.fitted,
               "frequencies": [float(f) for f in model.frequencies], "c0": float(P.c0),
@@ -77,17 +85,31 @@ def write(model, path, title="", gravity=None, display=None):
     return header
 
 
+def control_arrays(parts, r):
+    """The control arrays of a model's ControlParts (module docstring); none without."""
+    if not parts:
+        return {}
+    pressures = [p for p in parts if p.kind == "pressure"]
+    return {"control_kinds": np.array([p.kind == "activation" for p in parts], np.uint8),
+            "control_values": np.array([p.value for p in parts], np.float64),
+            "control_c1": np.array([p.c1 for p in parts]),
+            "control_C2": np.array([p.C2 for p in parts]),
+            "control_S3": np.array([p.S3 for p in pressures]).reshape(len(pressures), r, r, r)}
+
+
 def declared(loads):
     """The loads a model was built and validated for (a Loads, or None: the scene's own), as
     the header records them: each drag's vertex count, magnitude (N) and directions (None: any),
-    the gravity cone (degrees) and the carry (turn in degrees, move in m, seconds)."""
+    the gravity cone (degrees), the carry (turn in degrees, move in m, seconds) and the
+    controls' ranges."""
     if loads is None:
         return None
     return {"drags": [{"vertices": len(d.vertices), "magnitude": d.magnitude,
                        "directions": None if d.directions is None else
                        [list(map(float, v)) for v in d.directions]} for d in loads.drags],
             "cone": loads.cone,
-            "carry": None if loads.carry is None else dataclasses.asdict(loads.carry)}
+            "carry": None if loads.carry is None else dataclasses.asdict(loads.carry),
+            "controls": {name: list(span) for name, span in loads.controls}}
 
 
 def _display_masses(scene, display):
