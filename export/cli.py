@@ -170,13 +170,15 @@ def _reduced(argv):
 
 
 def _declared_loads(args, scene):
-    """The Loads of --drag, --cone and --carry, or None where none is given."""
+    """The Loads of --drag, --cone and --carry and of the scene file's control ranges (with
+    the default drags where none is given), or None where none is given."""
     from anisofem.cli.arguments import fixed_vertices, is_scene_file
     from anisofem.io.scenefile import SceneFile
-    from anisofem.reduced import Carry, Drag, Loads
-    if not (args.drag or args.cone or args.carry):
+    from anisofem.reduced import Carry, Drag, Loads, default_loads
+    places = SceneFile(args.scene) if is_scene_file(args.scene) else None
+    ranges = places.control_ranges if places else {}
+    if not (args.drag or args.cone or args.carry or ranges):
         return None
-    places = SceneFile(args.scene) if is_scene_file(args.scene) and args.drag else None
     drags = []
     for entry in args.drag:
         if len(entry) not in (2, 5):
@@ -190,8 +192,10 @@ def _declared_loads(args, scene):
         vertices = (places.vertices(where) if places else
                     fixed_vertices(scene.mesh, where, "--drag"))
         drags.append(Drag(vertices, magnitude, (direction,) if direction else None))
+    if not args.drag and ranges:
+        drags = default_loads(scene).drags
     carry = Carry(*args.carry) if args.carry else None
-    loads = Loads(drags=tuple(drags), cone=args.cone, carry=carry)
+    loads = Loads(drags=tuple(drags), cone=args.cone, carry=carry, controls=ranges)
     loads.check(scene)
     return loads
 
@@ -226,7 +230,9 @@ def _what_is_built(args, scene, fixed, loads):
             f"{args.modes} modes + {args.snapshots} directions fitted to static equilibria"
             if args.snapshots else f"{args.modes} modes and their modal derivatives")
     declared = (f"the declared loads ({len(loads.drags)} drags, a {loads.cone:g} degree "
-                f"cone{', a carry' if loads.carry else ''})" if loads else
+                f"cone{', a carry' if loads.carry else ''}"
+                f"{f', {len(loads.controls)} control ranges' if loads.controls else ''})"
+                if loads else
                 "the default loads (half the body's weight at each free end)")
     fitted = args.framed or args.snapshots
     return (f"{args.scene}: {scene.mesh.n_tets} tets, holding {held} vertices {where}; "

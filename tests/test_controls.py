@@ -2,6 +2,8 @@
 reduced model. The reduced energy under any controls equals the FEM's at the same positions
 (exact, independently of the basis); a rollout whose controls change every step follows the
 FEM's; bad control input is named."""
+import json
+
 import numpy as np
 import pytest
 
@@ -269,3 +271,35 @@ def test_the_runtimes_name_bad_controls_and_bad_control_arrays(written, tmp_path
             bad = corrupt(path, str(tmp_path / "bad"), **edit)
             with pytest.raises(ValueError, match=message):
                 make(bad)
+
+
+def test_export_builds_a_scene_files_controls_for_their_ranges(tmp_path, capsys):
+    """A scene file's [controls.NAME] with a range: `python -m export reduced` fits the model
+    to it (the header records it) and the file steps with the control; a bad range is named."""
+    from export.cli import main
+    from export.runtime import ReducedSimulator
+    from test_scenefile import scene_file, two_halves
+    two_halves(tmp_path)
+    text = ('mesh = "bar.msh"\n[material]\nfiber = [1, 0, 0]\nfiber_stiffness = 1e5\n'
+            '[controls.squeeze]\nactivation = "stiff"\nrange = [0, 0.3]\n'
+            '[[boundary]]\nwhere = "base"\nheld = true\n')
+    path = str(tmp_path / "bar")
+    main(["reduced", str(scene_file(tmp_path, text)), "--modes", "4", "--snapshots", "8",
+          "-o", path])
+    assert "1 drags, a 0 degree cone, 1 control ranges" in capsys.readouterr().err
+    header = json.load(open(path + ".json"))
+    assert header["controls"] == ["squeeze"]
+    assert header["loads"]["controls"] == {"squeeze": [0.0, 0.3]}
+    sim = ReducedSimulator(path)
+    q, w = sim.rest_state()
+    for _ in range(20):
+        q, w = sim.step(q, w, np.zeros_like(sim.rest_positions), 0.02,
+                        controls={"squeeze": 0.2})
+    tip = sim.positions(q)[:, 0].max()
+    assert tip < sim.rest_positions[:, 0].max() - 1e-4   # the stiff half's fibers contract
+    for bad in ("range = [0, 1.3]", "range = [0.3]"):
+        with pytest.raises(SystemExit) as exit_:
+            main(["reduced", str(scene_file(tmp_path, text.replace("range = [0, 0.3]", bad),
+                                            "bad.toml")), "-o", path])
+        assert exit_.value.code == 2
+        assert "controls.squeeze.range: expected" in capsys.readouterr().err

@@ -64,6 +64,8 @@ SCHEMA = {
                       "control's value, in [0, 1) (the region needs fiber_stiffness > 0)",
         "value": "the control's value (default 0), times its curve's factor where it has one",
         "curve": "the name of the load curve its value follows in time (statics take it at 1)",
+        "range": "[low, high]: the values a reduced model of the scene is built to follow "
+                 "(python -m export reduced fits its snapshots to them)",
     },
     "rotation": {
         "axis": "[ax, ay, az]",

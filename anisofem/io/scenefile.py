@@ -46,8 +46,9 @@ def load_scene(path):
 
 
 class SceneFile:
-    """A scene file read: path, table (tomllib's dict), scene (the Scene), and the names it
-    uses: region(name) the (m,) bool mask of a physical volume's tets, vertices(where) the
+    """A scene file read: path, table (tomllib's dict), scene (the Scene), control_ranges
+    ({name: (low, high)} of the controls that give a range), and the names it uses:
+    region(name) the (m,) bool mask of a physical volume's tets, vertices(where) the
     vertices of a place (a surface, a side or a box, as a [[boundary]] entry names it)."""
 
     def __init__(self, path):
@@ -65,6 +66,7 @@ class SceneFile:
                     from None
         self._reader = _Reader(self.path)
         self.scene = self._reader.scene(self.table)
+        self.control_ranges = self._reader.ranges
 
     def region(self, name):
         return self._reader.region(name, name)
@@ -334,6 +336,7 @@ class _Reader:
         if not isinstance(table, dict):
             raise self.error("controls", "expected [controls.NAME] tables")
         pressures, activations, parts = [], [], []
+        self.ranges = {}
         for name, spec in table.items():
             key = f"controls.{name}"
             if not isinstance(spec, dict):
@@ -357,6 +360,13 @@ class _Reader:
             if "curve" in spec:
                 parts.append(Timed(self.curve_named(spec["curve"], curves, f"{key}.curve"),
                                    control=name))
+            if "range" in spec:
+                low, high = _vector(self, spec["range"], f"{key}.range", 2)
+                if not low < high or (kinds == ["activation"] and not 0 <= low < high < 1):
+                    raise self.error(f"{key}.range", f"expected [low, high] with low < high"
+                                     f"{' in [0, 1)' if kinds == ['activation'] else ''}, got "
+                                     f"{spec['range']!r}")
+                self.ranges[name] = (float(low), float(high))
         return pressures, activations, parts
 
     def curve_named(self, value, curves, key):
@@ -523,10 +533,12 @@ def _number(reader, value, key):
     return float(value)
 
 
-def _vector(reader, value, key):
-    if not isinstance(value, list) or len(value) != 3 or \
+def _vector(reader, value, key, size=3):
+    """value as a finite (size,) float array: a list of `size` numbers."""
+    if not isinstance(value, list) or len(value) != size or \
             any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value):
-        raise reader.error(key, f"expected [x, y, z] numbers, got {value!r}")
+        shown = "[x, y, z]" if size == 3 else f"{size}"
+        raise reader.error(key, f"expected {shown} numbers, got {value!r}")
     v = np.array(value, dtype=float)
     if not np.isfinite(v).all():
         raise reader.error(key, f"must be finite, got {value!r}")
