@@ -303,3 +303,48 @@ def test_export_builds_a_scene_files_controls_for_their_ranges(tmp_path, capsys)
                                             "bad.toml")), "-o", path])
         assert exit_.value.code == 2
         assert "controls.squeeze.range: expected" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    return ReducedModel(finger(), modes=6, snapshots=24, loads=Loads(controls=RANGES),
+                        validate=False)
+
+
+def test_reach_finds_the_controls_that_bring_the_tip_to_a_target(fitted):
+    """Targets across the reachable workspace (the tip's equilibria under random controls in
+    the ranges): each reached in the model within 1e-4 of the finger's length, and the FEM at
+    the controls found puts the tip within 1% of it; a target above the finger (it bends
+    only down) is out of reach: said, with the nearest point found."""
+    model, scene = fitted, fitted.scene
+    tip = int(np.flatnonzero(scene.mesh.vertices[:, 2] > 0.06 - 1e-9)[0])
+    rng = np.random.default_rng(0)
+    for _ in range(6):
+        drawn = [rng.uniform(*RANGES[name]) for name in model.controls]
+        target = model.positions(model.solve(controls=drawn)[0])[tip]
+        found = model.reach(tip, target)
+        assert found.reached and found.distance <= 1e-4 * 0.06, found.message
+        low, high = np.array([RANGES[n] for n in model.controls]).T
+        assert ((found.controls >= low) & (found.controls <= high)).all()
+        full = af.solve(scene.with_controls(found.controls)).x[tip]
+        assert np.linalg.norm(full - target) <= 0.01 * 0.06
+    above = model.x0[tip] + [0.0, 0.05, 0.0]
+    found = model.reach(tip, above)
+    assert not found.reached and found.message.startswith("out of reach")
+    rest = model.positions(model.solve(controls=[0, 0, 0])[0])[tip]
+    assert found.distance <= np.linalg.norm(rest - above) + 1e-9
+    assert np.allclose(found.position, model.positions(found.q)[tip])
+
+
+def test_reach_names_bad_bounds(fitted):
+    for bounds, message in (({"left": (0, 1)}, "bounds: no control 'left'"),
+                            ({"curl": (0, 1.2)}, r"bounds: 'curl': expected low < high in "
+                                                 r"\[0, 1\)"),
+                            ({"push": (3, 1)}, "bounds: 'push': expected low < high")):
+        with pytest.raises(ValueError, match=message):
+            fitted.reach(0, [0, 0, 0.06], bounds=bounds)
+    unranged = ReducedModel(finger(), modes=3, validate=False)
+    with pytest.raises(ValueError, match="bounds: control 'push' has no range"):
+        unranged.reach(0, [0, 0, 0.06])
+    with pytest.raises(ValueError, match="effector: vertex 100000 is not one of"):
+        fitted.reach(100000, [0, 0, 0.06])

@@ -32,6 +32,7 @@ from .display import interpolate
 from .loads import Loads, default_loads, unseen_cases
 from .snapshots import static_states, principal_directions
 from .polynomial import build_bytes, polynomial, with_pressure
+from .reach import reach
 from .controls import (control_parts, control_responses, control_values, controlled,
                        passive)
 
@@ -224,6 +225,13 @@ class ReducedModel:
         if not self.parts:
             return self.polynomial
         return controlled(self.polynomial, self.parts, self.control_values(values))
+
+    def reach(self, effector, target, bounds=None, tolerance=None, controls=None):
+        """The controls within bounds that bring `effector` (a vertex index, or a rest point
+        (3,) m) to `target` (3,), m, at static equilibrium: an anisofem.reduced.reach.Reach
+        (controls, q, position, distance, reached, message). bounds: a mapping name -> (low,
+        high) over the ranges the model was built for."""
+        return reach(self, effector, target, bounds, tolerance, controls)
 
     def validate(self, cases=None, seed=0):
         """The model against the full FEM on cases it was not built from (a Validation): with
