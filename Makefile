@@ -102,7 +102,7 @@ web/scenes/%-reduced.json: export/writers/reduced.py export/runtime.py export/fr
 # the C runtime (export/c, less its file loader) built to WebAssembly by zig's C compiler (the
 # ziglang wheel from PyPI): the page's reduced and framed models step with it
 ZIG_SPEC ?= ziglang==0.17.1
-WASM_SOURCES := $(addprefix export/c/,arrays.c linalg.c reduced.c framed.c model.c)
+WASM_SOURCES := $(addprefix export/c/,arrays.c linalg.c reduced.c reach.c framed.c model.c)
 
 $(VENV)/.zig: $(VENV)/.fem
 	$(PY) -m pip install --quiet "$(ZIG_SPEC)"

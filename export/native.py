@@ -22,8 +22,8 @@ import numpy as np
 
 FOLDER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "c")
 #: The runtime's sources, in build order, and its headers.
-SOURCES = tuple(os.path.join(FOLDER, f"{name}.c")
-                for name in ("arrays", "linalg", "reduced", "framed", "model", "files"))
+SOURCES = tuple(os.path.join(FOLDER, f"{name}.c") for name in
+                ("arrays", "linalg", "reduced", "reach", "framed", "model", "files"))
 HEADERS = (os.path.join(FOLDER, "anisofem.h"), os.path.join(FOLDER, "af_internal.h"))
 #: The kinds af_kind returns (anisofem.h).
 REDUCED, FRAMED = 1, 2
@@ -119,6 +119,9 @@ def library(lib=None):
             "af_control_name": (char_p, [handle, ctypes.c_int]),
             "af_control_value": (ctypes.c_double, [handle, ctypes.c_int]),
             "af_set_controls": (ctypes.c_int, [handle, _DOUBLE_P]),
+            "af_reach": (ctypes.c_int, [handle, ctypes.POINTER(ctypes.c_int), _DOUBLE_P,
+                                        ctypes.c_int, _DOUBLE_P, _DOUBLE_P, _DOUBLE_P,
+                                        ctypes.c_double, _DOUBLE_P, _DOUBLE_P]),
         }
         for name, (restype, argtypes) in types.items():
             function = getattr(c, name)
@@ -272,6 +275,23 @@ class CReducedSimulator(CModel):
     def positions(self, q):
         """Positions (n, 3), m, of coordinates q (r,)."""
         return self._positions(q)  # af_positions reads a state's first half: q
+
+    def reach(self, nodes, weights, target, low, high, tolerance=0.0):
+        """af_reach: the controls within [low, high] (k,) that bring the effector sum_i
+        weights[i] x[nodes[i]] to target (3,), m, at static equilibrium under the constant
+        force. Returns (controls (k,), position (3,), reached, message); RuntimeError with the
+        runtime's message for bad input."""
+        nodes = np.ascontiguousarray(np.atleast_1d(nodes), dtype=np.int32)
+        weights = np.ascontiguousarray(np.atleast_1d(weights), dtype=np.float64)
+        arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (target, low, high)]
+        controls, position = np.zeros(len(self.controls)), np.zeros(3)
+        code = self._c.af_reach(self._handle,
+                                nodes.ctypes.data_as(ctypes.POINTER(ctypes.c_int)),
+                                _pointer(weights), nodes.size, *map(_pointer, arrays),
+                                tolerance, _pointer(controls), _pointer(position))
+        if code < 0:
+            self._check(code, "af_reach")
+        return controls, position, code == 0, self._c.af_error(self._handle).decode()
 
 
 class CFramedSimulator(CModel):

@@ -348,3 +348,36 @@ def test_reach_names_bad_bounds(fitted):
         unranged.reach(0, [0, 0, 0.06])
     with pytest.raises(ValueError, match="effector: vertex 100000 is not one of"):
         fitted.reach(100000, [0, 0, 0.06])
+
+
+def test_the_c_runtime_reaches_like_the_model(written):
+    """af_reach against ReducedModel.reach on the same file: the same controls (1e-7 of each
+    range) and effector (1e-9 m) for reachable targets, and the same out-of-reach answer."""
+    from export import native
+    if native.compiler() is None:
+        pytest.skip("no C compiler")
+    model, path, folder = written
+    c = native.CReducedSimulator(path, native.build(str(folder / "lib")))
+    c.set_constant_force(model.scene.external_force)
+    tip = int(np.flatnonzero(model.scene.mesh.vertices[:, 2] > 0.06 - 1e-9)[0])
+    low, high = np.array([RANGES[n] for n in model.controls]).T
+    rng = np.random.default_rng(1)
+    targets = [model.positions(model.solve(controls=[rng.uniform(*RANGES[n]) for n in
+                                                     model.controls])[0])[tip]
+               for _ in range(4)] + [model.x0[tip] + [0.0, 0.05, 0.0]]
+    q = None   # af_reach starts each equilibrium's Newton from the last reach's
+    for target in targets:
+        ours = model.reach(tip, target, q0=q)
+        q = ours.q
+        controls, position, reached, message = c.reach([tip], [1.0], target, low, high)
+        assert reached == ours.reached
+        assert np.abs(controls - ours.controls).max() <= 1e-7 * np.abs(high - low).max()
+        assert np.abs(position - ours.position).max() <= 1e-9
+        assert reached or message.startswith("out of reach")
+    assert c.control_values.tolist() == [0.0, 0.0, 0.0]   # af_reach leaves them as they were
+    with pytest.raises(RuntimeError, match="reach: the bounds of 'curl' must have low < high"):
+        c.reach([tip], [1.0], targets[0], [-1, 0.2, 0], [1, 0.1, 0.1])
+    with pytest.raises(RuntimeError, match="'curl', control 1 is an activation"):
+        c.reach([tip], [1.0], targets[0], [-1, 0.2, 0], [1, 1.5, 0.1])
+    with pytest.raises(RuntimeError, match="reach: effector node 0 is -3"):
+        c.reach([-3], [1.0], targets[0], low, high)

@@ -226,12 +226,13 @@ class ReducedModel:
             return self.polynomial
         return controlled(self.polynomial, self.parts, self.control_values(values))
 
-    def reach(self, effector, target, bounds=None, tolerance=None, controls=None):
+    def reach(self, effector, target, bounds=None, tolerance=None, controls=None, q0=None):
         """The controls within bounds that bring `effector` (a vertex index, or a rest point
         (3,) m) to `target` (3,), m, at static equilibrium: an anisofem.reduced.reach.Reach
         (controls, q, position, distance, reached, message). bounds: a mapping name -> (low,
-        high) over the ranges the model was built for."""
-        return reach(self, effector, target, bounds, tolerance, controls)
+        high) over the ranges the model was built for; controls, q0: where to start (a
+        previous answer's controls and q, in a control loop)."""
+        return reach(self, effector, target, bounds, tolerance, controls, q0)
 
     def validate(self, cases=None, seed=0):
         """The model against the full FEM on cases it was not built from (a Validation): with

@@ -30,6 +30,10 @@ from .._validate import as_float_array
 DAMPING = 1e-3
 SOFTER, STIFFER, LARGEST = 3.0, 4.0, 1e8
 
+#: The reach stops, out of reach, after a step that shrinks the squared distance by less than
+#: this share of it (a crawl into a minimum short of the target).
+CRAWL = 1e-6
+
 #: The reach stops, out of reach, where the gradient of the squared distance along the
 #: directions the bounds leave open is below this share of |J| |e - target|.
 STATIONARY = 1e-9
@@ -39,7 +43,7 @@ STATIONARY = 1e-9
 TOLERANCE = 1e-4
 
 #: The equilibria's Newton tolerance (relative, as ReducedModel.solve's rtol).
-SOLVE_RTOL = 1e-10
+SOLVE_RTOL = 1e-8
 
 
 @dataclass
@@ -94,12 +98,14 @@ def model_bounds(model, bounds):
     return low, high
 
 
-def reach(model, effector, target, bounds=None, tolerance=None, controls=None, max_iter=50):
+def reach(model, effector, target, bounds=None, tolerance=None, controls=None, q0=None,
+          max_iter=50):
     """The controls within bounds that bring `effector` (a vertex index, or a rest point
     (3,) m) of a ReducedModel to `target` (3,), m, at static equilibrium under the scene's
     loads (module docstring), from controls (default: the model's written values, clipped to
-    the bounds). tolerance: the distance counted as reached, m (default TOLERANCE times the
-    body's size). Returns a Reach."""
+    the bounds) and their equilibrium's Newton from q0 (a previous Reach's q in a control
+    loop; default 0). tolerance: the distance counted as reached, m (default TOLERANCE times
+    the body's size). Returns a Reach."""
     if not model.parts:
         raise ValueError("model: it has no controls (named pressures, activations) to set")
     e0, E = effector_rows(model, effector)
@@ -107,26 +113,31 @@ def reach(model, effector, target, bounds=None, tolerance=None, controls=None, m
     low, high = model_bounds(model, bounds)
     size = float(np.ptp(model.x0, axis=0).max())
     tolerance = TOLERANCE * size if tolerance is None else float(tolerance)
-    first = _descend(model, e0, E, target, low, high, np.clip(model.control_values(controls),
-                                                               low, high), tolerance, max_iter)
+    start = np.clip(model.control_values(controls), low, high)
+    q0 = None if q0 is None else as_float_array(q0, "q0", shape=(model.r,))
+    first = _descend(model, e0, E, target, low, high, start, q0, tolerance, max_iter)
     if first.reached:
         return first
-    second = _descend(model, e0, E, target, low, high, 0.5 * (low + high), tolerance, max_iter)
-    second.iterations += first.iterations
-    return second if second.distance < first.distance else first
+    second = _descend(model, e0, E, target, low, high, 0.5 * (low + high), None, tolerance,
+                      max_iter)
+    best = second if second.distance < first.distance else first
+    best.iterations = first.iterations + second.iterations
+    return best
 
 
-def _descend(model, e0, E, target, low, high, u, tolerance, max_iter):
-    """reach from the controls u (k,) within the bounds: a Reach."""
+def _descend(model, e0, E, target, low, high, u, q0, tolerance, max_iter):
+    """reach from the controls u (k,) within the bounds, their equilibrium's Newton from q0
+    (None: 0): a Reach."""
     width = high - low
-    q = _equilibrium(model, u, None)
+    q = _equilibrium(model, u, q0)
     residual = e0 + E @ q - target
     damping = None
     for it in range(max_iter + 1):
         distance = math.sqrt(float(residual @ residual))
         if distance <= tolerance or it == max_iter:
             break
-        J = (E @ _control_slopes(model, q, u)) * width                  # (3, k), scaled
+        slopes = _control_slopes(model, q, u)                            # dq/du (r, k)
+        J = (E @ slopes) * width                                         # (3, k), scaled
         s = (u - low) / width
         if _stationary(J, residual, s):
             break
@@ -135,7 +146,7 @@ def _descend(model, e0, E, target, low, high, u, tolerance, max_iter):
         while damping <= LARGEST * scale:
             trial = np.clip(low + (s + bounded_least_squares(J, residual, -s, 1.0 - s,
                                                              damping)) * width, low, high)
-            q_trial = _equilibrium(model, trial, q)
+            q_trial = _equilibrium(model, trial, q + slopes @ (trial - u))  # from its tangent
             moved = e0 + E @ q_trial - target
             if moved @ moved < residual @ residual:
                 damping /= SOFTER
@@ -143,7 +154,11 @@ def _descend(model, e0, E, target, low, high, u, tolerance, max_iter):
             damping *= STIFFER
         else:
             break
+        crawled = residual @ residual - moved @ moved <= CRAWL * (residual @ residual)
         u, q, residual = trial, q_trial, moved
+        if crawled:
+            distance = math.sqrt(float(residual @ residual))
+            break
     position = e0 + E @ q
     reached = distance <= tolerance
     message = (f"reached: {distance:.3g} m from the target" if reached else

@@ -68,8 +68,28 @@ int af_reduced_set_force(af_reduced *m, const double *force);
 int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force, double dt,
                        double rtol, int max_iter, char *error, size_t error_size);
 void af_reduced_place(const af_reduced *m, const double *q, double *x);
+/* The static equilibrium under the constant force and the controls now, Newton from q (r,)
+ * in place: iterations, or AF_NOT_CONVERGED with a message. */
+int af_reduced_static(af_reduced *m, double *q, double rtol, int max_iter, char *error,
+                      size_t error_size);
+/* dq/du (r x k, row-major) at the equilibrium q under the controls now: -H^-1 dg/du. */
+void af_reduced_control_slopes(af_reduced *m, const double *q, double *slopes);
+void af_reduced_basis_rows(const af_reduced *m, const int *nodes, const double *weights,
+                           int count, double *e0, double *E);
+/* Inverse statics (reach.c): AF_OK (reached), AF_OUT_OF_REACH, or a negative code; the
+ * controls found, the effector's position there and the iterations taken; the model's
+ * controls left as they were. start: the first descent's controls (NULL: the controls now);
+ * q0 (r,): where its first equilibrium's Newton starts where warm (else 0), overwritten by
+ * the answer's equilibrium. */
+int af_reduced_reach(af_reduced *m, const int *nodes, const double *weights, int count,
+                     const double *target, const double *low, const double *high,
+                     double tolerance, int max_iter, const double *start, double *q0,
+                     int warm, double *controls, double *position, int *iterations,
+                     char *error, size_t error_size);
 int af_reduced_controls(const af_reduced *m);
 double af_reduced_control(const af_reduced *m, int i);
+int af_reduced_check_controls(const af_reduced *m, const double *values, const char *names,
+                              char *error, size_t error_size);
 int af_reduced_set_controls(af_reduced *m, const double *values, const char *names, char *error,
                             size_t error_size);
 

@@ -39,7 +39,8 @@ enum {
     AF_BAD_FILE = -1,      /* the file is missing, corrupt, or of another format version */
     AF_BAD_INPUT = -2,     /* a non-finite force or state, dt <= 0, a base that is not rigid */
     AF_NOT_CONVERGED = -3, /* Newton stopped short of its tolerance (the state is unchanged) */
-    AF_NO_MEMORY = -4
+    AF_NO_MEMORY = -4,
+    AF_OUT_OF_REACH = 1    /* af_reach: the target is out of reach; the nearest point found */
 };
 
 /* The kinds of model (af_kind). */
@@ -95,7 +96,20 @@ AF_API double af_control_value(const af_model *model, int i);
  * AF_OK, or AF_BAD_INPUT with the controls unchanged and af_error naming the control whose
  * value is not finite, or is an activation outside [0, 1). */
 AF_API int af_set_controls(af_model *model, const double *values);
-/* Newton iterations of the last step. */
+/* Inverse statics: the controls within [low, high] (af_controls doubles each) that bring an
+ * effector, the point sum_i weights[i] x[nodes[i]] over count nodes (a vertex: one node of
+ * weight 1; a material point: its tet's nodes and shape functions there; a region's mean), to
+ * target (3 doubles, m) at static equilibrium under the constant force. From the controls now
+ * (clipped to the bounds; in a control loop, the last answer set by af_set_controls), the
+ * equilibrium's Newton from the last reach's, and where that ends short, again from the
+ * bounds' middle; the nearer is kept. tolerance: the distance counted as reached, m (<= 0: 1e-4 of the body's
+ * size). Writes the controls found into controls and the effector there into position (3);
+ * leaves the model's controls as they were (af_set_controls applies the answer). Returns
+ * AF_OK (reached), AF_OUT_OF_REACH (the nearest point found; af_error says how far), or a
+ * negative code naming the bad input in af_error. */
+AF_API int af_reach(af_model *model, const int *nodes, const double *weights, int count,
+                    const double *target, const double *low, const double *high,
+                    double tolerance, double *controls, double *position);
 AF_API int af_iterations(const af_model *model);
 /* Why the last af_step or af_set_* failed, "" if it did not. */
 AF_API const char *af_error(const af_model *model);

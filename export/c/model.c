@@ -18,7 +18,8 @@ struct af_model {
     unsigned char *held;
     int *surface, *tets;
     char *control_names;                /* the controls' names, each ended by a NUL */
-    int controls;
+    int controls, warm;                 /* warm: reach_q holds the last reach's equilibrium */
+    double *reach_q;
     af_reduced *reduced;
     af_framed *framed;
     char error[ERROR_SIZE];
@@ -29,7 +30,7 @@ void af_free(af_model *m) {
     af_reduced_close(m->reduced);
     af_framed_close(m->framed);
     free(m->rest); free(m->masses); free(m->next); free(m->held); free(m->surface);
-    free(m->tets); free(m->control_names);
+    free(m->tets); free(m->control_names); free(m->reach_q);
     free(m);
 }
 
@@ -369,6 +370,68 @@ int af_set_controls(af_model *m, const double *values) {
         return AF_BAD_INPUT;
     }
     return af_reduced_set_controls(m->reduced, values, m->control_names, m->error, ERROR_SIZE);
+}
+
+/* The default reach tolerance: this share of the rest shape's largest extent. */
+#define REACH_TOLERANCE 1e-4
+#define REACH_ITERATIONS 50
+
+int af_reach(af_model *m, const int *nodes, const double *weights, int count,
+             const double *target, const double *low, const double *high, double tolerance,
+             double *controls, double *position) {
+    int i, a, result;
+    m->error[0] = '\0';
+    if (!m->controls) {
+        af_say(m->error, ERROR_SIZE, "reach: the model has no controls to set");
+        return AF_BAD_INPUT;
+    }
+    if (count < 1 || !nodes || !weights || !target || !low || !high || !controls ||
+        !position) {
+        af_say(m->error, ERROR_SIZE, "reach: an effector of at least one node, a target, "
+               "bounds and room for the answer, got count %d or a NULL", count);
+        return AF_BAD_INPUT;
+    }
+    for (i = 0; i < count; i++)
+        if (nodes[i] < 0 || nodes[i] >= m->n || !isfinite(weights[i])) {
+            af_say(m->error, ERROR_SIZE, "reach: effector node %d is %d with weight %g: a "
+                   "vertex of the %d and a finite weight expected", i, nodes[i], weights[i],
+                   m->n);
+            return AF_BAD_INPUT;
+        }
+    for (a = 0; a < 3; a++)
+        if (!isfinite(target[a])) {
+            af_say(m->error, ERROR_SIZE, "reach: target component %d is not finite", a);
+            return AF_BAD_INPUT;
+        }
+    for (i = 0; i < m->controls; i++)
+        if (!(low[i] < high[i])) {
+            af_say(m->error, ERROR_SIZE, "reach: the bounds of '%s' must have low < high, got "
+                   "%g and %g", af_control_name(m, i), low[i], high[i]);
+            return AF_BAD_INPUT;
+        }
+    if (af_reduced_check_controls(m->reduced, low, m->control_names, m->error, ERROR_SIZE) ||
+        af_reduced_check_controls(m->reduced, high, m->control_names, m->error, ERROR_SIZE))
+        return AF_BAD_INPUT;
+    if (!(tolerance > 0.0)) {
+        double size = 0.0;
+        for (a = 0; a < 3; a++) {
+            double lo = m->rest[a], hi = m->rest[a];
+            for (i = 1; i < m->n; i++) {
+                if (m->rest[3 * i + a] < lo) lo = m->rest[3 * i + a];
+                if (m->rest[3 * i + a] > hi) hi = m->rest[3 * i + a];
+            }
+            if (hi - lo > size) size = hi - lo;
+        }
+        tolerance = REACH_TOLERANCE * size;
+    }
+    if (!m->reach_q &&
+        !(m->reach_q = (double *)calloc((size_t)af_reduced_size(m->reduced), sizeof(double))))
+        return AF_NO_MEMORY;
+    result = af_reduced_reach(m->reduced, nodes, weights, count, target, low, high, tolerance,
+                              REACH_ITERATIONS, NULL, m->reach_q, m->warm, controls, position,
+                              &m->iterations, m->error, ERROR_SIZE);
+    m->warm = result >= 0;
+    return result;
 }
 
 void af_positions(const af_model *m, const double *state, double *x) {

@@ -97,9 +97,9 @@ int af_reduced_controls(const af_reduced *m) { return m->controls; }
 
 double af_reduced_control(const af_reduced *m, int i) { return m->values[i]; }
 
-int af_reduced_set_controls(af_reduced *m, const double *values, const char *names,
-                            char *error, size_t error_size) {
-    long r = m->r, i, j, c;
+int af_reduced_check_controls(const af_reduced *m, const double *values, const char *names,
+                              char *error, size_t error_size) {
+    long i, c;
     const char *name = names;
     for (c = 0; c < m->controls; c++) {
         double v = values[c];
@@ -112,6 +112,13 @@ int af_reduced_set_controls(af_reduced *m, const double *values, const char *nam
             return AF_BAD_INPUT;
         }
     }
+    return AF_OK;
+}
+
+int af_reduced_set_controls(af_reduced *m, const double *values, const char *names,
+                            char *error, size_t error_size) {
+    long r = m->r, i, j, c;
+    if (af_reduced_check_controls(m, values, names, error, error_size)) return AF_BAD_INPUT;
     memcpy(m->c1, m->base1, (size_t)r * sizeof(double));
     memcpy(m->C2, m->base2, (size_t)(r * r) * sizeof(double));
     memcpy(m->S3, m->base3, (size_t)(r * r * r) * sizeof(double));
@@ -155,9 +162,9 @@ af_reduced *af_reduced_open(const af_file *f, int n, const double *rest) {
     if (shape[0] != r || shape[1] != r || shape[2] != r) goto shape;
     if (!(m->W4 = (double *)af_array(f, "W4", 1, "float64", 2, shape))) goto fail;
     if (shape[0] != m->triples || shape[1] != r) goto shape;
-    /* work: A, Ap (T each); X, Y, H, L, V, J (r^2 each); g, p, x, load, terms, t1, lam (r
-       each) */
-    m->work = (double *)malloc((size_t)(2 * m->triples + 6 * r * r + 7 * r + 1) * sizeof(double));
+    /* work: A, Ap (T each); X, Y, H, L, V, J (r^2 each); g, p, x, load, terms, t1, lam,
+       q_hat (r each) */
+    m->work = (double *)malloc((size_t)(2 * m->triples + 6 * r * r + 8 * r + 1) * sizeof(double));
     m->constant = (double *)calloc((size_t)r + 1, sizeof(double));
     if (!m->work || !m->constant) {
         af_say(f->error, f->error_size, "no memory for a model of r = %ld", r);
@@ -175,6 +182,19 @@ fail:
 }
 
 int af_reduced_size(const af_reduced *m) { return m->r; }
+
+void af_reduced_basis_rows(const af_reduced *m, const int *nodes, const double *weights,
+                           int count, double *e0, double *E) {
+    long r = m->r, i, j, k;
+    for (i = 0; i < 3; i++) e0[i] = 0.0;
+    for (i = 0; i < 3 * r; i++) E[i] = 0.0;
+    for (j = 0; j < count; j++)
+        for (i = 0; i < 3; i++) {
+            const double *row = m->basis + (3L * nodes[j] + i) * r;
+            e0[i] += weights[j] * m->rest[3L * nodes[j] + i];
+            for (k = 0; k < r; k++) E[i * r + k] += weights[j] * row[k];
+        }
+}
 
 void af_reduced_place(const af_reduced *m, const double *q, double *x) {
     long i, k, r = m->r;
@@ -246,18 +266,17 @@ int af_reduced_set_force(af_reduced *m, const double *force) {
     return AF_OK;
 }
 
-int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force, double dt,
-                       double rtol, int max_iter, char *error, size_t error_size) {
+/* Minimize |x - q_hat|^2 inertia / 2 + V(x) - load.x from x (r,) in place to a reduced
+ * gradient of tolerance + rtol |dV/dq(x0)| or the round-off floor: the iterations taken, or
+ * AF_NOT_CONVERGED with a message. q_hat is read only where inertia > 0. */
+static int minimize(af_reduced *m, double *x, const double *q_hat, double inertia,
+                    const double *load, double tolerance, double rtol, int max_iter,
+                    char *error, size_t error_size) {
     long r = m->r, rr = r * r, i, k, it;
     double *A = m->work, *Ap = A + m->triples, *X = Ap + m->triples, *Y = X + rr,
            *H = Y + rr, *L = H + rr, *V = L + rr, *J = V + rr, *g = J + rr, *p = g + r,
-           *x = p + r, *load = x + r, *terms = load + r, *t1 = terms + r, *lam = t1 + r;
-    double inertia, tolerance, residual = 0.0, eps = 2.220446049250313e-16;
-    for (k = 0; k < r; k++) load[k] = m->constant[k];
-    if (force) project(m, force, load);
-    inertia = 1.0 / (dt * dt);
-    tolerance = rtol * (sqrt(af_dot(load, load, r)) + sqrt(af_dot(w, w, r)) / dt);
-    for (k = 0; k < r; k++) x[k] = q[k] + dt * w[k];
+           *terms = p + 3 * r, *t1 = terms + r, *lam = t1 + r;
+    double residual = 0.0, eps = 2.220446049250313e-16;
     w4_times(m, x, A);
     for (it = 0; it <= max_iter; it++) {
         double a1, a2, a3, pure, mixed, step = 1.0, floor_;
@@ -271,7 +290,7 @@ int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force,
         }
         if (it == 0) tolerance += rtol * sqrt(af_dot(g, g, r));
         for (i = 0; i < r; i++) {
-            g[i] += inertia * (x[i] - (q[i] + dt * w[i])) - load[i];
+            g[i] += (inertia > 0.0 ? inertia * (x[i] - q_hat[i]) : 0.0) - load[i];
             for (k = 0; k < r; k++)
                 H[i * r + k] = m->C2[i * r + k] + 6.0 * Y[i * r + k] + 12.0 * X[i * r + k]
                                + (i == k ? inertia : 0.0);
@@ -288,13 +307,7 @@ int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force,
             terms[i] = s + fabs(load[i]) + fabs(m->c1[i]);
         }
         floor_ = FLOOR * eps * (double)r * sqrt(af_dot(terms, terms, r));
-        if (residual <= (tolerance > floor_ ? tolerance : floor_)) {
-            for (k = 0; k < r; k++) {
-                w[k] = (x[k] - q[k]) / dt;
-                q[k] = x[k];
-            }
-            return (int)it;
-        }
+        if (residual <= (tolerance > floor_ ? tolerance : floor_)) return (int)it;
         if (it == max_iter) break;
         af_newton_direction(H, g, p, L, V, lam, J, t1, r, CLAMP, 0);
         a1 = af_dot(g, p, r);
@@ -314,4 +327,57 @@ int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force,
     af_say(error, error_size, "step: Newton stopped at |g| = %.3g, its tolerance %.3g, after "
            "%ld iterations", residual, tolerance, it);
     return AF_NOT_CONVERGED;
+}
+
+int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force, double dt,
+                       double rtol, int max_iter, char *error, size_t error_size) {
+    long r = m->r, k;
+    double *base = m->work + 2 * m->triples + 6 * r * r, *x = base + 2 * r, *load = base + 3 * r,
+           *q_hat = base + 7 * r;
+    int result;
+    for (k = 0; k < r; k++) load[k] = m->constant[k];
+    if (force) project(m, force, load);
+    for (k = 0; k < r; k++) x[k] = q_hat[k] = q[k] + dt * w[k];
+    result = minimize(m, x, q_hat, 1.0 / (dt * dt),
+                      load, rtol * (sqrt(af_dot(load, load, r)) + sqrt(af_dot(w, w, r)) / dt),
+                      rtol, max_iter, error, error_size);
+    if (result < 0) return result;
+    for (k = 0; k < r; k++) {
+        w[k] = (x[k] - q[k]) / dt;
+        q[k] = x[k];
+    }
+    return result;
+}
+
+int af_reduced_static(af_reduced *m, double *q, double rtol, int max_iter, char *error,
+                      size_t error_size) {
+    long r = m->r;
+    return minimize(m, q, NULL, 0.0, m->constant,
+                    rtol * sqrt(af_dot(m->constant, m->constant, r)), rtol, max_iter, error,
+                    error_size);
+}
+
+void af_reduced_control_slopes(af_reduced *m, const double *q, double *slopes) {
+    long r = m->r, rr = r * r, i, k, c;
+    double *A = m->work, *X = A + 2 * m->triples, *Y = X + rr, *H = Y + rr, *L = H + rr,
+           *V = L + rr, *J = V + rr, *g = J + rr, *p = g + r, *t1 = g + 5 * r, *lam = g + 6 * r;
+    w4_times(m, q, A);
+    af_contract(A, q, X, r);
+    s3_times(m, q, Y);
+    for (i = 0; i < rr; i++) H[i] = m->C2[i] + 6.0 * Y[i] + 12.0 * X[i];
+    for (c = 0; c < m->controls; c++) {
+        const double *p1 = m->part1 + c * r, *p2 = m->part2 + c * rr;
+        double v = m->values[c], slope = m->kinds[c] ? 2.0 - 2.0 * v : 1.0;
+        for (i = 0; i < r; i++) {
+            double s = p1[i];
+            for (k = 0; k < r; k++) s += p2[i * r + k] * q[k];
+            if (c < m->pressures) {
+                const double *p3 = m->part3 + c * rr * r + i * rr;
+                for (k = 0; k < rr; k++) s += 3.0 * p3[k] * q[k / r] * q[k % r];
+            }
+            g[i] = slope * s;
+        }
+        af_newton_direction(H, g, p, L, V, lam, J, t1, r, CLAMP, 0);   /* p = -H^-1 g */
+        for (i = 0; i < r; i++) slopes[i * m->controls + c] = p[i];
+    }
 }
