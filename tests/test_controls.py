@@ -3,6 +3,7 @@ reduced model. The reduced energy under any controls equals the FEM's at the sam
 (exact, independently of the basis); a rollout whose controls change every step follows the
 FEM's; bad control input is named."""
 import json
+import re
 
 import numpy as np
 import pytest
@@ -381,3 +382,41 @@ def test_the_c_runtime_reaches_like_the_model(written):
         c.reach([tip], [1.0], targets[0], [-1, 0.2, 0], [1, 1.5, 0.1])
     with pytest.raises(RuntimeError, match="reach: effector node 0 is -3"):
         c.reach([-3], [1.0], targets[0], low, high)
+
+
+def test_under_the_sanitizers_a_file_with_controls_steps_and_reaches(written, tmp_path):
+    """tests/c/load_and_step.c with AddressSanitizer and UndefinedBehaviorSanitizer: the
+    controls set anew every step, one af_reach, and the corrupt control arrays each named."""
+    import subprocess
+    from corrupt_files import corrupt, nan_at, set_spec
+    from export import native
+    from test_c_runtime import _sanitized
+    if native.compiler() is None:
+        pytest.skip("no C compiler")
+    _, path, _ = written
+    exe = _sanitized(tmp_path)
+    out = str(tmp_path / "bad")
+    cases = [(path, r"ok 1 \d+ 50 \S+ controls 3 reach [01]$"),
+             (corrupt(path, out + "-nan", edit_bin=nan_at("control_c1")),
+              r"array control_c1 holds a non-finite number"),
+             (corrupt(path, out + "-kinds", edit_bin=_kinds_out_of_order),
+              r"array control_kinds: 0 \(pressures\) then 1 \(activations\) expected"),
+             (corrupt(path, out + "-s3", set_spec("control_S3", "shape",
+                                                  lambda s: [s[0] + 1] + s[1:])),
+              r"control_S3|runs past the end"),
+             (corrupt(path, out + "-names", edit_header=lambda h: h.update(controls=["a"])),
+              r"the header's \"controls\" is not a list of 3 names")]
+    done = subprocess.run([exe, *(c[0] for c in cases)], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0 and "runtime error" not in done.stderr, done.stderr
+    lines = done.stdout.splitlines()
+    assert len(lines) == len(cases)
+    for line, (_, pattern) in zip(lines, cases):
+        assert re.search(pattern, line), (pattern, line)
+
+
+def _kinds_out_of_order(data, header):
+    """edit_bin: control_kinds' last entry a pressure (0), after the activations."""
+    offset = header["arrays"]["control_kinds"]["offset"]
+    data[offset + 2] = 0
+    return data

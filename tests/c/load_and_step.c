@@ -1,6 +1,7 @@
 /* For tests/test_c_checks.py: load each file named on the command line with af_load and print
- * one line per file, "ok KIND N STEPS LOWEST" after 50 steps under the file's gravity, or
- * "error MESSAGE" where it cannot be loaded or stepped. Built with the sanitizers, it shows
+ * one line per file, "ok KIND N STEPS LOWEST" after 50 steps under the file's gravity (and
+ * for a file with controls, set anew every step, " controls K reach CODE" after one af_reach
+ * of vertex 0), or "error MESSAGE" where it cannot be loaded or stepped. Built with the sanitizers, it shows
  * that no file, good or corrupt, reads memory it should not. */
 #include <stdio.h>
 #include <stdlib.h>
@@ -25,11 +26,31 @@ int main(int argc, char **argv) {
         x = (double *)malloc((size_t)(3 * n) * sizeof(double));
         af_rest_state(m, state);
         for (i = 0; i < 3 * n; i++) force[i] = af_masses(m)[i / 3] * g[i % 3];
-        for (k = 0; k < 50 && code == AF_OK; k++) code = af_step(m, state, force, NULL, 0.02);
+        af_set_constant_force(m, NULL);
+        for (k = 0; k < 50 && code == AF_OK; k++) {
+            double values[64];
+            for (i = 0; i < af_controls(m) && i < 64; i++) values[i] = 0.05 * ((k + i) % 2);
+            if (af_controls(m)) code = af_set_controls(m, values);
+            if (code == AF_OK) code = af_step(m, state, force, NULL, 0.02);
+        }
         if (code == AF_OK) {
             af_positions(m, state, x);
             for (i = 0; i < n; i++) if (x[3 * i + 2] < lowest) lowest = x[3 * i + 2];
-            printf("ok %d %d %d %.17g\n", af_kind(m), n, k, lowest);
+            printf("ok %d %d %d %.17g", af_kind(m), n, k, lowest);
+            if (af_controls(m) && af_controls(m) <= 64) {
+                double low[64], high[64], found[64], at[3], target[3];
+                int node = 0;
+                double one = 1.0;
+                for (i = 0; i < af_controls(m); i++) {
+                    low[i] = 0.0;
+                    high[i] = 0.1;
+                }
+                for (i = 0; i < 3; i++) target[i] = af_rest_positions(m)[i] + 1e-3;
+                af_set_constant_force(m, force);
+                code = af_reach(m, &node, &one, 1, target, low, high, 0.0, found, at);
+                printf(" controls %d reach %d", af_controls(m), code);
+            }
+            printf("\n");
         } else {
             printf("error %s\n", af_error(m));
         }
