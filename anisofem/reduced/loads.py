@@ -36,6 +36,12 @@ CONE_DIRECTIONS = 4
 #: split into connected pieces (the tip of a cantilever, each arm's end of a T).
 END_SHARE = 0.9
 
+#: With more than two declared controls, the build also solves for all of them at once at
+#: this many points per control, drawn uniformly in their ranges from COMBINED_SEED (the
+#: validation draws from seed 0).
+COMBINED = 2
+COMBINED_SEED = 1
+
 #: The unseen cases draw a drag's magnitude between this share of the declared one and all of it.
 SMALLEST_UNSEEN = 0.3
 
@@ -265,8 +271,10 @@ def build_cases(scene, loads):
     candidate direction at SHARES of its magnitude (a chain, solved in order); gravity turned
     to CONE_DIRECTIONS points on the cone's rim and on the cone at half its angle (one-case
     chains); a carry widens the cone to its turn and adds its inertia (Carry.inertia) at
-    SHARES; each declared control from its written value toward each end of its range, and
-    each pair of them together toward each pair of ends, at SHARES."""
+    SHARES; each declared control from its written value toward each end of its range, each
+    pair of them together toward each pair of ends, and with more than two, all of them
+    toward COMBINED points per control drawn in their ranges (seed COMBINED_SEED), at
+    SHARES."""
     none = {}
     chains = [[(s * d.force(scene, direction), none) for s in SHARES]
               for d in loads.drags for direction in d.candidate_directions]
@@ -291,6 +299,10 @@ def build_cases(scene, loads):
     ends = [{name: end} for name in names for end in away[name]]
     ends += [{a: x, b: y} for i, a in enumerate(names) for b in names[i + 1:]
              for x in away[a] for y in away[b]]
+    if len(names) > 2:   # all of them at once: COMBINED draws per control from the ranges
+        rng = np.random.default_rng(COMBINED_SEED)
+        ends += [{name: float(rng.uniform(*span)) for name, span in loads.controls}
+                 for _ in range(COMBINED * len(names))]
     for end in ends:
         chains.append([(zero, {name: written[name] + s * (value - written[name])
                                for name, value in end.items()}) for s in SHARES])
