@@ -23,6 +23,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ("actuator.py", "actuator.png", "bending grows with pressure: True"),
     ("actuator.py twist", "actuator_twist.png", "bending grows with pressure: True"),
     ("two_region_part.py", "two_region_part.png", "converged: True"),
+    ("tentacle.py", "tentacle.png", "drew out/tentacle.png"),
     ("identify.py", None, "stopped after")])
 def test_example_runs_and_draws(tmp_path, script, picture, says):
     script, *args = script.split()
@@ -38,6 +39,12 @@ def test_example_runs_and_draws(tmp_path, script, picture, says):
         assert abs(float(values["fiber_elevation"]) - 10.0) < 2.0, r.stdout
         assert abs(float(values["kappa"]) / 2e5 - 1.0) < 0.1, r.stdout
         assert (tmp_path / "out" / "identify" / "fitted.toml").exists()
+    if script == "tentacle.py":  # each target in reach: reached in the model, and the FEM at
+        # the controls found within 1% of the tentacle's 0.2 m; the last one out of reach
+        rows = [line.split("|") for line in r.stdout.splitlines() if line.count("|") == 5][1:]
+        assert len(rows) == 5 and "out of reach" in r.stdout.splitlines()[-2]
+        for row in rows[:4]:
+            assert float(row[2]) < 0.02 and float(row[3]) < 2.0, row
     if script == "actuator.py":  # the ramp's ParaView collection: one .vtu per pressure; the
         # crossed winding bends without twisting, the graded one twists as it bends
         assert len(list((tmp_path / "out").glob("actuator*_0*.vtu"))) == 11

@@ -121,7 +121,7 @@ int af_reduced_set_controls(af_reduced *m, const double *values, const char *nam
     if (af_reduced_check_controls(m, values, names, error, error_size)) return AF_BAD_INPUT;
     memcpy(m->c1, m->base1, (size_t)r * sizeof(double));
     memcpy(m->C2, m->base2, (size_t)(r * r) * sizeof(double));
-    memcpy(m->S3, m->base3, (size_t)(r * r * r) * sizeof(double));
+    if (m->pressures) memcpy(m->S3, m->base3, (size_t)(r * r * r) * sizeof(double));
     for (c = 0; c < m->controls; c++) {
         double v = m->values[c] = values[c];
         double beta = m->kinds[c] ? v * (2.0 - v) : v;
