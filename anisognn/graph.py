@@ -90,8 +90,9 @@ def from_scene(scene, dtype=torch.float32):
     if scene.mesh.order != 1:
         raise ValueError(f"scene: the network steps linear tets (the paper's setting); this "
                          f"mesh has quadratic tets (order {scene.mesh.order})")
-    if scene.pressures:
-        raise ValueError("scene: the network takes nodal forces; this scene has pressure loads")
+    if scene.pressures or scene.cables:
+        raise ValueError(f"scene: the network takes nodal forces; this scene has "
+                         f"{'pressure loads' if scene.pressures else 'cables'}")
     if (scene.elements.rest2 != 1.0).any():
         raise ValueError("scene: the network was trained on passive fibers; this scene activates "
                          "some (Material's activation)")

@@ -77,9 +77,10 @@ def _context(scene, comm, *options):
     all ranks hold the same scene size and options."""
     PETSc = _petsc()
     check_scene(scene)
-    if scene.pressures:
-        raise ValueError("scene: the petsc engine takes nodal forces, gravity and tractions; "
-                         "this scene has pressure loads (solve it with anisofem.solve)")
+    if scene.pressures or scene.cables:
+        raise ValueError(f"scene: the petsc engine takes nodal forces, gravity and tractions; "
+                         f"this scene has {'pressure loads' if scene.pressures else 'cables'} "
+                         f"(solve it with anisofem.solve)")
     comm = PETSc.COMM_WORLD if comm is None else comm
     _share_cores(comm)
     _agree(comm, scene, *options)

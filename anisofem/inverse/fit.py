@@ -27,7 +27,7 @@ import numpy as np
 from . import lbfgsb
 from .._validate import as_float_array
 from ..physics.material import Material
-from ..reduced.display import locate
+from ..physics.points import locate
 from ..physics.scene import check_scene
 from .sensitivity import fiber_angles, fiber_direction, static_jacobian, static_sensitivity
 from ..solvers.solve import solve

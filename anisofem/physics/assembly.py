@@ -1,6 +1,7 @@
 """Sparsity patterns: where each entry of each element Hessian (3k x 3k for k nodes per
 element) lands, built once per mesh and set of unknowns, so that assembly is a scatter-add into
-a preallocated array."""
+a preallocated array. A layout may also hold couplings, groups of nodes that no element joins
+(a cable's routing points in two tets): `positions(groups)` places their blocks."""
 from functools import cached_property
 
 import numpy as np
@@ -37,6 +38,14 @@ def _entry_dofs(tets, dof_map):
     return int(dof_map.max()) + 1, np.repeat(ed, width, axis=1), np.tile(ed, (1, width))
 
 
+def _groups(tets, couplings):
+    """The node groups a pattern joins: the elements (m, k), and the couplings (g, w) where
+    given."""
+    if couplings is None or len(couplings) == 0:
+        return [tets]
+    return [tets, np.ascontiguousarray(couplings, dtype=np.int64)]
+
+
 def _position_type(largest):
     """int32 for positions up to `largest` where they fit (the element loop is compiled for
     one index type), else int64."""
@@ -59,12 +68,14 @@ class CsrLayout:
 
     kind = "csr"
 
-    def __init__(self, tets, dof_map):
+    def __init__(self, tets, dof_map, couplings=None):
         tets = np.ascontiguousarray(tets, dtype=np.int64)
         dof_map = np.ascontiguousarray(dof_map, dtype=np.int64)
+        self._dof_map = dof_map
         n = dof_map.shape[0]
         k = int(dof_map.max()) + 1 if dof_map.size else 0
-        pairs = np.unique((tets[:, :, None] * n + tets[:, None, :]).ravel())
+        pairs = np.unique(np.concatenate([(g[:, :, None] * n + g[:, None, :]).ravel()
+                                          for g in _groups(tets, couplings)]))
         vertex_ptr = np.searchsorted(pairs // n, np.arange(n + 1)).astype(np.int64)
         neighbors = (pairs % n).astype(np.int64)
         del pairs
@@ -85,6 +96,14 @@ class CsrLayout:
 
     def zeros(self):
         return np.zeros(self.nnz)
+
+    def positions(self, groups):
+        """(g, (3w)^2) the positions of the blocks of node groups (g, w) (couplings given to
+        the layout, or nodes of one element), as map's rows."""
+        groups = np.ascontiguousarray(groups, dtype=np.int64)
+        out = np.empty((groups.shape[0], (3 * groups.shape[1]) ** 2), self.indices.dtype)
+        _element_positions(groups, self._dof_map, self.indptr, self.indices, out)
+        return out
 
     def matrix(self, data):
         """scipy.sparse.csr_matrix sharing data."""
@@ -174,13 +193,19 @@ class DenseLayout:
 
     kind = "dense"
 
-    def __init__(self, tets, dof_map):
-        k, rows, cols = _entry_dofs(tets, dof_map)
-        self.map = np.where((rows >= 0) & (cols >= 0), rows * k + cols,
-                            -1).astype(_position_type(k * k))
+    def __init__(self, tets, dof_map, couplings=None):
+        self._dof_map = dof_map
+        self.map = self.positions(tets)
+        k = int(dof_map.max()) + 1 if dof_map.size else 0
         self.diag = np.arange(k, dtype=np.int64) * (k + 1)
         self.dofs = unknown_dofs(dof_map)
         self.shape = (k, k)
+
+    def positions(self, groups):
+        """(g, (3w)^2) the positions of the blocks of node groups (g, w), as map's rows."""
+        k, rows, cols = _entry_dofs(groups, self._dof_map)
+        return np.where((rows >= 0) & (cols >= 0), rows * k + cols,
+                        -1).astype(_position_type(k * k))
 
     def zeros(self):
         return np.zeros(self.shape[0] * self.shape[1])
@@ -203,21 +228,32 @@ class BandedLayout:
 
     kind = "banded"
 
-    def __init__(self, tets, dof_map):
-        k, rows, cols = _entry_dofs(tets, dof_map)
-        valid = (rows >= 0) & (cols >= 0)
-        graph = sp.csr_matrix((np.ones(int(valid.sum())), (rows[valid], cols[valid])),
-                              shape=(k, k))
+    def __init__(self, tets, dof_map, couplings=None):
+        entries = [_entry_dofs(g, dof_map) for g in _groups(tets, couplings)]
+        k = entries[0][0]
+        rows = np.concatenate([e[1][(e[1] >= 0) & (e[2] >= 0)] for e in entries])
+        cols = np.concatenate([e[2][(e[1] >= 0) & (e[2] >= 0)] for e in entries])
+        graph = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(k, k))
         self.perm = reverse_cuthill_mckee(graph, symmetric_mode=True).astype(np.int64)
-        position = np.empty(k, np.int64)
-        position[self.perm] = np.arange(k)
-        pr, pc = position[rows[valid]], position[cols[valid]]
+        self._position = np.empty(k, np.int64)
+        self._position[self.perm] = np.arange(k)
+        self._dof_map = dof_map
+        pr, pc = self._position[rows], self._position[cols]
         self.kd = int((pr - pc).max()) if pr.size else 0
-        self.map = np.full(rows.shape, -1, _position_type((self.kd + 1) * k))
-        self.map[valid] = np.where(pr >= pc, (pr - pc) + pc * (self.kd + 1), -1)
-        self.diag = position * (self.kd + 1)
+        self.map = self.positions(tets)
+        self.diag = self._position * (self.kd + 1)
         self.dofs = unknown_dofs(dof_map)
         self.shape = (k, k)
+
+    def positions(self, groups):
+        """(g, (3w)^2) the positions of the blocks of node groups (g, w) in the band, as map's
+        rows."""
+        k, rows, cols = _entry_dofs(groups, self._dof_map)
+        valid = (rows >= 0) & (cols >= 0)
+        out = np.full(rows.shape, -1, _position_type((self.kd + 1) * k))
+        pr, pc = self._position[rows[valid]], self._position[cols[valid]]
+        out[valid] = np.where(pr >= pc, (pr - pc) + pc * (self.kd + 1), -1)
+        return out
 
     def zeros(self):
         return np.zeros((self.kd + 1) * self.shape[0])

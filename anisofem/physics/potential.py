@@ -99,8 +99,8 @@ class Potential:
 
     def terms(self, x):
         """Energy terms in J: isotropic, fiber, external, kinetic, pressure (-p times each
-        cavity's volume change, summed), total; and per-element
-        elastic energies (m,) under "elements"."""
+        cavity's volume change, and each cable's tension times its length, summed), total; and
+        per-element elastic energies (m,) under "elements"."""
         e_iso, e_fib, _, _ = self._elastic(x)
         external, kinetic = self._loads(x, kernels.EMPTY_GRAD)
         out = {"isotropic": float(e_iso.sum()), "fiber": float(e_fib.sum()),
@@ -134,16 +134,20 @@ class Potential:
         if layout is not None and not project:
             for cavity in self.scene.pressures:
                 cavity.add_hessian(x, layout, data)
+        if layout is not None:   # a cable's Hessian is positive semi-definite
+            for cable in self.scene.cables:
+                cable.add_hessian(x, layout, data)
         if self.dynamic and layout is not None:
             data[layout.diag] += self.mass_per_dof[layout.dofs]
         return value, grad, data
 
     def _pressure(self, x, grad=None):
-        """The pressures' energy, J; adds their gradient to grad (n, 3) when given. (Their
-        Hessian is left out of the PSD-projected one: the elastic part is PSD by itself.)"""
+        """The pressures' and cables' energy, J (the actuators'); adds their gradient to grad
+        (n, 3) when given. (The pressures' Hessian is left out of the PSD-projected one: the
+        elastic part is PSD by itself.)"""
         total = 0.0
-        for cavity in self.scene.pressures:
-            total += cavity.energy(x, grad)
+        for load in self.scene.pressures + self.scene.cables:
+            total += load.energy(x, grad)
         return total
 
     def _loads(self, x, grad):

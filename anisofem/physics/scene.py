@@ -13,6 +13,7 @@ from .kernels import MAX_NODES
 from .densities import STVK
 from .material import Material
 from .mesh import TetMesh, block_coloring
+from .cables import Cable, CableLoad
 from .controls import Activation, control_mapping, control_number
 from .curves import Timed
 from .pressure import CavityLoad, Pressure
@@ -81,6 +82,9 @@ class Scene:
         control.
     activation : an anisofem.Activation or a sequence of them: the fibers' activation of sets
         of elements, each a control (anisofem.physics.controls); `activations` holds them.
+    cable : an anisofem.Cable or a sequence of them: tendons routed through the body, each
+        pulled with a tension, a control (anisofem.physics.cables); `cables` holds them bound
+        to the mesh.
 
     Controls (`controls`, their names; `control_values`) are set by with_controls, by load
     curves (following) and by simulate's `controls`.
@@ -91,7 +95,7 @@ class Scene:
 
     def __init__(self, mesh, material=None, *, fixed=None, fixed_positions=None, gravity=None,
                  body_force=None, nodal_force=None, traction=None, traction_faces=None,
-                 pressure=None, activation=None):
+                 pressure=None, activation=None, cable=None):
         if not isinstance(mesh, TetMesh):
             raise TypeError(f"mesh: expected an anisofem.TetMesh, got {type(mesh).__name__}")
         material = Material.paper() if material is None else material
@@ -122,7 +126,8 @@ class Scene:
         self.external_force = f
         self.pressures = _cavity_loads(mesh, pressure, self.fixed_mask)
         self.activations = _activations(activation, self._params)
-        _check_names(self.pressures, self.activations)
+        self.cables = _cable_loads(mesh, cable)
+        _check_names(self.pressures, self.activations, self.cables)
         self.timed = ()
         for arr in (self.fixed_mask, self.fixed_positions, self.masses, self.external_force,
                     self.gravity):
@@ -231,22 +236,24 @@ class Scene:
 
     @property
     def controls(self):
-        """The names of the scene's controls: its named pressures, then its activations."""
-        return tuple(p.name for p in self.pressures if p.name) + tuple(
-            a.name for a in self.activations)
+        """The names of the scene's controls: its named pressures, its activations, then its
+        cables."""
+        return (tuple(p.name for p in self.pressures if p.name)
+                + tuple(a.name for a in self.activations) + tuple(c.name for c in self.cables))
 
     @property
     def control_values(self):
-        """(k,) the controls' values now, in the order of `controls` (Pa, activation)."""
+        """(k,) the controls' values now, in the order of `controls` (Pa, activation, N)."""
         return np.array([p.magnitude for p in self.pressures if p.name]
-                        + [a.value for a in self.activations], dtype=float)
+                        + [a.value for a in self.activations]
+                        + [c.tension for c in self.cables], dtype=float)
 
     def with_controls(self, values):
         """The same scene with controls set: values, a mapping name -> value (the others
         keep theirs) or one value per control in the order of `controls`. Pressures in Pa,
-        activations in [0, 1). Shares what held_at shares; ValueError naming the control
-        for an unknown name, a value that is not a finite number or an activation outside
-        [0, 1)."""
+        activations in [0, 1), tensions >= 0 N. Shares what held_at shares; ValueError naming
+        the control for an unknown name, a value that is not a finite number, an activation
+        outside [0, 1) or a negative tension."""
         values = control_mapping(values, self.controls)
         moved = self.held_at(self.fixed_positions)
         moved.pressures = tuple(
@@ -254,22 +261,33 @@ class Scene:
             for p in self.pressures)
         moved.activations = tuple(a.at(values[a.name]) if a.name in values else a
                                   for a in self.activations)
+        moved.cables = tuple(c.at(values[c.name]) if c.name in values else c
+                             for c in self.cables)
         if any(a.name in values for a in self.activations):
             moved.elements = _activated(self.elements, moved.activations)
         return moved
 
     def layout(self, kind):
-        """The Hessian layout over the free DOFs: kind "csr", "dense" or "banded" (cached)."""
+        """The Hessian layout over the free DOFs: kind "csr", "dense" or "banded" (cached);
+        it joins the nodes of each cable segment too."""
         if kind not in self._layouts:
             cls = {"csr": CsrLayout, "dense": DenseLayout, "banded": BandedLayout}[kind]
-            self._layouts[kind] = cls(self.elements.tets, self.dof_map)
+            self._layouts[kind] = cls(self.elements.tets, self.dof_map, self._couplings)
         return self._layouts[kind]
 
     @cached_property
     def full_layout(self):
         """CSR layout over all 3n DOFs (for the public hessian())."""
         n = self.mesh.n_vertices
-        return CsrLayout(self.elements.tets, np.arange(3 * n, dtype=np.int64).reshape(n, 3))
+        return CsrLayout(self.elements.tets, np.arange(3 * n, dtype=np.int64).reshape(n, 3),
+                         self._couplings)
+
+    @property
+    def _couplings(self):
+        """(g, w) the node groups of the cables' segments (None without cables)."""
+        if not self.cables:
+            return None
+        return np.concatenate([c.groups for c in self.cables])
 
     def check_static(self):
         """Raise ValueError unless fixed components remove the rigid translations."""
@@ -321,6 +339,7 @@ class Scene:
         force.setflags(write=False)
         moved.external_force = force
         moved.pressures = tuple(p.scaled(share) for p in self.pressures)
+        moved.cables = tuple(c.at(share * c.tension) for c in self.cables)
         return moved
 
     def plus_force(self, force):
@@ -494,9 +513,21 @@ def _activated(elements, activations):
     return replace(elements, rest2=rest2)
 
 
-def _check_names(pressures, activations):
+def _cable_loads(mesh, cable):
+    """The CableLoads (a tuple) of `cable`: None, a Cable or a sequence of them."""
+    if cable is None:
+        return ()
+    given = (cable,) if isinstance(cable, Cable) else tuple(cable)
+    for c in given:
+        if not isinstance(c, Cable):
+            raise TypeError(f"cable: expected anisofem.Cable objects, got {type(c).__name__}")
+    return tuple(CableLoad(mesh, c) for c in given)
+
+
+def _check_names(pressures, activations, cables):
     """ValueError where two controls share a name."""
-    names = [p.name for p in pressures if p.name] + [a.name for a in activations]
+    names = ([p.name for p in pressures if p.name] + [a.name for a in activations]
+             + [c.name for c in cables])
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise ValueError(f"controls: the name {twice[0]!r} is given to two controls; each "

@@ -540,8 +540,9 @@ def refusal(scene):
     """Why the framed model cannot take a StVK scene (a message naming the field), or None:
     pressures (a cavity's volume spans domains), activated fibers and controls, and nodes held
     along some axes only."""
-    if scene.pressures:
-        return "scene: the framed model does not take pressures; use ReducedModel"
+    if scene.pressures or scene.cables:
+        return (f"scene: the framed model does not take "
+                f"{'pressures; use ReducedModel' if scene.pressures else 'cables'}")
     if scene.activations or (scene.elements.rest2 != 1.0).any():
         return ("scene: the framed model takes passive fibers (no activation, no activation "
                 "control); use ReducedModel")

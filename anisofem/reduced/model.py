@@ -125,6 +125,9 @@ class ReducedModel:
     def __init__(self, scene, modes=MODES, derivatives=None, snapshots=0, loads=None,
                  validate=True, progress=None):
         check_polynomial_scene(scene, "reduced model")
+        if scene.cables:
+            raise ValueError("scene: the reduced model takes no cables (a cable's length is not "
+                             "a polynomial of the coordinates); step it with the FEM")
         scene.check_static()
         modes = _count(modes, "modes", 1)
         snapshots = _count(snapshots, "snapshots", 0)

@@ -219,6 +219,9 @@ def representable(rungs, scene, notes):
         left["reduced"] = "the reduced model needs the StVK base material"
     if scene.pressures:
         left["surrogate"] = "the surrogates take nodal forces, not pressure"
+    if scene.cables:
+        left["reduced"] = "the reduced models take no cables"
+        left["surrogate"] = "the surrogates take nodal forces, not cables"
     if scene.timed:
         left["reduced"] = "the reduced rungs hold the loads constant, not on their curves"
         left["surrogate"] = "the surrogates take constant nodal forces, not load curves"

@@ -34,7 +34,7 @@ import numpy as np
 
 from anisofem import Material, Scene, TetMesh
 from anisofem.reduced import FramedModel, ReducedModel
-from anisofem.reduced.display import node_weights
+from anisofem.physics.points import node_weights
 from anisofem.physics.scene import GRAVITY
 
 from .. import runtime

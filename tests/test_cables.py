@@ -1,0 +1,109 @@
+"""Cables (tendons): against beam theory, their derivatives against central differences at
+ordinary and extreme tensions, as a control changed every step, and bad input named."""
+import numpy as np
+import pytest
+
+import anisofem as af
+from anisofem.physics.potential import Potential
+from anisofem.reduced import ReducedModel
+from test_derivatives import fd_gradient, fd_hessian, rel_err
+
+L, H, E = 0.1, 0.02, 1e5
+
+
+def beam(cells=(10, 2, 2), order=2, tension=0.0, offset=0.006):
+    """A cantilever L x H x H along x held at x = 0, a cable straight along it at `offset`
+    above its axis (z) from the held end to the tip, through 9 points inside the body."""
+    mesh = af.box_beam(size=(L, H, H), cells=cells, order=order)
+    points = [(x, 0.0, offset) for x in np.linspace(0.0, L, 9)]
+    return af.Scene(mesh, af.Material(E, 0.3, 1000.0),
+                    fixed=af.metrics.end_vertices(mesh, 0, "min"),
+                    cable=af.Cable(points, tension, "pull"))
+
+
+def test_a_cable_bends_a_beam_by_an_end_moment():
+    """A small tension T at offset e anchored at the tip is an end moment T e: the tip
+    deflects T e L^2 / (2 E I) within 2% (quadratic tets, 10 x 2 x 2 cells), and the beam
+    shortens by T L / (E A)."""
+    T, e = 0.01, 0.006
+    scene = beam(tension=T, offset=e)
+    result = af.solve(scene, rtol=1e-10)
+    assert result.converged
+    X = scene.mesh.vertices
+    tip = (result.x - X)[np.abs(X[:, 0] - L) < 1e-12].mean(axis=0)
+    bending = T * e * L ** 2 / (2 * E * H ** 4 / 12)
+    assert abs(tip[2] / bending - 1) < 0.02, tip[2] / bending
+    assert abs(-tip[0] / (T * L / (E * H * H)) - 1) < 0.02
+    # no tension, no deflection; a tension doubled, about twice the deflection (small T)
+    assert np.abs(af.solve(scene.with_controls({"pull": 0.0})).x - X).max() < 1e-15
+    twice = af.solve(scene.with_controls({"pull": 2 * T}), rtol=1e-10).x
+    ratio = (twice - X)[np.abs(X[:, 0] - L) < 1e-12, 2].mean() / tip[2]
+    assert abs(ratio - 2) < 0.01
+
+
+@pytest.mark.parametrize("order", [1, 2])
+@pytest.mark.parametrize("tension", [0.05, 500.0])
+def test_the_cables_gradient_and_hessian_are_its_energys(order, tension):
+    """At a deformed state, the potential's gradient and Hessian with a cable through vertices
+    and interior points match central differences of its energy and gradient (1e-6), at an
+    ordinary tension and one 10^4 times larger; the energy's derivative in the tension is the
+    cable's length."""
+    mesh = af.box_beam(size=(L, H, H), cells=(3, 1, 1), order=order)
+    points = [int(np.argmin(mesh.vertices[:, 0])), (0.03, 0.002, 0.004), (0.06, -0.003, 0.001),
+              int(np.argmax(mesh.vertices[:, 0] - mesh.vertices[:, 2]))]
+    scene = af.Scene(mesh, af.Material(E, 0.3, 1000.0), fixed=[0],
+                     cable=af.Cable(points, tension, "pull"))
+    rng = np.random.default_rng(2)
+    x = mesh.vertices + 0.002 * rng.standard_normal(mesh.vertices.shape)
+    g = af.gradient(scene, x)
+    assert rel_err(g, fd_gradient(scene, x, 1e-7)) < 1e-6
+    Hm = af.hessian(scene, x).toarray()
+    assert rel_err(Hm, fd_hessian(scene, x, 1e-7)) < 1e-6
+    h = 1e-3 * tension
+    slope = (Potential(scene.with_controls({"pull": tension + h})).energy(x)
+             - Potential(scene.with_controls({"pull": tension - h})).energy(x)) / (2 * h)
+    assert abs(slope - scene.cables[0].length(x)) <= 1e-6 * scene.cables[0].length(x)
+
+
+def test_a_tension_changed_every_step_follows_the_controller():
+    """simulate with a tension from a callable: each step's scene pulls with it (the same
+    rollout as stepping by hand), and the tip rises and falls with the tension."""
+    scene = beam(cells=(6, 1, 1), order=1)
+    dt, steps = 0.02, 8
+
+    def controller(t):
+        return {"pull": 0.5 * np.sin(np.pi * t / (steps * dt))}
+    rollout = af.simulate(scene, steps, dt, controls=controller)
+    x, v = scene.initial_positions(), np.zeros_like(scene.initial_positions())
+    for k in range(steps):
+        result = af.step(scene.with_controls(controller((k + 1) * dt)), x, v, dt)
+        x, v = result.x, result.v
+    assert rollout.converged
+    assert np.abs(rollout.positions[-1] - x).max() <= 1e-12 + 1e-9 * np.abs(x).max()
+    tip = np.abs(scene.mesh.vertices[:, 0] - L) < 1e-12
+    lift = rollout.positions[:, tip, 2].mean(axis=1)
+    assert lift.max() > lift[0] + 1e-4
+
+
+def test_bad_cables_are_named():
+    mesh = af.box_beam(size=(L, H, H), cells=(3, 1, 1))
+    material = af.Material(E, 0.3, 1000.0)
+    for make, message in (
+            (lambda: af.Cable([0], 1.0, "c"), "cable 'c': points: a cable runs through at "
+                                               "least two points, got 1"),
+            (lambda: af.Cable([0, 1], -1.0, "c"), "control 'c': a cable's tension must be >= 0"),
+            (lambda: af.Cable([0, 1], float("nan"), "c"), "control 'c': expected a finite"),
+            (lambda: af.Scene(mesh, material, cable=af.Cable([0, (0.05, 0.0, 0.5)], 1.0, "c")),
+             r"cable 'c': point 1 at \[0.05, 0.0, 0.5\] m lies outside the mesh"),
+            (lambda: af.Scene(mesh, material, cable=af.Cable([0, 10 ** 6], 1.0, "c")),
+             "cable 'c': point 1 is vertex 1000000, not one of the mesh's"),
+            (lambda: af.Scene(mesh, material, cable=af.Cable([0, "tip"], 1.0, "c")),
+             "cable 'c': point 1: expected a vertex index or a finite rest point"),
+            (lambda: af.Scene(mesh, material, cable=af.Cable([3, 3], 1.0, "c")),
+             "cable 'c': its points all lie at one place"),
+            (lambda: beam(cells=(3, 1, 1), order=1).with_controls({"pull": -2.0}),
+             "control 'pull': a cable's tension must be >= 0")):
+        with pytest.raises(ValueError, match=message):
+            make()
+    with pytest.raises(ValueError, match="the reduced model takes no cables"):
+        ReducedModel(beam(cells=(3, 1, 1), order=1), modes=2, validate=False)
