@@ -107,3 +107,17 @@ def test_bad_cables_are_named():
             make()
     with pytest.raises(ValueError, match="the reduced model takes no cables"):
         ReducedModel(beam(cells=(3, 1, 1), order=1), modes=2, validate=False)
+
+
+def test_a_scene_file_routes_a_cable(tmp_path):
+    from test_scenefile import scene_file, two_halves
+    two_halves(tmp_path)
+    text = ('mesh = "bar.msh"\n[controls.pull]\ncable = [[0, 0, 0.003], [0.02, 0, 0.003], '
+            '[0.04, 0, 0.003]]\nvalue = 0.01\n[[boundary]]\nwhere = "base"\nheld = true\n')
+    scene = af.load_scene(scene_file(tmp_path, text))
+    assert scene.controls == ("pull",) and scene.cables[0].tension == 0.01
+    assert scene.cables[0].rest_length == pytest.approx(0.04)
+    for bad, message in (("value = 0.01", "value = -1"), ("[0.04, 0, 0.003]]",
+                                                           "[0.04, 0, 0.3]]")):
+        with pytest.raises(ValueError, match="controls"):
+            af.load_scene(scene_file(tmp_path, text.replace(bad, message), "bad.toml"))

@@ -62,6 +62,8 @@ SCHEMA = {
                     "control's value in Pa",
         "activation": "a region, as [regions.NAME]'s NAME: its fibers contract by the "
                       "control's value, in [0, 1) (the region needs fiber_stiffness > 0)",
+        "cable": "[[x, y, z], ...] m: a cable through these rest points of the body, pulled "
+                 "with the control's value in N (>= 0), sliding through them",
         "value": "the control's value (default 0), times its curve's factor where it has one",
         "curve": "the name of the load curve its value follows in time (statics take it at 1)",
         "range": "[low, high]: the values a reduced model of the scene is built to follow "

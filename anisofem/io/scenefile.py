@@ -16,6 +16,7 @@ import warnings
 
 import numpy as np
 
+from ..physics.cables import Cable
 from ..physics.controls import Activation
 from ..physics.curves import LoadCurve, Timed
 from ..physics.fibers import helix_directions, helix_frame, segments
@@ -123,7 +124,8 @@ class _Reader:
         curves = self.curves(table.get("curves", {}))
         material = self.material(table)
         held, positions, parts, loads = self.boundaries(table, curves)
-        pressures, activations, timed = self.controls(table.get("controls", {}), curves)
+        pressures, activations, cables, timed = self.controls(table.get("controls", {}),
+                                                              curves)
         parts += timed
         gravity = _vector(self, table["gravity"], "gravity") if "gravity" in table else None
         body = _vector(self, table["body_force"], "body_force") if "body_force" in table else None
@@ -131,10 +133,11 @@ class _Reader:
             scene = Scene(self.mesh, material, fixed=held, fixed_positions=positions,
                           gravity=gravity, body_force=body,
                           pressure=loads["pressure"] + pressures, activation=activations,
-                          nodal_force=loads["force"])
+                          cable=cables, nodal_force=loads["force"])
         except ValueError as err:
-            raise self.error("controls" if str(err).startswith(("activation", "controls"))
-                             else "boundary", str(err)) from None
+            raise self.error("controls" if str(err).startswith(("activation", "controls",
+                                                                "cable")) else "boundary",
+                             str(err)) from None
         return scene.following(parts) if parts else scene
 
     # materials and fibers
@@ -331,25 +334,35 @@ class _Reader:
         return held, positions, parts, {"force": force, "pressure": pressures}
 
     def controls(self, table, curves):
-        """([controls.NAME] tables) -> (named Pressures, Activations, Timed parts of the
-        controls that follow a curve)."""
+        """([controls.NAME] tables) -> (named Pressures, Activations, Cables, Timed parts of
+        the controls that follow a curve)."""
         if not isinstance(table, dict):
             raise self.error("controls", "expected [controls.NAME] tables")
-        pressures, activations, parts = [], [], []
+        pressures, activations, cables, parts = [], [], [], []
         self.ranges = {}
         for name, spec in table.items():
             key = f"controls.{name}"
             if not isinstance(spec, dict):
                 raise self.error(key, "expected a table: pressure or activation, and value")
             _keys(self, spec, "controls", key)
-            kinds = [k for k in ("pressure", "activation") if k in spec]
+            kinds = [k for k in ("pressure", "activation", "cable") if k in spec]
             if len(kinds) != 1:
-                raise self.error(key, "give one of pressure (a place: the cavity's walls) or "
-                                      "activation (a region: its fibers)")
+                raise self.error(key, "give one of pressure (a place: the cavity's walls), "
+                                      "activation (a region: its fibers) or cable (its points)")
             value = _number(self, spec.get("value", 0.0), f"{key}.value")
             if kinds == ["pressure"]:
                 faces = self.faces(spec["pressure"], f"{key}.pressure")
                 pressures.append(Pressure(faces, value, name=name))
+            elif kinds == ["cable"]:
+                points = spec["cable"]
+                if not isinstance(points, list) or len(points) < 2:
+                    raise self.error(f"{key}.cable", "expected a list of at least two points "
+                                                     "[x, y, z], m")
+                points = [_vector(self, p, f"{key}.cable[{i}]") for i, p in enumerate(points)]
+                try:
+                    cables.append(Cable(points, value, name=name))
+                except ValueError as err:
+                    raise self.error(f"{key}.value", str(err)) from None
             else:
                 region = _string(self, spec["activation"], f"{key}.activation")
                 try:
@@ -367,7 +380,7 @@ class _Reader:
                                      f"{' in [0, 1)' if kinds == ['activation'] else ''}, got "
                                      f"{spec['range']!r}")
                 self.ranges[name] = (float(low), float(high))
-        return pressures, activations, parts
+        return pressures, activations, cables, parts
 
     def curve_named(self, value, curves, key):
         """The LoadCurve a key names; SceneFileError listing the file's curves otherwise."""
