@@ -139,3 +139,47 @@ def test_fit_per_region_from_the_command(tmp_path):
                         "m.csv", "--params", "kappa@hard"], cwd=tmp_path, capture_output=True,
                        text=True)
     assert r.returncode == 2 and "no physical volume 'hard'; it has: soft, stiff" in r.stderr
+
+
+def stiff_block():
+    """A 3 cm cube of stiff fibers (kappa = 100 E along a tilted direction) held at its base,
+    pushed sideways and squashed by a traction on its top: a body and loads the identification
+    tests above do not use."""
+    mesh = af.box_beam((0.03, 0.03, 0.03), (3, 3, 3))
+    X = mesh.vertices
+    top = mesh.faces_where(lambda p: p[:, 2] > X[:, 2].max() - 1e-9)
+    angle = np.radians(25.0)
+    material = af.Material(1e5, 0.45, 1000.0, (np.cos(angle), 0.0, np.sin(angle)), 1e7)
+    return af.Scene(mesh, material, fixed=np.flatnonzero(X[:, 2] < X[:, 2].min() + 1e-9),
+                    traction=(2e3, 0.0, -3e3), traction_faces=top)
+
+
+def test_an_unbounded_fit_from_a_poor_start_ends(monkeypatch):
+    """Without bounds, from a start 30 times too soft and 40 degrees off, the fit ends within
+    minutes with an answer or a clear failure; where a trial's solve runs past its time limit
+    (here forced: limits of a millisecond), it says so and steps back instead of hanging."""
+    scene = stiff_block()
+    X = scene.mesh.vertices
+    points = X[::7]
+    truth = af.solve(scene).x
+    from anisofem.inverse.fit import Markers as Probe
+    measured = Probe(scene.mesh, points).at(truth - X)
+    poor = scene.with_material(scene.material.replaced(fiber_stiffness=1e7 / 30,
+                                                       fiber_direction=(1.0, 0.0, 0.0)))
+    said = []
+    t0 = time.perf_counter()
+    result = fit(poor, points, measured, ["kappa", "fiber_elevation"], max_iter=30,
+                 log=said.append)
+    assert time.perf_counter() - t0 < 240.0
+    assert result.iterations >= 1 and result.message
+    assert result.converged or all("stepped back" in s for s in said)
+    from anisofem.inverse import lbfgsb
+    monkeypatch.setattr(lbfgsb, "SHORTEST_LIMIT", 1e-3)
+    monkeypatch.setattr(lbfgsb, "TRIAL_FACTOR", 1e-3)
+    said.clear()
+    t0 = time.perf_counter()
+    result = fit(poor, points, measured, ["kappa", "fiber_elevation"], max_iter=30,
+                 log=said.append)
+    assert time.perf_counter() - t0 < 60.0
+    assert said and all("time limit reached" in s and s.endswith("stepped back") for s in said)
+    assert said[0].startswith("fit: the static solve of load case 0 failed at kappa = ")

@@ -38,7 +38,8 @@ def fit_command(args):
         shown = ", ".join(f"{n} = {v:.6g}" for n, v in values.items())
         print(f"iteration {k}: J = {J:.4e}, {shown}", flush=True)
     result = fitting.fit(scenes, [t[:, :3] for t in tables], [t[:, 3:] for t in tables],
-                         args.params, start, bounds, args.max_iter, progress, regions)
+                         args.params, start, bounds, args.max_iter, progress, regions,
+                         log=_trial_failed)
     print(f"stopped after {result.iterations} iterations ({result.evaluations} solves per "
           f"case, {result.seconds:.1f} s): {result.message}")
     for n, v in result.values.items():
@@ -85,7 +86,7 @@ def design_command(args):
         print(f"iteration {k}: J = {J:.4e}, |dJ/dangles| = {g:.3e}, angles "
               + _listed(angles, "{:.2f}"), flush=True)
     result = design(scene_file.scene, helix, scene_file.vertices(args.tip), args.target, start,
-                    (low, high), args.smooth, args.max_iter, progress)
+                    (low, high), args.smooth, args.max_iter, progress, log=_trial_failed)
     print(f"stopped after {result.iterations} iterations ({result.evaluations} solves, "
           f"{result.seconds:.1f} s): {result.message}")
     print("angles (degrees): " + _listed(result.angles, "{:.3f}")
@@ -167,3 +168,8 @@ def _assignment(text, flag, parse):
         return name, parse(value)
     except ValueError as err:
         raise ValueError(f"{flag}: {name}: {err}") from None
+
+
+def _trial_failed(message):
+    """Say that a trial point's solve failed (and the search stepped back from it)."""
+    print(f"  trial: {message}", flush=True)

@@ -47,12 +47,13 @@ class DesignResult(lbfgsb.Outcome):
 
 
 def design(scene, helix, tip, target, start, bounds=(0.0, 90.0), smooth=1e-3, max_iter=100,
-           progress=None):
+           progress=None, log=None):
     """Winding angles per segment of `helix` (a Helix of scene's tets) so that the mean of the
     vertices `tip` (k,) comes to rest at `target` (3,), m, from `start` (degrees: one for
     every segment, or one each), within bounds (low, high) degrees, with the smoothness
     weight `smooth` (per radian^2). progress(iteration, J, gradient norm, angles) after each
-    iteration. Returns a DesignResult."""
+    iteration; log(message) for each trial whose solve failed or ran past its time limit
+    (lbfgsb.trial_limit; the search steps back from it). Returns a DesignResult."""
     t0 = time.perf_counter()
     check_scene(scene)
     target = as_float_array(target, "target", shape=(3,))
@@ -75,7 +76,7 @@ def design(scene, helix, tip, target, start, bounds=(0.0, 90.0), smooth=1e-3, ma
             progress(*history[-1])
     answer = lbfgsb.minimize(problem.objective, np.radians(start),
                              [(math.radians(low), math.radians(high))] * helix.count,
-                             max_iter, report)
+                             max_iter, report, log)
     x = problem.solved(answer.x)[1].x
     where = x[tip].mean(axis=0)
     return DesignResult(int(answer.nit), problem.evaluations, bool(answer.success),
@@ -108,6 +109,7 @@ class _Problem:
         self.length = scene.mesh.size
         self.state = scene.initial_positions()
         self.evaluations, self.last_gradient = 0, np.zeros(helix.count)
+        self.limit = None   # s per solve: none for the start's, lbfgsb.trial_limit after
 
     def solved(self, alpha):
         """(the scene with angles alpha (count,) radians, its static NewtonResult)."""
@@ -115,10 +117,13 @@ class _Problem:
         fibers[self.helix.tets] = helix_directions(self.helix.axis, self.around,
                                                    alpha[self.segment], self.helix.crossed)
         moved = self.scene.with_material(self.scene.material.replaced(fiber_direction=fibers))
-        result = solve(moved, x0=self.state, warn=False)
+        result = solve(moved, x0=self.state, warn=False, time_limit=self.limit)
         if not result.converged:
             raise RuntimeError(f"design: the static solve failed at angles "
-                               f"{np.degrees(alpha).round(2).tolist()} ({result.message})")
+                               f"{np.degrees(alpha).round(2).tolist()} ({result.message} after "
+                               f"{result.seconds:.3g} s)")
+        if self.limit is None:
+            self.limit = lbfgsb.trial_limit(result.seconds)
         self.state = result.x
         self.evaluations += 1
         return moved, result

@@ -82,15 +82,16 @@ class Markers:
 
 
 def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
-        progress=None, regions=None):
+        progress=None, regions=None, log=None):
     """Fit `names` so that the scenes' (Scenes of one body, one per load case) static
     displacements at marker rest points match the measured ones, m: markers (k, 3) and
     measured (k, 3) for one case, or a list of each, one per case. A name is a key of
     PARAMETERS (one value over the whole body) or "KEY@REGION" (one value over the tets of
     regions[REGION], an (m,) bool mask). start: {name: value} (default: the first scene's,
     the mean over its tets); bounds: {name: (low, high)} (default PARAMETERS'). progress(
-    iteration, J, values) after each iteration. Returns a FitResult (its marker_residuals:
-    the markers of all cases in order)."""
+    iteration, J, values) after each iteration; log(message) for each trial point whose solve
+    failed or ran past its time limit (lbfgsb.trial_limit; the search steps back from it).
+    Returns a FitResult (its marker_residuals: the markers of all cases in order)."""
     t0 = time.perf_counter()
     scenes = [scenes] if not isinstance(scenes, (list, tuple)) else list(scenes)
     for s in scenes:
@@ -116,7 +117,7 @@ def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
         if progress is not None:
             progress(*history[-1])
     answer = lbfgsb.minimize(problem.objective, layout.to_z(layout.start), layout.z_bounds,
-                             max_iter, report)
+                             max_iter, report, log)
     values = layout.values(answer.x)
     residuals, jacobian = problem.residuals_and_jacobian(answer.x)
     count = residuals.size
@@ -134,6 +135,11 @@ def fit(scenes, markers, measured, names, start=None, bounds=None, max_iter=100,
     return FitResult(int(answer.nit), problem.evaluations, bool(answer.success),
                      str(answer.message), time.perf_counter() - t0, history, values, deviations,
                      per_marker, float(np.sqrt((per_marker ** 2).mean())))
+
+
+def _shown(values):
+    """Parameter values {name: value} as text."""
+    return ", ".join(f"{name} = {value:.4g}" for name, value in values.items())
 
 
 def _masks(names, regions, m):
@@ -311,18 +317,23 @@ class _Problem:
         self.ends = np.cumsum([3 * len(m) for m in measured])
         self.states = [s.initial_positions() for s in scenes]
         self.evaluations = 0
+        self.limit = None   # s per solve: none for the start's, lbfgsb.trial_limit after
 
     def _solve(self, z):
         material = self.layout.material(z)
         out = []
+        t0 = time.perf_counter()
         for k, scene in enumerate(self.scenes):
             moved = scene.with_material(material)
-            result = solve(moved, x0=self.states[k], warn=False)
+            result = solve(moved, x0=self.states[k], warn=False, time_limit=self.limit)
             if not result.converged:
                 raise RuntimeError(f"fit: the static solve of load case {k} failed at "
-                                   f"{self.layout.values(z)} ({result.message})")
+                                   f"{_shown(self.layout.values(z))} ({result.message} after "
+                                   f"{result.seconds:.3g} s)")
             self.states[k] = result.x
             out.append((moved, result))
+        if self.limit is None:
+            self.limit = lbfgsb.trial_limit(time.perf_counter() - t0)
         self.evaluations += 1
         return out
 

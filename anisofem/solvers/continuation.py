@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from .newton import minimize
+from .newton import TIME_SPENT, minimize
 
 #: The first increment, a share of the whole load.
 FIRST = 0.25
@@ -34,7 +34,7 @@ def worth_ramping(potential, result):
         potential.scene.gradient_roundoff
 
 
-def ramp(potential, x0, method, spent=()):
+def ramp(potential, x0, method, spent=(), deadline=None):
     """The minimizer of potential (an anisofem.physics.potential.Potential) by load continuation
     from x0 (n, 3), m: each increment minimizes potential.loaded(share); x0's fixed components
     are set by each increment's scene. method: an anisofem.solvers.methods.Method
@@ -45,7 +45,9 @@ def ramp(potential, x0, method, spent=()):
     converged); its iterations, counts and seconds sum every solve tried, failed increments
     included. Where an increment below SMALLEST fails, the result is that failed solve (x its
     last iterate), its message naming the share of the load reached. Raises ValueError where
-    an increment's prescribed positions leave Neo-Hookean elements inverted at every size."""
+    an increment's prescribed positions leave Neo-Hookean elements inverted at every size.
+    deadline: a time.perf_counter() time past which no increment runs on (the result says
+    so: newton.TIME_SPENT)."""
     t0 = time.perf_counter()
     totals = dict.fromkeys(COUNTS, 0)
     seconds = 0.0
@@ -58,9 +60,13 @@ def ramp(potential, x0, method, spent=()):
         share = min(1.0, done + increment)
         loaded = potential if share == 1.0 else potential.loaded(share)
         start = _predict(loaded.scene, x, previous, share - done)
-        result = None if start is None else minimize(loaded, start, method, warn=False)
+        result = None if start is None else minimize(loaded, start, method, warn=False,
+                                                     deadline=deadline)
         if result is not None:
             _add(totals, result)
+        if result is not None and result.message == TIME_SPENT:
+            result.message = f"load continuation stopped at {done:.3g} of the load: {TIME_SPENT}"
+            break
         if result is not None and result.converged:
             increments += 1
             previous, x, done = (x, share - done), result.x, share

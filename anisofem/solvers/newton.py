@@ -56,6 +56,8 @@ class InversionWarning(RuntimeWarning):
 
 #: NewtonResult.message of a solve that spent its fixed iteration budget.
 BUDGET_SPENT = "iteration budget spent"
+#: The message of a solve stopped at its deadline.
+TIME_SPENT = "time limit reached"
 
 
 @dataclass
@@ -114,7 +116,8 @@ class NewtonResult:
                 + ("" if self.physical else f", inverted={self.inversion.inverted}") + ")")
 
 
-def minimize(potential, x0, method="auto", *, warn=True, accept=None, **options):
+def minimize(potential, x0, method="auto", *, warn=True, accept=None, deadline=None,
+             **options):
     """Minimize potential (an anisofem.physics.potential.Potential) from x0 (n, 3), fixed components
     already at their prescribed positions, by `method`: "auto" or a name of
     anisofem.solvers.methods.METHODS with its options, or a Method instance (which keeps its
@@ -123,12 +126,14 @@ def minimize(potential, x0, method="auto", *, warn=True, accept=None, **options)
 
     accept(x, G(x)) -> bool: with an iteration budget, the solve stops at the budget only at an
     iterate accept approves, and otherwise goes on (to the tolerance, or max_iter iterations).
+    deadline: a time.perf_counter() time after which it stops, not converged (TIME_SPENT).
     """
     method = methods.make(method, potential.scene.n_free, **options)
     t0 = time.perf_counter()
     method.start(potential)
     with method.threads():
-        x, converged, it, res, energy, message = _iterate(potential, x0, method, accept)
+        x, converged, it, res, energy, message = _iterate(potential, x0, method, accept,
+                                                          deadline)
     result = NewtonResult(x=x, converged=converged, iterations=it, residuals=res, energy=energy,
                           method=method.name, message=message,
                           seconds=time.perf_counter() - t0,
@@ -152,7 +157,7 @@ def report(result, n_tets, stacklevel=3):
                       InversionWarning, stacklevel=stacklevel)
 
 
-def _iterate(potential, x0, method, accept):
+def _iterate(potential, x0, method, accept, deadline=None):
     """The loop of minimize: (x, converged, iterations, residuals, energy, message)."""
     scene = potential.scene
     free = scene.free_dofs
@@ -177,6 +182,8 @@ def _iterate(potential, x0, method, accept):
         else:
             if it >= method.max_iter:
                 return x, False, it, res, energy, "max_iter reached"
+            if deadline is not None and time.perf_counter() > deadline:
+                return x, False, it, res, energy, TIME_SPENT
             if method.budget and it >= method.iterations and (accept is None or
                                                               accept(x, energy)):
                 return x, False, it, res, energy, BUDGET_SPENT

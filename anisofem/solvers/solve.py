@@ -1,4 +1,5 @@
 """Static equilibrium, one backward-Euler step, and rollouts."""
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -6,7 +7,7 @@ import numpy as np
 from . import methods
 from .._validate import as_count, as_scalar
 from .continuation import ramp, worth_ramping
-from .newton import NewtonResult, minimize, report
+from .newton import TIME_SPENT, NewtonResult, minimize, report
 from ..physics.curves import LoadCurve
 from ..physics.potential import Potential, check_positions
 from ..physics.scene import check_scene
@@ -16,7 +17,8 @@ from .stability import stability
 CONTINUATION = ("auto", "always", "never")
 
 
-def solve(scene, x0=None, method="auto", warn=True, continuation="auto", **options):
+def solve(scene, x0=None, method="auto", warn=True, continuation="auto", time_limit=None,
+          **options):
     """Static equilibrium of a Scene.
 
     x0: (n, 3) start, m (default: rest positions with fixed vertices at their prescribed
@@ -30,10 +32,14 @@ def solve(scene, x0=None, method="auto", warn=True, continuation="auto", **optio
     equilibrium (anisofem.solvers.continuation); "always" ramps from the start; "never" does not.
     Returns a NewtonResult; .x is the (n, 3) equilibrium, .increments the load increments
     taken (0: none), .stability says whether it is a minimum or a saddle (computed when
-    asked). Raises ValueError if the scene holds too little to have a unique equilibrium.
+    asked). time_limit: seconds after which the solve stops where it is, not converged (its
+    message says so; for the trial solves of an optimization that must end). Raises
+    ValueError if the scene holds too little to have a unique equilibrium.
     """
     check_scene(scene)
     scene.check_static()
+    deadline = None if time_limit is None else time.perf_counter() + as_scalar(time_limit,
+                                                                                "time_limit")
     if continuation not in CONTINUATION:
         raise ValueError(f"continuation: expected one of {CONTINUATION}, got "
                          f"{continuation!r}")
@@ -54,11 +60,12 @@ def solve(scene, x0=None, method="auto", warn=True, continuation="auto", **optio
                          f"with det F > 0 (prescribed positions far from rest: reach them in "
                          f"steps, continuation='auto' or scene.held_at)")
     if ramped:
-        result = ramp(potential, x0, method)
+        result = ramp(potential, x0, method, deadline=deadline)
     else:
-        result = minimize(potential, x0, method, warn=False)
-        if continuation == "auto" and worth_ramping(potential, result):
-            result = ramp(potential, x0, method, spent=[result])
+        result = minimize(potential, x0, method, warn=False, deadline=deadline)
+        if (continuation == "auto" and result.message != TIME_SPENT
+                and worth_ramping(potential, result)):
+            result = ramp(potential, x0, method, spent=[result], deadline=deadline)
     if warn:
         report(result, scene.mesh.n_tets)
     result._stability = lambda: stability(potential, result.x)
