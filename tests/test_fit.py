@@ -157,7 +157,7 @@ def stiff_block():
 def test_an_unbounded_fit_from_a_poor_start_ends(monkeypatch):
     """Without bounds, from a start 30 times too soft and 40 degrees off, the fit ends within
     minutes with an answer or a clear failure; where a trial's solve runs past its time limit
-    (here forced: limits of a millisecond), it says so and steps back instead of hanging."""
+    (here forced: limits of 0 s), it says so and steps back instead of hanging."""
     scene = stiff_block()
     X = scene.mesh.vertices
     points = X[::7]
@@ -174,8 +174,8 @@ def test_an_unbounded_fit_from_a_poor_start_ends(monkeypatch):
     assert result.iterations >= 1 and result.message
     assert result.converged or all("stepped back" in s for s in said)
     from anisofem.inverse import lbfgsb
-    monkeypatch.setattr(lbfgsb, "SHORTEST_LIMIT", 1e-3)
-    monkeypatch.setattr(lbfgsb, "TRIAL_FACTOR", 1e-3)
+    monkeypatch.setattr(lbfgsb, "SHORTEST_LIMIT", 0.0)
+    monkeypatch.setattr(lbfgsb, "TRIAL_FACTOR", 0.0)
     said.clear()
     t0 = time.perf_counter()
     result = fit(poor, points, measured, ["kappa", "fiber_elevation"], max_iter=30,
