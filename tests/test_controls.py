@@ -3,6 +3,7 @@ reduced model. The reduced energy under any controls equals the FEM's at the sam
 (exact, independently of the basis); a rollout whose controls change every step follows the
 FEM's; bad control input is named."""
 import json
+import os
 import re
 
 import numpy as np
@@ -12,6 +13,7 @@ import anisofem as af
 from anisofem.reduced import Loads, ReducedModel
 
 E = 1e5
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def finger(order=1):
@@ -420,3 +422,82 @@ def _kinds_out_of_order(data, header):
     offset = header["arrays"]["control_kinds"]["offset"]
     data[offset + 2] = 0
     return data
+
+
+def test_trajectory_gradient_is_the_objectives(fitted):
+    """The adjoint gradient of the path objective in the knots' controls (scaled) against
+    central differences: within 1e-6."""
+    from anisofem.inverse.control import _Trajectory
+    from anisofem.reduced.reach import model_bounds
+    model = fitted
+    tip = int(np.flatnonzero(model.scene.mesh.vertices[:, 2] > 0.06 - 1e-9)[0])
+    dt, steps = 0.02, 12
+    times = dt * np.arange(steps + 1)
+    points = model.x0[tip] + np.outer(times, [0.0, -0.02, 0.0])
+    low, high = model_bounds(model, None)
+    problem = _Trajectory(model, tip, times, points, np.linspace(0, steps * dt, 4), steps, dt,
+                          low, high, 1e-3)
+    z = np.random.default_rng(0).uniform(0.2, 0.8, 12)
+    _, g = problem.objective(z)
+    fd = np.zeros_like(z)
+    for i in range(z.size):
+        step = np.zeros_like(z)
+        step[i] = 1e-6
+        fd[i] = (problem.objective(z + step)[0] - problem.objective(z - step)[0]) / 2e-6
+    assert np.linalg.norm(g - fd) <= 1e-6 * np.linalg.norm(fd)
+
+
+def test_follow_finds_controls_in_time_for_a_path(fitted):
+    """A path the tip takes under controls that change in time (a pressure swinging both
+    ways, a curl and a squeeze): from every control at its low end, follow's controls make
+    the reduced model's tip follow it within 2% of the finger's length."""
+    from anisofem.inverse.control import follow
+    model = fitted
+    tip = int(np.flatnonzero(model.scene.mesh.vertices[:, 2] > 0.06 - 1e-9)[0])
+    dt, steps = 0.02, 25
+
+    def true(t):
+        return [1.5e4 * np.sin(4 * t), 0.06 * (1 - np.cos(5 * t)), 0.04 * t]
+    q = model.solve(controls=true(0.0))[0]
+    w, points = np.zeros(model.r), [model.positions(q)[tip]]
+    for n in range(1, steps + 1):
+        q, w, _ = model.step(q, w, dt, controls=true(n * dt))
+        points.append(model.positions(q)[tip])
+    result = follow(model, tip, dt * np.arange(steps + 1), np.array(points), dt)
+    assert result.largest_error < 0.02, result.largest_error
+    low, high = np.array([RANGES[n] for n in model.controls]).T
+    assert ((result.controls >= low - 1e-12) & (result.controls <= high + 1e-12)).all()
+
+
+def test_the_control_command_writes_the_curves_it_found(tmp_path, capsys):
+    """python -m anisofem control on the example actuator: its iterations, the tip's largest
+    error in the model and in the full FEM under the controls found (both within 2% of its
+    length), and a scene file whose control follows the curve found; bad input, one line."""
+    from anisofem.cli import main
+    from anisofem.io.scenefile import SceneFile
+    scene_path = os.path.join(ROOT, "examples", "scenes", "actuator_control.toml")
+    tip = SceneFile(scene_path).vertices("tip")
+    rest = af.load_scene(scene_path).mesh.vertices[tip].mean(axis=0)
+    times = np.linspace(0.0, 0.4, 9)
+    path = rest + np.outer(np.sin(np.pi * times / 0.4) ** 2, [0.0, -0.01, 0.0])
+    csv = tmp_path / "path.csv"
+    np.savetxt(csv, np.column_stack([times, path]), delimiter=",", header="t,x,y,z",
+               comments="")
+    out = tmp_path / "controlled.toml"
+    main(["control", scene_path, "--effector", "tip", "--path", str(csv), "-o", str(out)])
+    text = capsys.readouterr().out
+    assert "iteration 1: J = " in text
+    model_error, fem_error = (float(re.search(rf"{what}: largest error .* \(([0-9.e-]+)%",
+                                              text).group(1))
+                              for what in (r"reduced model \(r = \d+\)", "full FEM under these "
+                                                                         "controls"))
+    assert model_error < 2.0 and fem_error < 2.0, text
+    scene = af.load_scene(out)
+    assert scene.controls == ("inflate",) and scene.timed[0].control == "inflate"
+    assert scene.at(0.2).control_values[0] > 1e3
+    for flags, message in ((["--path", str(tmp_path / "none.csv")], "--path: no such file"),
+                           (["--effector", "nowhere"], "no physical surface 'nowhere'")):
+        args = ["control", scene_path, "--effector", "tip", "--path", str(csv), *flags]
+        with pytest.raises(SystemExit) as exit_:
+            main(args)
+        assert exit_.value.code == 2 and message in capsys.readouterr().err

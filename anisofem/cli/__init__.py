@@ -1,9 +1,9 @@
-"""The command line, `python -m anisofem {mesh,solve,trade,fit,design,bench}`: the shared
+"""The command line, `python -m anisofem {mesh,solve,trade,fit,design,control,bench}`: the shared
 arguments (`arguments`), the parser (`parser`, whose text is the usage), the forward commands
 (`commands`) and the inverse ones (`inverse`)."""
 from .arguments import BODIES, Parser, add_scene_arguments, body_of, scene_of
 from .commands import bench_command, mesh_command, solve_command, trade_command
-from .inverse import design_command, fit_command
+from .inverse import control_command, design_command, fit_command
 from .parser import build_parser
 
 __all__ = ["main", "one_line_warning", "BAD_INPUT", "BODIES", "Parser", "add_scene_arguments",
@@ -31,4 +31,5 @@ def main(argv=None):
 
 
 COMMANDS = {"mesh": mesh_command, "solve": solve_command, "trade": trade_command,
-            "bench": bench_command, "fit": fit_command, "design": design_command}
+            "bench": bench_command, "fit": fit_command, "design": design_command,
+            "control": control_command}

@@ -1,5 +1,5 @@
-"""The inverse commands: `fit` (material parameters from measured markers) and `design`
-(a fiber layout for a target)."""
+"""The inverse commands: `fit` (material parameters from measured markers), `design` (a
+fiber layout for a target) and `control` (controls in time for a path)."""
 import math
 import os
 
@@ -122,25 +122,31 @@ def _listed(values, form):
 
 
 def _marker_table(path):
-    """(k, 6) rows of a marker CSV: x, y, z, ux, uy, uz in m, a header line allowed; ValueError
-    naming the file and the line of what is not six numbers."""
+    """(k, 6) rows of a marker CSV: x, y, z, ux, uy, uz in m (_table)."""
+    return _table(path, "--markers", ("x", "y", "z", "ux", "uy", "uz"), "marker")
+
+
+def _table(path, flag, columns, what):
+    """(k, len(columns)) rows of numbers of a CSV file, a header line allowed; ValueError
+    naming the flag, the file and the line of what is not len(columns) numbers."""
     if not os.path.isfile(path):
-        raise FileNotFoundError(f"--markers: no such file {path!r}")
+        raise FileNotFoundError(f"{flag}: no such file {path!r}")
     rows = []
     with open(path, errors="replace") as f:
         for k, line in enumerate(f, 1):
             fields = [x.strip() for x in line.split(",")]
             if not line.strip() or (k == 1 and not _numbers(fields)):
                 continue  # a blank line, or the header
-            if len(fields) != 6:
-                raise ValueError(f"--markers: {path} line {k}: {len(fields)} fields, expected "
-                                 f"x, y, z, ux, uy, uz")
+            if len(fields) != len(columns):
+                raise ValueError(f"{flag}: {path} line {k}: {len(fields)} fields, expected "
+                                 f"{', '.join(columns)}")
             if not _numbers(fields):
                 bad = next(x for x in fields if not _numbers([x]))
-                raise ValueError(f"--markers: {path} line {k}: {bad!r} is not a finite number")
+                raise ValueError(f"{flag}: {path} line {k}: {bad!r} is not a finite number")
             rows.append([float(x) for x in fields])
     if not rows:
-        raise ValueError(f"--markers: {path} holds no marker rows (x, y, z, ux, uy, uz in m)")
+        raise ValueError(f"{flag}: {path} holds no {what} rows ({', '.join(columns)} in SI "
+                         f"units)")
     return np.array(rows)
 
 
@@ -168,6 +174,82 @@ def _assignment(text, flag, parse):
         return name, parse(value)
     except ValueError as err:
         raise ValueError(f"{flag}: {name}: {err}") from None
+
+
+def control_command(args):
+    """python -m anisofem control: each iteration's objective and the effector's largest
+    error; the knots' controls; the full FEM's rollout under them against the path; the scene
+    file with the controls on curves (-o)."""
+    from ..inverse.control import follow
+    from ..reduced import Loads, ReducedModel
+    from ..solvers.solve import simulate, solve
+    scene_file = SceneFile(args.scene)
+    scene = scene_file.scene
+    ranges = scene_file.control_ranges
+    missing = [n for n in scene.controls if n not in ranges]
+    if not scene.controls or missing:
+        why = "it has none" if not scene.controls else "missing for " + ", ".join(missing)
+        raise ValueError(f"scene: each control needs a range ([controls.NAME] range = [low, "
+                         f"high]); {why}")
+    path = _table(args.path, "--path", ("t", "x", "y", "z"), "path")
+    effector = [int(v) for v in scene_file.vertices(args.effector)]
+    print(f"{args.scene}: {scene.mesh.n_tets} tets, controls {', '.join(scene.controls)}; "
+          f"building its reduced model ({args.modes} modes + {args.snapshots} directions fitted "
+          f"to the controls' ranges)", flush=True)
+    model = ReducedModel(scene, modes=args.modes, snapshots=args.snapshots,
+                         loads=Loads(controls=ranges), validate=False)
+    knots = np.round(np.arange(0.0, path[-1, 0] + 0.5 * args.knot, args.knot), 9)
+    if knots[-1] < path[-1, 0]:
+        knots = np.append(knots, path[-1, 0])
+
+    def progress(k, J, controls):
+        print(f"iteration {k}: J = {J:.4e}", flush=True)
+    result = follow(model, effector, path[:, 0], path[:, 1:], args.dt, knots=knots,
+                    smooth=args.smooth, max_iter=args.max_iter, progress=progress,
+                    log=_trial_failed)
+    size = float(np.ptp(scene.mesh.vertices, axis=0).max())
+    print(f"stopped after {result.iterations} iterations ({result.evaluations} rollouts, "
+          f"{result.seconds:.1f} s): {result.message}")
+    print(f"reduced model (r = {model.r}): largest error {1e3 * result.errors[1:].max():.3g} "
+          f"mm ({100 * result.largest_error:.3g}% of the body's {1e3 * size:.3g} mm)")
+    for j, t in enumerate(result.knot_times):
+        print(f"  t = {t:.3f} s: " + ", ".join(f"{n} = {v:.5g}" for n, v in
+                                                zip(model.controls, result.controls[j])))
+    steps = len(result.errors) - 1
+    start = solve(scene.with_controls(result.at(0.0)), warn=False).x
+    full = simulate(scene, steps, args.dt, x0=start, controls=result.at, warn=False)
+    tip = full.positions[:, effector].mean(axis=1)
+    targets = np.array([np.interp(args.dt * np.arange(steps + 1), path[:, 0], path[:, a])
+                        for a in (1, 2, 3)]).T
+    worst = float(np.linalg.norm(tip - targets[:len(tip)], axis=1)[1:].max())
+    print(f"full FEM under these controls: largest error {1e3 * worst:.3g} mm "
+          f"({100 * worst / size:.3g}% of the body)")
+    if args.output:
+        table = controlled_table(scene_file, result, args.output)
+        with atomic_path(args.output, ".toml") as tmp:
+            with open(tmp, "w") as fh:
+                fh.write(f"# {args.scene} with the controls python -m anisofem control found, "
+                         f"on curves\n" + dump(table))
+        print(f"-> {args.output}")
+    return 0 if result.converged else 1
+
+
+def controlled_table(scene_file, result, output_path):
+    """A copy of the scene file's table with each control on a curve of the knots' values:
+    [curves.NAME_path] whose values are the control's over its largest magnitude (its value),
+    its mesh path made relative to output_path's folder."""
+    from ..inverse.fit import moved_mesh_path
+    out = moved_mesh_path(scene_file.table, scene_file.path, output_path)
+    curves = out.setdefault("curves", {})
+    for k, name in enumerate(scene_file.scene.controls):
+        values = result.controls[:, k]
+        largest = float(np.abs(values).max())
+        curves[f"{name}_path"] = {"times": [float(t) for t in result.knot_times],
+                                  "values": [float(v / largest) if largest else 0.0
+                                             for v in values]}
+        control = out["controls"][name]
+        control["value"], control["curve"] = largest, f"{name}_path"
+    return out
 
 
 def _trial_failed(message):

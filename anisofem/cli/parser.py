@@ -1,4 +1,4 @@
-"""Command line: `python -m anisofem {mesh,solve,trade,fit,design,bench}`.
+"""Command line: `python -m anisofem {mesh,solve,trade,fit,design,control,bench}`.
 
   python -m anisofem mesh box --cells 10 2 2 -o beam.msh
   python -m anisofem solve beam.msh --fixed x-min --gravity 0 0 -9.81 --fiber 1 0 0 \\
@@ -126,6 +126,28 @@ def build_parser():
                         "per radian^2")
     d.add_argument("--max-iter", type=int, default=100, help="L-BFGS-B iterations at most")
     d.add_argument("-o", "--output", help="write the designed scene file here (.toml)")
+    c = sub.add_parser("control", help="controls in time (a scene file's [controls], within "
+                                       "their ranges) that make a point of the body follow a "
+                                       "path, found in its reduced model", **defaults)
+    c.add_argument("scene", help="a scene file (.toml) whose controls give their range")
+    c.add_argument("--effector", required=True,
+                   help="what follows the path: a physical surface, a side (x-max, ...) or a "
+                        "box whose vertices' mean moves")
+    c.add_argument("--path", required=True, metavar="CSV",
+                   help="rows t, x, y, z: where the effector should be at each time (s, m; "
+                        "linear in between; a header line is skipped)")
+    c.add_argument("--dt", type=float, default=0.02, help="time step, s")
+    c.add_argument("--knot", type=float, default=0.1,
+                   help="time between the control curves' points, s")
+    c.add_argument("--modes", type=int, default=6, help="the reduced model's vibration modes")
+    c.add_argument("--snapshots", type=int, default=24,
+                   help="its directions fitted to static equilibria over the controls' ranges")
+    c.add_argument("--smooth", type=float, default=1e-4,
+                   help="weight of the squared jumps between a control's points, over its "
+                        "range")
+    c.add_argument("--max-iter", type=int, default=200, help="L-BFGS-B iterations at most")
+    c.add_argument("-o", "--output", help="write the scene file with the controls on curves "
+                                          "here (.toml)")
     b = sub.add_parser("bench", help="speed of the kernels and solvers (table + JSON)",
                        **defaults)
     b.add_argument("--sizes", nargs="+", default=list(bench.SIZES), choices=list(bench.SIZES))

@@ -62,13 +62,19 @@ class Reach:
 
 
 def effector_rows(model, effector):
-    """(e0 (3,), E (3, r)) of an effector: a vertex index, or a rest point (3,) of the body
-    (interpolated in the tet holding it)."""
-    if isinstance(effector, (int, np.integer)) and not isinstance(effector, bool):
-        n = model.scene.mesh.n_vertices
-        if not 0 <= effector < n:
-            raise ValueError(f"effector: vertex {effector} is not one of the mesh's {n}")
-        return model.x0[effector], model.basis.reshape(n, 3, -1)[effector]
+    """(e0 (3,), E (3, r)) of an effector: a vertex index, a list of them (their mean), or a
+    rest point (3,) of the body (interpolated in the tet holding it)."""
+    n = model.scene.mesh.n_vertices
+    many = (isinstance(effector, (list, tuple, np.ndarray)) and len(effector) > 0
+            and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+                    for v in effector))
+    if many or (isinstance(effector, (int, np.integer)) and not isinstance(effector, bool)):
+        vertices = np.atleast_1d(np.asarray(effector, dtype=np.int64))
+        outside = vertices[(vertices < 0) | (vertices >= n)]
+        if outside.size:
+            raise ValueError(f"effector: vertex {int(outside[0])} is not one of the mesh's {n}")
+        return (model.x0[vertices].mean(axis=0),
+                model.basis.reshape(n, 3, -1)[vertices].mean(axis=0))
     point = as_float_array(effector, "effector", shape=(3,))
     return point, model.basis_at(point[None])[0]
 
@@ -190,14 +196,20 @@ def _stationary(J, residual, s):
 def _control_slopes(model, q, u):
     """dq/du (r, k) at the equilibrium q under controls u: -H^-1 dg/du."""
     _, H = model.force(q, hessian=True, controls=u)
+    return -np.linalg.solve(H, control_force_slopes(model, q, u))
+
+
+def control_force_slopes(model, q, u):
+    """dg/du (r, k), N per unit of each control, of the reduced force at q under controls u
+    (k,): beta_k'(u_k) G_k(q), G_k the gradient of control k's part (d beta / du: 1 for a
+    pressure, 2 - 2 a for an activation)."""
     columns = []
     for part, value in zip(model.parts, u):
         G = part.c1 + part.C2 @ q
         if part.S3 is not None:
             G = G + 3.0 * np.einsum("abc,b,c->a", part.S3, q, q)
-        slope = 1.0 if part.kind == "pressure" else 2.0 - 2.0 * value   # d beta / du
-        columns.append(slope * G)
-    return -np.linalg.solve(H, np.column_stack(columns))
+        columns.append((1.0 if part.kind == "pressure" else 2.0 - 2.0 * value) * G)
+    return np.column_stack(columns)
 
 
 def bounded_least_squares(J, r, low, high, damping):
