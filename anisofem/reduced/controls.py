@@ -7,17 +7,23 @@ times a constant, b = 1 - (1 - a)^2 = a (2 - a) (polynomial.activation_terms). W
 u, the model's energy is the polynomial with c1 + sum_k beta_k c1_k, C2 + sum_k beta_k C2_k
 and S3 + sum_k beta_k S3_k (beta_k: p for a pressure, b for an activation): forming them costs
 r^2 per control, and r^3 per pressure.
+
+A cable's T L(q) is not a polynomial: L = sum_j |a_j + D_j q| over its s segments, the
+routing points' positions linear in q (CablePart). Its energy, gradient and Hessian cost
+O(s r^2) per evaluation, and a step with a pulled cable is Newton with a backtracking search
+on the energy itself (ReducedModel), not on the exact quartic along the step.
 """
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..physics.cables import tension_value
 from ..physics.controls import activation_value, control_mapping, control_number
 from ..physics.potential import Potential
 from .polynomial import Polynomial, activation_terms, pressure_terms
 
 #: The kinds of control a reduced model takes.
-KINDS = ("pressure", "activation")
+KINDS = ("pressure", "activation", "tension")
 
 
 @dataclass
@@ -46,9 +52,51 @@ class ControlPart:
                 else activation_value(value, self.name))
 
 
+@dataclass
+class CablePart:
+    """A cable's part of a reduced model's energy, T L(q) with L(q) = sum_j |a_j + D_j q|:
+    name, value (the tension the scene wrote, N), a (s, 3) its segments at x0, m, D (s, 3, r)
+    their rate in q."""
+    name: str
+    value: float
+    a: np.ndarray
+    D: np.ndarray
+    kind = "tension"
+    S3 = None
+
+    def coefficient(self, value):
+        return value
+
+    def checked(self, value):
+        """value as a tension; ValueError naming the cable otherwise."""
+        return tension_value(value, self.name)
+
+    def _segments(self, q):
+        d = self.a + self.D @ q                                   # (s, 3)
+        l = np.linalg.norm(d, axis=1)
+        return d / np.where(l > 0, l, 1.0)[:, None], l
+
+    def length(self, q):
+        """L(q), m."""
+        return float(self._segments(q)[1].sum())
+
+    def slope(self, q):
+        """dL/dq (r,): the reduced force of a unit tension, N per N."""
+        t, _ = self._segments(q)
+        return np.einsum("si,sir->r", t, self.D)
+
+    def hessian(self, q):
+        """d2L/dq2 (r, r), 1/m: sum_j D_j^T (I - t_j t_j^T) / l_j D_j."""
+        t, l = self._segments(q)
+        P = (np.eye(3) - t[:, :, None] * t[:, None, :]) / np.where(l > 0, l, np.inf)[:, None,
+                                                                                        None]
+        return np.einsum("sir,sij,sjt->rt", self.D, P, self.D)
+
+
 def control_parts(scene, x0, basis):
-    """The ControlParts (a tuple, in the order of scene.controls) of a scene's named pressures
-    and activations at positions x0 + basis q, x0 (n, 3) m, basis (3n, r)."""
+    """The control parts (a tuple, in the order of scene.controls) of a scene's named
+    pressures, activations (ControlPart) and cables (CablePart) at positions x0 + basis q, x0
+    (n, 3) m, basis (3n, r)."""
     parts = []
     for cavity in scene.pressures:
         if cavity.name:
@@ -60,6 +108,12 @@ def control_parts(scene, x0, basis):
         (c0, c1, C2), constant = activation_terms(scene.elements, share, x0, basis)
         parts.append(ControlPart(activation.name, "activation", activation.value, c0, c1, C2,
                                  constant=constant))
+    U = basis.reshape(-1, 3, basis.shape[1])
+    for cable in scene.cables:
+        rest = np.einsum("pk,pki->pi", cable.weights, x0[cable.nodes])
+        rows = np.einsum("pk,pkir->pir", cable.weights, U[cable.nodes])
+        parts.append(CablePart(cable.name, cable.tension, np.diff(rest, axis=0),
+                               np.diff(rows, axis=0)))
     return tuple(parts)
 
 
@@ -71,11 +125,11 @@ def control_responses(scene, x0, factor, free):
     since the gradient is affine in each coefficient."""
     unset = passive(scene)
     rest = Potential(unset).energy_gradient(x0)[1]
-    names = [p.name for p in scene.pressures if p.name] + [a.name for a in scene.activations]
+    activations = {a.name for a in scene.activations}
     columns = []
-    for k, name in enumerate(names):
-        value = 1.0 if k < len(names) - len(scene.activations) else ACTIVATION_PROBE
-        beta = value if k < len(names) - len(scene.activations) else value * (2.0 - value)
+    for name in scene.controls:
+        value = ACTIVATION_PROBE if name in activations else 1.0
+        beta = value * (2.0 - value) if name in activations else value
         pushed = Potential(unset.with_controls({name: value})).energy_gradient(x0)[1]
         columns.append(-factor.solve((pushed - rest).ravel()[free] / beta))
     return np.column_stack(columns) if columns else np.zeros((free.size, 0))
@@ -86,7 +140,7 @@ ACTIVATION_PROBE = 0.5
 
 
 def passive(scene):
-    """The scene with its activation controls at 0 and its named pressures at 0: what a
+    """The scene with its controls at 0 (named pressures, activations, cables): what a
     model's polynomial is built from, its controls' parts kept apart."""
     zero = {name: 0.0 for name in scene.controls}
     return scene.with_controls(zero) if zero else scene
@@ -112,7 +166,7 @@ def controlled(poly, parts, values):
     copied = False
     for part, value in zip(parts, values):
         beta = part.coefficient(value)
-        if beta == 0.0:
+        if beta == 0.0 or part.kind == "tension":
             continue
         c0 += beta * part.c0 + beta * beta * part.constant
         c1 += beta * part.c1

@@ -187,10 +187,14 @@ class Loads:
         if self.carry is not None and not scene.fixed_mask.any():
             raise ValueError("carry: the scene holds no vertex to carry")
         activations = {a.name for a in scene.activations}
+        cables = {c.name for c in scene.cables}
         for name, (low, high) in self.controls:
             if name not in scene.controls:
                 raise ValueError(f"controls: no control {name!r}; the scene has: "
                                  f"{', '.join(scene.controls) or 'none'}")
+            if name in cables and low < 0:
+                raise ValueError(f"controls: {name!r} is a cable, its range must lie at >= 0 "
+                                 f"N, got ({low:g}, {high:g})")
             if name in activations and not 0.0 <= low < high < 1.0:
                 raise ValueError(f"controls: {name!r} is an activation, its range must lie in "
                                  f"[0, 1), got ({low:g}, {high:g})")

@@ -125,9 +125,6 @@ class ReducedModel:
     def __init__(self, scene, modes=MODES, derivatives=None, snapshots=0, loads=None,
                  validate=True, progress=None):
         check_polynomial_scene(scene, "reduced model")
-        if scene.cables:
-            raise ValueError("scene: the reduced model takes no cables (a cable's length is not "
-                             "a polynomial of the coordinates); step it with the FEM")
         scene.check_static()
         modes = _count(modes, "modes", 1)
         snapshots = _count(snapshots, "snapshots", 0)
@@ -224,10 +221,18 @@ class ReducedModel:
         return control_values(self.parts, values)
 
     def polynomial_at(self, values=None):
-        """The energy's Polynomial with the controls at values (control_values)."""
+        """The energy's Polynomial with the controls at values (control_values); the cables'
+        part is not a polynomial (pulled)."""
         if not self.parts:
             return self.polynomial
         return controlled(self.polynomial, self.parts, self.control_values(values))
+
+    def pulled(self, values=None):
+        """[(CablePart, tension)] of the cables pulled at values (control_values)."""
+        if not self.parts:
+            return []
+        return [(part, value) for part, value in zip(self.parts, self.control_values(values))
+                if part.kind == "tension" and value > 0]
 
     def reach(self, effector, target, bounds=None, tolerance=None, controls=None, q0=None):
         """The controls within bounds that bring `effector` (a vertex index, or a rest point
@@ -295,22 +300,26 @@ class ReducedModel:
         return self.basis.T @ f.ravel()
 
     def energy(self, q, controls=None):
-        """The energy V(q), J: elastic, with the pressures' and activations' (controls: see
-        control_values)."""
-        return self.polynomial_at(controls).energy(q)
+        """The energy V(q), J: elastic, with the pressures', activations' and cables'
+        (controls: see control_values)."""
+        return self.polynomial_at(controls).energy(q) + sum(
+            T * part.length(q) for part, T in self.pulled(controls))
 
     def force(self, q, hessian=False, controls=None):
-        """dV/dq (r,) in N (U^T of the full gradient of the elastic and pressure energy at
+        """dV/dq (r,) in N (U^T of the full gradient of the elastic and actuators' energy at
         x0 + U q), and with hessian=True also d2V/dq2 (r, r) in N/m."""
-        return self.polynomial_at(controls).gradient(q, hessian)
+        g, H = self.polynomial_at(controls).gradient(q, True)
+        for part, T in self.pulled(controls):
+            g = g + T * part.slope(q)
+            H = H + T * part.hessian(q)
+        return (g, H) if hessian else g
 
     def solve(self, force=None, q0=None, rtol=1e-8, max_iter=50, controls=None):
         """The static equilibrium under the scene's loads plus nodal forces `force` (n, 3), N,
         with controls (see control_values), from q0 (default 0): returns (q, NewtonReport)."""
         q = np.zeros(self.r) if q0 is None else as_float_array(q0, "q0", shape=(self.r,))
         load = self._load(force)
-        return self._newton(self.polynomial_at(controls), load, q, None, 0.0,
-                            rtol * _norm(load), rtol, max_iter)
+        return self._newton(controls, load, q, None, 0.0, rtol * _norm(load), rtol, max_iter)
 
     def step(self, q, v, dt, force=None, rtol=1e-8, max_iter=50, controls=None):
         """One backward-Euler step of dt s from the reduced state (q, v) under the scene's
@@ -321,25 +330,84 @@ class ReducedModel:
             raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
         q_hat = q + dt * v
         load = self._load(force)
-        q_next, report = self._newton(self.polynomial_at(controls), load, q_hat.copy(), q_hat,
-                                      1.0 / dt ** 2, rtol * (_norm(load) + _norm(v) / dt),
-                                      rtol, max_iter)
+        q_next, report = self._newton(controls, load, q_hat.copy(), q_hat, 1.0 / dt ** 2,
+                                      rtol * (_norm(load) + _norm(v) / dt), rtol, max_iter)
         return q_next, (q_next - q) / dt, report
 
     def _load(self, force):
         return self.external if force is None else self.external + self.project(force)
 
-    def _newton(self, P, load, q, q_hat, inertia, tolerance, rtol, max_iter):
-        """Minimize V(q) - load . q + inertia |q - q_hat|^2 / 2, V the Polynomial P, from q
-        (inertia 1/dt^2, or 0 for statics) to a gradient norm of tolerance + rtol |dV/dq(q)|
-        (N: rtol times the problem's force size) or the round-off floor
-        (anisofem.reduced.kernels.newton)."""
+    def _newton(self, controls, load, q, q_hat, inertia, tolerance, rtol, max_iter):
+        """Minimize V(q) - load . q + inertia |q - q_hat|^2 / 2, V the energy under controls,
+        from q (inertia 1/dt^2, or 0 for statics) to a gradient norm of tolerance + rtol
+        |dV/dq(q)| (N: rtol times the problem's force size) or the round-off floor
+        (anisofem.reduced.kernels.newton; with a cable pulled, pulled_newton)."""
+        P = self.polynomial_at(controls)
+        pulled = self.pulled(controls)
         q_hat = q if q_hat is None else q_hat
+        if pulled:
+            return pulled_newton(P, pulled, load, q, q_hat, inertia, tolerance, rtol, max_iter)
         q, iterations, residual, status = kernels.newton(
             P.c1, P.C2, P.S3.reshape(self.r ** 2, self.r), P.W4, load, q,
             q_hat, inertia, tolerance, rtol, ROUNDOFF_FACTOR, max_iter)
         return q, NewtonReport(status == kernels.CONVERGED, iterations, residual,
                                _MESSAGES[status].format(max_iter))
+
+
+def pulled_newton(P, pulled, load, q, q_hat, inertia, tolerance, rtol, max_iter):
+    """ReducedModel._newton with cables pulled, [(CablePart, T)]: Newton with the Hessian's
+    negative eigenvalues clamped and a backtracking Armijo search on the energy itself (a
+    step that changes it by less than its round-off is taken where the gradient falls)."""
+    r = q.size
+
+    def total(x):
+        d = x - q_hat
+        return (P.energy(x) + sum(T * part.length(x) for part, T in pulled)
+                + 0.5 * inertia * float(d @ d) - float(load @ x))
+
+    def derivatives(x):
+        g, H = P.gradient(x, True)
+        for part, T in pulled:
+            g, H = g + T * part.slope(x), H + T * part.hessian(x)
+        return g, H
+    energy, eps = total(q), np.finfo(float).eps
+    residual, status = math.inf, kernels.SPENT
+    for it in range(max_iter + 1):
+        g, H = derivatives(q)
+        if it == 0:
+            tolerance += rtol * _norm(g)
+        g = g - load + inertia * (q - q_hat)
+        H = H + inertia * np.eye(r)
+        residual = _norm(g)
+        if not math.isfinite(residual):
+            status = kernels.NOT_FINITE
+            break
+        terms = np.abs(H) @ np.abs(q) + np.abs(load) + np.abs(P.c1)
+        if residual <= max(tolerance, ROUNDOFF_FACTOR * eps * r * _norm(terms)):
+            status = kernels.CONVERGED
+            break
+        if it == max_iter:
+            break
+        p = -kernels.positive_solve(H, g)
+        slope = float(g @ p)
+        if not slope < 0:
+            status = kernels.NO_DESCENT
+            break
+        t, noise = 1.0, 1e-13 * max(abs(energy), 1e-300)
+        while t >= kernels.MIN_STEP:
+            trial = q + t * p
+            e = total(trial)
+            if e <= energy + kernels.ARMIJO * t * slope or (
+                    abs(e - energy) <= noise and _norm(derivatives(trial)[0] - load
+                                                       + inertia * (trial - q_hat)) < residual):
+                break
+            t *= 0.5
+        if t < kernels.MIN_STEP:
+            status = kernels.NO_DESCENT
+            break
+        q, energy = trial, e
+    return q, NewtonReport(status == kernels.CONVERGED, it, residual,
+                           _MESSAGES[status].format(max_iter))
 
 
 _MESSAGES = {kernels.CONVERGED: "converged", kernels.SPENT: "{} iterations spent",

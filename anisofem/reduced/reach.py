@@ -96,10 +96,11 @@ def model_bounds(model, bounds):
             raise ValueError(f"bounds: control {part.name!r} has no range (give bounds, or "
                              f"build the model with Loads(controls=...))")
         low[k], high[k] = (float(v) for v in ranges[part.name])
+        within = {"activation": " in [0, 1)", "tension": " at >= 0 N"}.get(part.kind, "")
         if not low[k] < high[k] or (part.kind == "activation" and
-                                    not 0.0 <= low[k] < high[k] < 1.0):
-            raise ValueError(f"bounds: {part.name!r}: expected low < high"
-                             f"{' in [0, 1)' if part.kind == 'activation' else ''}, got "
+                                    not 0.0 <= low[k] < high[k] < 1.0) or (
+                part.kind == "tension" and low[k] < 0):
+            raise ValueError(f"bounds: {part.name!r}: expected low < high{within}, got "
                              f"({low[k]:g}, {high[k]:g})")
     return low, high
 
@@ -202,9 +203,12 @@ def _control_slopes(model, q, u):
 def control_force_slopes(model, q, u):
     """dg/du (r, k), N per unit of each control, of the reduced force at q under controls u
     (k,): beta_k'(u_k) G_k(q), G_k the gradient of control k's part (d beta / du: 1 for a
-    pressure, 2 - 2 a for an activation)."""
+    pressure, 2 - 2 a for an activation; a cable's: dL/dq)."""
     columns = []
     for part, value in zip(model.parts, u):
+        if part.kind == "tension":
+            columns.append(part.slope(q))
+            continue
         G = part.c1 + part.C2 @ q
         if part.S3 is not None:
             G = G + 3.0 * np.einsum("abc,b,c->a", part.S3, q, q)

@@ -220,7 +220,6 @@ def representable(rungs, scene, notes):
     if scene.pressures:
         left["surrogate"] = "the surrogates take nodal forces, not pressure"
     if scene.cables:
-        left["reduced"] = "the reduced models take no cables"
         left["surrogate"] = "the surrogates take nodal forces, not cables"
     if scene.timed:
         left["reduced"] = "the reduced rungs hold the loads constant, not on their curves"

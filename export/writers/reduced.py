@@ -89,6 +89,10 @@ def control_arrays(parts, r):
     """The control arrays of a model's ControlParts (module docstring); none without."""
     if not parts:
         return {}
+    cables = [p.name for p in parts if p.kind == "tension"]
+    if cables:
+        raise ValueError(f"model: the runtimes take no cables yet (a cable's length is not a "
+                         f"polynomial of the coordinates); this model has {', '.join(cables)}")
     pressures = [p for p in parts if p.kind == "pressure"]
     return {"control_kinds": np.array([p.kind == "activation" for p in parts], np.uint8),
             "control_values": np.array([p.value for p in parts], np.float64),
