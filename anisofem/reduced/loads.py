@@ -246,10 +246,27 @@ def free_ends(scene):
 def default_loads(scene):
     """The scene's own loads plus, at each free end (free_ends), a drag in any direction of up
     to DRAG_SHARE of the body's weight (its mass times |gravity|, or standard gravity in a
-    scene without)."""
+    scene without), and the range each control on a load curve takes (curve_ranges)."""
     g = float(np.linalg.norm(scene.gravity)) or STANDARD_GRAVITY
     weight = DRAG_SHARE * float(scene.masses.sum()) * g
-    return Loads(drags=tuple(Drag(tuple(end), weight) for end in free_ends(scene)))
+    return Loads(drags=tuple(Drag(tuple(end), weight) for end in free_ends(scene)),
+                 controls=curve_ranges(scene))
+
+
+def curve_ranges(scene):
+    """{name: (low, high)}: the values each of the scene's controls on a load curve takes,
+    its written value times the curve's smallest and largest factor (none where they are
+    one)."""
+    written = dict(zip(scene.controls, scene.control_values))
+    ranges = {}
+    for part in scene.timed:
+        if part.control is not None:
+            ends = written[part.control] * np.array([part.curve.values.min(),
+                                                     part.curve.values.max()])
+            low, high = float(ends.min()), float(ends.max())
+            if low < high:
+                ranges[part.control] = (low, high)
+    return ranges
 
 
 def gravity_change(scene, direction):

@@ -74,19 +74,36 @@ def _stepping(build_seconds, dt, step):
     return advance
 
 
+def _schedule(scene, dt):
+    """at(k) -> (extra nodal force (n, 3) N or None, controls (k,) or None) at the end of step
+    k of dt s: the scene's forces and controls on load curves (Scene.at), over the scene as
+    written, which the reduced models are built from."""
+    if not scene.timed:
+        return lambda k: (None, None)
+
+    def at(k):
+        now = scene.at(k * dt)
+        force = now.external_force - scene.external_force
+        return force, (now.control_values if scene.controls else None)
+    return at
+
+
 def reduced_rung(modes, snapshots=0):
     """A Rung stepping the scene's ReducedModel (anisofem.reduced) with `modes` vibration
     modes and their modal derivatives, or with `snapshots` > 0 the modes and that many
     principal directions of static equilibria under the scene's default declared loads. The
-    model is built before the rollout; its first step reports the build time as
-    "setup_seconds"."""
+    model is built before the rollout, and follows the scene's forces and controls on load
+    curves; its first step reports the build time as "setup_seconds"."""
     def make(scene, dt):
         model = ReducedModel(scene, modes=modes, snapshots=snapshots, validate=False)
         q, w = np.zeros(model.r), np.zeros(model.r)
+        at, k = _schedule(scene, dt), 0
 
         def step():
-            nonlocal q, w
-            q, w, report = model.step(q, w, dt)
+            nonlocal q, w, k
+            k += 1
+            force, controls = at(k)
+            q, w, report = model.step(q, w, dt, force=force, controls=controls)
             return model.positions(q), report
         return _stepping(model.build_seconds, dt, step)
     return Rung(f"reduced m{modes}" + (f" s{snapshots}" if snapshots else ""), "reduced",
@@ -101,10 +118,12 @@ def framed_rung(bands, coordinates):
     def make(scene, dt):
         model = FramedModel(scene, bands=bands, coordinates=coordinates, validate=False)
         now = before = model.rest()
+        at, k = _schedule(scene, dt), 0
 
         def step():
-            nonlocal now, before
-            after, report = model.step(now, before, dt)
+            nonlocal now, before, k
+            k += 1
+            after, report = model.step(now, before, dt, force=at(k)[0])
             now, before = after, now
             return model.positions(now), report
         return _stepping(model.build_seconds, dt, step)
@@ -212,8 +231,9 @@ def physical_reference_only(rungs, inverted, notes):
 def representable(rungs, scene, notes):
     """rungs without those that cannot model the scene, saying so in notes: the reduced ones
     where it has Neo-Hookean elements (the reduced model's energy is exact only for the StVK
-    base) or load curves; the surrogates where it has pressure, load curves or
-    activated fibers; any rung its own refusal turns away (Rung.refusal)."""
+    base), held vertices or unnamed pressures on load curves; the surrogates where it has
+    pressure, cables, load curves or activated fibers; any rung its own refusal turns away
+    (Rung.refusal)."""
     left = {}
     if scene.neohookean.any():
         left["reduced"] = "the reduced model needs the StVK base material"
@@ -221,8 +241,10 @@ def representable(rungs, scene, notes):
         left["surrogate"] = "the surrogates take nodal forces, not pressure"
     if scene.cables:
         left["surrogate"] = "the surrogates take nodal forces, not cables"
+    if any(p.motion is not None or p.pressure is not None for p in scene.timed):
+        left["reduced"] = ("the reduced rungs follow forces and controls on load curves, not "
+                           "held vertices moved or unnamed pressures on them")
     if scene.timed:
-        left["reduced"] = "the reduced rungs hold the loads constant, not on their curves"
         left["surrogate"] = "the surrogates take constant nodal forces, not load curves"
     if (scene.elements.rest2 != 1.0).any():
         left["surrogate"] = "the surrogates were trained on passive fibers, not activated ones"
