@@ -167,6 +167,11 @@ def _reduced(argv):
     print(f"wrote {args.output}.json and .bin: {header['n']} vertices, {header['m']} tets, "
           f"r = {header['r']} ({header['modes']} modes{fitted}), built in "
           f"{model.build_seconds:.2g} s{_checked(model.validation)}")
+    if model.validation is not None and model.validation.tip_error > BASIS_WARNING:
+        print(f"warning: {100 * model.validation.tip_error:.2g}% off the full FEM: this body "
+              f"moves more than its linear basis holds; more --snapshots, or --framed (its "
+              f"parts in their own rotating frames) for a body that bends or swings far",
+              file=sys.stderr)
 
 
 def _declared_loads(args, scene):
@@ -261,6 +266,10 @@ def _cubature(header):
     """Where a framed file's joints are a cubature, the clause that says of how many."""
     layer = header["joint_layer"]
     return "" if layer == header["joint_elements"] else f" (a cubature of its {layer})"
+
+
+#: export reduced warns where the model's validation misses the full FEM's tip by more.
+BASIS_WARNING = 0.05
 
 
 def _checked(v):

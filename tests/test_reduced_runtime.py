@@ -321,3 +321,27 @@ def test_the_command_builds_for_the_loads_it_is_given_and_says_what_it_holds(tmp
             main(["reduced", "box", "--cells", "10", "2", "2", *flags, "-o", path])
         assert exit_.value.code == 2
         assert re.search(message, capsys.readouterr().err), flags
+
+
+def test_the_command_warns_where_the_linear_basis_does_not_hold(tmp_path, capsys):
+    """A 0.2 m beam dragged by 0.5 N at its tip, 2 modes and 1 fitted direction: the validation
+    is far off, and the command says so and points to more snapshots and the framed model."""
+    main(["reduced", "box", "--cells", "10", "2", "2", "--size", "0.2", "0.02", "0.02",
+          "--modes", "2", "--snapshots", "1", "--drag", "x-max", "0.5", "-o",
+          str(tmp_path / "w")])
+    err = capsys.readouterr().err
+    assert re.search(r"warning: \d+% off the full FEM: this body moves more than its linear "
+                     r"basis holds; more --snapshots, or --framed", err), err
+
+
+def test_the_trade_notes_a_body_a_linear_basis_does_not_hold():
+    """linear_basis_note: where every linear reduced rung misses and a framed one does not."""
+    from anisofem.studies.trade import linear_basis_note
+    rows = [{"name": "reduced m5", "kind": "reduced", "max_error": 0.2, "stable": True},
+            {"name": "reduced framed b4 c12", "kind": "reduced", "max_error": 0.004,
+             "stable": True}]
+    note = linear_basis_note(rows, 0.01)
+    assert note.startswith("the linear reduced models miss by 20% at best (reduced m5)")
+    assert "the framed model (reduced framed b4 c12) follows" in note
+    rows[0]["max_error"] = 0.005
+    assert linear_basis_note(rows, 0.01) is None

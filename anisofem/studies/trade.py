@@ -152,7 +152,27 @@ def trade(scene, steps=100, dt=0.02, rungs=None, tolerance=0.01, progress=True, 
     mark_front(rows)
     good = [r for r in rows if r["stable"] and r["max_error"] <= tolerance]
     result["recommended"] = min(good, key=lambda r: r["ms_per_step"])["name"] if good else None
+    note = linear_basis_note(rows, tolerance)
+    if note:
+        notes.append(note)
     return result
+
+
+def linear_basis_note(rows, tolerance):
+    """A note where every linear reduced rung misses the exact rollout by more than tolerance
+    and a framed one does not: the body's motion is more than a linear basis holds (None
+    otherwise)."""
+    linear = [r for r in rows if r["kind"] == "reduced" and "framed" not in r["name"]]
+    framed = [r for r in rows if r["kind"] == "reduced" and "framed" in r["name"]]
+    if not linear or min(r["max_error"] for r in linear) <= tolerance:
+        return None
+    best = min(linear, key=lambda r: r["max_error"])
+    within = [r for r in framed if r["stable"] and r["max_error"] <= tolerance]
+    return (f"the linear reduced models miss by {100 * best['max_error']:.2g}% at best "
+            f"({best['name']}): this body moves more than a linear basis holds"
+            + (f"; the framed model ({within[0]['name']}) follows its frames' rotations"
+               if within else "; a framed model (its parts in their own rotating frames) may "
+                              "hold it"))
 
 
 def _against_the_body(result, scene, bodies, ref, check, tip, dt, steps, progress):
