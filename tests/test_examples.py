@@ -24,6 +24,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ("actuator.py twist", "actuator_twist.png", "bending grows with pressure: True"),
     ("two_region_part.py", "two_region_part.png", "converged: True"),
     ("tentacle.py", "tentacle.png", "drew out/tentacle.png"),
+    ("actuator_control.py", "actuator_control.png", "drew out/actuator_control.png"),
     ("identify.py", None, "stopped after")])
 def test_example_runs_and_draws(tmp_path, script, picture, says):
     script, *args = script.split()
@@ -45,6 +46,12 @@ def test_example_runs_and_draws(tmp_path, script, picture, says):
         assert len(rows) == 5 and "out of reach" in r.stdout.splitlines()[-2]
         for row in rows[:4]:
             assert float(row[2]) < 0.02 and float(row[3]) < 2.0, row
+    if script == "actuator_control.py":  # the tip follows the 10 mm path within 0.5 mm in
+        # closed loop, and the full FEM under the same pressures within 0.1 mm of the runtime
+        line = next(x for x in r.stdout.splitlines() if x.startswith("tip: largest error"))
+        assert float(line.split()[3]) < 0.5, line
+        line = next(x for x in r.stdout.splitlines() if x.startswith("full FEM"))
+        assert float(line.split("tip within ")[1].split()[0]) < 0.1, line
     if script == "actuator.py":  # the ramp's ParaView collection: one .vtu per pressure; the
         # crossed winding bends without twisting, the graded one twists as it bends
         assert len(list((tmp_path / "out").glob("actuator*_0*.vtu"))) == 11
