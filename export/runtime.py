@@ -47,6 +47,9 @@ import os
 
 import numpy as np
 
+#: control_kinds' codes (export.writers.reduced).
+PRESSURE, ACTIVATION, TENSION = 0, 1, 2
+
 #: Fiber features of edges whose tets have no fiber are 0; below this kappa (Pa) a fiber is
 #: treated as absent when choosing its direction.
 FIBER_EPS = 1e-12
@@ -493,38 +496,62 @@ class ReducedSimulator:
             raise ValueError(f"path: {path}.json: controls: expected a list of names")
         self.controls = tuple(names)
         k = len(names)
-        self._kinds = np.zeros(0, bool)
+        self._kinds = np.zeros(0, np.uint8)
         self.control_values = np.zeros(0)
         self._coefficients = self.c1, self.C2, self.S3
+        self._cables = []
         if not k:
             return
         checked(path, header, arrays, {"control_kinds": ("uint8", (k,)),
                                        "control_values": ("float64", (k,)),
                                        "control_c1": ("float64", (k, r)),
                                        "control_C2": ("float64", (k, r, r))})
-        self._kinds = arrays["control_kinds"].astype(bool)
-        pressures = int((~self._kinds).sum())
-        if self._kinds[:pressures].any():
-            raise ValueError(f"path: {path}.json: array control_kinds: the pressures (0) must "
-                             f"come before the activations (1)")
+        self._kinds = np.array(arrays["control_kinds"])
+        if (self._kinds > TENSION).any() or (np.diff(self._kinds.astype(int)) < 0).any():
+            raise ValueError(f"path: {path}.json: array control_kinds: 0 (pressures), 1 "
+                             f"(activations) then 2 (cables) expected, got "
+                             f"{self._kinds.tolist()}")
+        pressures = int((self._kinds == PRESSURE).sum())
         checked(path, header, arrays, {"control_S3": ("float64", (pressures, r, r, r))})
         self._parts = tuple(np.array(arrays[key], dtype=self.dtype) for key in
                             ("control_c1", "control_C2", "control_S3"))
         self._parts = self._parts[:2] + (self._parts[2].reshape(pressures, r * r, r),)
+        cables = int((self._kinds == TENSION).sum())
+        if cables:
+            sizes = checked(path, header, arrays, {"cable_segments": ("int32", (cables,)),
+                                                   "cable_a": ("float64", ("S", 3)),
+                                                   "cable_D": ("float64", ("S", 3, r))})
+            counts = arrays["cable_segments"]
+            if (counts < 1).any() or counts.sum() != sizes["S"]:
+                raise ValueError(f"path: {path}.json: array cable_segments {counts.tolist()} "
+                                 f"does not count the {sizes['S']} rows of cable_a")
+            ends = np.cumsum(counts)
+            self._cables = [(np.array(arrays["cable_a"][e - c:e]),
+                             np.array(arrays["cable_D"][e - c:e], dtype=self.dtype))
+                            for c, e in zip(counts, ends)]
         self.control_values = np.zeros(k)
         self.set_controls(np.array(arrays["control_values"]))
 
     def _check_control(self, i, value):
-        """Control i's value as a float; ValueError naming it where it is not finite, or an
-        activation outside [0, 1)."""
+        """Control i's value as a float; ValueError naming it where it is not finite, an
+        activation outside [0, 1) or a negative tension."""
         value = float(value)
-        if self._kinds[i] and not 0.0 <= value < 1.0:
+        kind = self._kinds[i]
+        if kind == ACTIVATION and not 0.0 <= value < 1.0:
             raise ValueError(f"controls: {self.controls[i]!r} is an activation, in [0, 1); "
+                             f"got {value!r}")
+        if kind == TENSION and not value >= 0.0:
+            raise ValueError(f"controls: {self.controls[i]!r} is a cable, a tension >= 0 N; "
                              f"got {value!r}")
         if not np.isfinite(value):
             raise ValueError(f"controls: {self.controls[i]!r} is a pressure, a finite number "
                              f"of Pa; got {value!r}")
         return value
+
+    def _pulled(self):
+        """[(a (s, 3), D (s, 3, r), T)] of the cables pulled now."""
+        tensions = self.control_values[self._kinds == TENSION]
+        return [(a, D, T) for (a, D), T in zip(self._cables, tensions) if T > 0]
 
     def set_controls(self, values):
         """Set the controls for every later step: a mapping name -> value (the others keep
@@ -547,7 +574,8 @@ class ReducedSimulator:
         now = np.array([self._check_control(i, v) for i, v in enumerate(now)])
         if not self.controls:
             return
-        beta = np.where(self._kinds, now * (2.0 - now), now).astype(self.dtype)
+        beta = np.select([self._kinds == PRESSURE, self._kinds == ACTIVATION],
+                         [now, now * (2.0 - now)], 0.0).astype(self.dtype)
         c1p, C2p, S3p = self._parts
         self._coefficients = (self.c1 + beta @ c1p, self.C2 + np.tensordot(beta, C2p, axes=1),
                               self.S3 + np.tensordot(beta[:len(S3p)], S3p, axes=1))
@@ -585,11 +613,15 @@ class ReducedSimulator:
         eps = np.finfo(self.dtype).eps
         x = q_hat.copy()
         A = self.W4 @ x
+        pulled = self._pulled()
         for it in range(max_iter + 1):
             gathered = A[self.triples].reshape(self.r * self.r, self.r)  # S4[a, b, c, x]
             X = (gathered @ x).reshape(self.r, self.r)
             Y = (S3 @ x).reshape(self.r, self.r)
             g = c1 + (C2 + 3.0 * Y + 4.0 * X) @ x
+            cable_g, cable_H = _cable_terms(pulled, x, self.r)
+            if pulled:
+                g = g + cable_g
             if it == 0:
                 tolerance += rtol * _norm(g)
             g += inertia * (x - q_hat) - load
@@ -597,24 +629,26 @@ class ReducedSimulator:
             residual = _norm(g)
             if not np.isfinite(residual):
                 raise FloatingPointError("step: the reduced force is not finite")
-            terms = np.abs(H) @ np.abs(x) + np.abs(load) + np.abs(c1)
+            terms = np.abs(H + cable_H) @ np.abs(x) + np.abs(load) + np.abs(c1)
             if residual <= max(tolerance, FLOOR * eps * self.r * _norm(terms)):
                 self.iterations = it
                 return x, (x - q) / dt
             if it == max_iter:
                 break
-            p = -_positive_solve(H, g)
+            p = -_positive_solve(H + cable_H, g)
             a1 = float(g @ p)
             if not a1 < 0:
                 break
-            a2 = 0.5 * float(p @ H @ p)
+            a2 = 0.5 * float(p @ H @ p)              # the quartic's part (with inertia)
+            pull = float(cable_g @ p)
             Ap = self.W4 @ p
             mixed = float(((gathered @ p).reshape(self.r, self.r) @ p) @ p)
             pure = float(((Ap[self.triples].reshape(self.r * self.r, self.r) @ p)
                           .reshape(self.r, self.r) @ p) @ p)
             a3 = float(p @ (S3 @ p).reshape(self.r, self.r) @ p) + 4.0 * mixed
             t = 1.0
-            while t * (a2 + t * (a3 + t * pure)) > -(1.0 - 1e-4) * a1 and t >= 1e-12:
+            while (t * (a2 + t * (a3 + t * pure)) + (_cable_change(pulled, x, t * p) / t - pull)
+                   > -(1.0 - 1e-4) * a1 and t >= 1e-12):
                 t *= 0.5
             if t < 1e-12:
                 break
@@ -622,6 +656,34 @@ class ReducedSimulator:
             A = A + t * Ap
         raise FloatingPointError(f"step: Newton stopped at a reduced gradient of {residual:.3g} "
                                  f"after {it} iterations (tolerance {tolerance:.3g})")
+
+
+def _cable_terms(pulled, q, r):
+    """(g (r,), H (r, r)) of the pulled cables' T L(q), L = sum_j |a_j + D_j q|: T sum_j D_j^T
+    t_j and T sum_j D_j^T (I - t_j t_j^T) / l_j D_j."""
+    g, H = np.zeros(r), np.zeros((r, r))
+    for a, D, T in pulled:
+        d = a + D @ q
+        l = np.linalg.norm(d, axis=1)
+        t = d / np.where(l > 0, l, 1.0)[:, None]
+        g += T * np.einsum("si,sir->r", t, D)
+        P = (np.eye(3) - t[:, :, None] * t[:, None, :]) / np.where(l > 0, l, np.inf)[:, None,
+                                                                                        None]
+        H += T * np.einsum("sir,sij,sjt->rt", D, P, D)
+    return g, H
+
+
+def _cable_change(pulled, q, step):
+    """sum of T (L(q + step) - L(q)) over the pulled cables, each segment's (2 d . e + |e|^2) /
+    (|d + e| + |d|) (no cancellation)."""
+    total = 0.0
+    for a, D, T in pulled:
+        d = a + D @ q
+        e = D @ step
+        size = np.linalg.norm(d + e, axis=1) + np.linalg.norm(d, axis=1)
+        total += T * float(np.sum(np.einsum("si,si->s", 2.0 * d + e, e)
+                                  / np.where(size > 0, size, 1.0)))
+    return total
 
 
 def _angle_tag(header, angle):

@@ -402,7 +402,8 @@ def test_under_the_sanitizers_a_file_with_controls_steps_and_reaches(written, tm
              (corrupt(path, out + "-nan", edit_bin=nan_at("control_c1")),
               r"array control_c1 holds a non-finite number"),
              (corrupt(path, out + "-kinds", edit_bin=_kinds_out_of_order),
-              r"array control_kinds: 0 \(pressures\) then 1 \(activations\) expected"),
+              r"array control_kinds: 0 \(pressures\), 1 \(activations\) then 2 \(cables\) "
+              r"expected"),
              (corrupt(path, out + "-s3", set_spec("control_S3", "shape",
                                                   lambda s: [s[0] + 1] + s[1:])),
               r"control_S3|runs past the end"),

@@ -80,6 +80,16 @@ class CablePart:
         """L(q), m."""
         return float(self._segments(q)[1].sum())
 
+    def change(self, q, step):
+        """L(q + step) - L(q), m, without the cancellation of the difference: each segment's
+        (|d + e|^2 - |d|^2) / (|d + e| + |d|) = (2 d . e + |e|^2) / (|d + e| + |d|)."""
+        d = self.a + self.D @ q
+        e = self.D @ step
+        moved = d + e
+        size = np.linalg.norm(moved, axis=1) + np.linalg.norm(d, axis=1)
+        return float(np.sum(np.einsum("si,si->s", 2.0 * d + e, e)
+                            / np.where(size > 0, size, 1.0)))
+
     def slope(self, q):
         """dL/dq (r,): the reduced force of a unit tension, N per N."""
         t, _ = self._segments(q)

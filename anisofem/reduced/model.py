@@ -356,56 +356,55 @@ class ReducedModel:
 
 def pulled_newton(P, pulled, load, q, q_hat, inertia, tolerance, rtol, max_iter):
     """ReducedModel._newton with cables pulled, [(CablePart, T)]: Newton with the Hessian's
-    negative eigenvalues clamped and a backtracking Armijo search on the energy itself (a
-    step that changes it by less than its round-off is taken where the gradient falls)."""
+    negative eigenvalues clamped and a backtracking Armijo search on the energy along the
+    step, its polynomial part the exact quartic in the step length (as kernels.newton) and
+    the cables' T (L(q + t p) - L(q)) on their segments (CablePart.change, free of the
+    difference's cancellation)."""
     r = q.size
-
-    def total(x):
-        d = x - q_hat
-        return (P.energy(x) + sum(T * part.length(x) for part, T in pulled)
-                + 0.5 * inertia * float(d @ d) - float(load @ x))
-
-    def derivatives(x):
-        g, H = P.gradient(x, True)
-        for part, T in pulled:
-            g, H = g + T * part.slope(x), H + T * part.hessian(x)
-        return g, H
-    energy, eps = total(q), np.finfo(float).eps
+    S3 = P.S3.reshape(r * r, r)
+    A = kernels.matvec(P.W4, q)
+    eps = np.finfo(float).eps
     residual, status = math.inf, kernels.SPENT
     for it in range(max_iter + 1):
-        g, H = derivatives(q)
+        g, H = kernels.derivatives(P.c1, P.C2, S3, A, q, inertia)
+        cable_g, cable_H = np.zeros(r), np.zeros((r, r))
+        for part, T in pulled:
+            cable_g += T * part.slope(q)
+            cable_H += T * part.hessian(q)
         if it == 0:
-            tolerance += rtol * _norm(g)
-        g = g - load + inertia * (q - q_hat)
-        H = H + inertia * np.eye(r)
+            tolerance += rtol * _norm(g + cable_g)
+        g = g + cable_g - load + inertia * (q - q_hat)
         residual = _norm(g)
         if not math.isfinite(residual):
             status = kernels.NOT_FINITE
             break
-        terms = np.abs(H) @ np.abs(q) + np.abs(load) + np.abs(P.c1)
+        terms = np.abs(H + cable_H) @ np.abs(q) + np.abs(load) + np.abs(P.c1)
         if residual <= max(tolerance, ROUNDOFF_FACTOR * eps * r * _norm(terms)):
             status = kernels.CONVERGED
             break
         if it == max_iter:
             break
-        p = -kernels.positive_solve(H, g)
-        slope = float(g @ p)
-        if not slope < 0:
+        p = -kernels.positive_solve(H + cable_H, g)
+        a1 = float(g @ p)
+        if not a1 < 0:
             status = kernels.NO_DESCENT
             break
-        t, noise = 1.0, 1e-13 * max(abs(energy), 1e-300)
+        a2 = 0.5 * float(p @ H @ p)                      # the quartic's part (with inertia)
+        Ap = kernels.matvec(P.W4, p)
+        mixed, a4 = kernels.cubic_forms(A, Ap, p)
+        a3 = float(p @ (S3 @ p).reshape(r, r) @ p) + 4.0 * mixed
+        pull = float(cable_g @ p)
+        t = 1.0
         while t >= kernels.MIN_STEP:
-            trial = q + t * p
-            e = total(trial)
-            if e <= energy + kernels.ARMIJO * t * slope or (
-                    abs(e - energy) <= noise and _norm(derivatives(trial)[0] - load
-                                                       + inertia * (trial - q_hat)) < residual):
+            cables = sum(T * part.change(q, t * p) for part, T in pulled)
+            if (t * (a2 + t * (a3 + t * a4)) + (cables / t - pull)
+                    <= -(1.0 - kernels.ARMIJO) * a1):
                 break
             t *= 0.5
         if t < kernels.MIN_STEP:
             status = kernels.NO_DESCENT
             break
-        q, energy = trial, e
+        q, A = q + t * p, A + t * Ap
     return q, NewtonReport(status == kernels.CONVERGED, it, residual,
                            _MESSAGES[status].format(max_iter))
 

@@ -8,7 +8,9 @@
  * Controls (named pressures, activations): c1, C2 and S3 are the file's plus each control's
  * part (control_c1, control_C2, control_S3; pressures first, only they have a cubic part)
  * times its coefficient, a pressure's value or an activation a's a (2 - a), formed when the
- * controls are set. */
+ * controls are set. A cable's T L(q), L = sum_j |a_j + D_j q| over its segments, adds its
+ * gradient and Hessian to the step's, and its change T (L(q + t p) - L(q)) to the search
+ * along the step (each segment's (2 d.e + |e|^2) / (|d + e| + |d|), free of cancellation). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -27,7 +29,10 @@ struct af_reduced {
     double *constant;            /* (r,) the projected constant force */
     double *work;                /* scratch for a step */
     int controls, pressures;     /* k controls, the first `pressures` of them pressures */
-    unsigned char *kinds;        /* (k,) 0 a pressure, 1 an activation */
+    int cables;                  /* the last `cables` controls are cables */
+    unsigned char *kinds;        /* (k,) 0 a pressure, 1 an activation, 2 a cable */
+    int *segments;               /* (cables,) each cable's segment count */
+    double *cable_a, *cable_D;   /* (S, 3) and (S, 3, r) */
     double *values;              /* (k,) the controls' values now */
     double *part1, *part2, *part3;  /* (k, r), (k, r, r), (pressures, r, r, r) */
     double *base1, *base2, *base3;  /* the file's c1, C2, S3 (c1, C2, S3: with the controls) */
@@ -37,7 +42,8 @@ void af_reduced_close(af_reduced *m) {
     if (!m) return;
     free(m->basis); free(m->c1); free(m->C2); free(m->S3); free(m->W4); free(m->work);
     free(m->constant); free(m->kinds); free(m->values); free(m->part1); free(m->part2);
-    free(m->part3); free(m->base1); free(m->base2); free(m->base3);
+    free(m->part3); free(m->base1); free(m->base2); free(m->base3); free(m->segments);
+    free(m->cable_a); free(m->cable_D);
     free(m);
 }
 
@@ -46,6 +52,27 @@ static double *copy_of(const double *a, long n) {
     double *out = (double *)malloc((size_t)n * sizeof(double));
     if (out) memcpy(out, a, (size_t)n * sizeof(double));
     return out;
+}
+
+/* The cables' arrays; 0 with a message where they are wrong. */
+static int open_cables(af_reduced *m, const af_file *f) {
+    long shape[4], rows = 0, c;
+    if (!(m->segments = (int *)af_array(f, "cable_segments", 0, "int32", 1, shape))) return 0;
+    if (shape[0] != m->cables) goto shape;
+    for (c = 0; c < m->cables; c++) {
+        if (m->segments[c] < 1) goto shape;
+        rows += m->segments[c];
+    }
+    if (!(m->cable_a = (double *)af_array(f, "cable_a", 0, "float64", 2, shape))) return 0;
+    if (shape[0] != rows || shape[1] != 3) goto shape;
+    if (!(m->cable_D = (double *)af_array(f, "cable_D", 0, "float64", 3, shape))) return 0;
+    if (shape[0] != rows || shape[1] != 3 || shape[2] != m->r) goto shape;
+    return 1;
+shape:
+    af_say(f->error, f->error_size, "%s: the arrays cable_segments (%d,), cable_a (S, 3) and "
+           "cable_D (S, 3, r = %d) do not fit: S is the sum of the segment counts, each >= 1",
+           f->name, m->cables, m->r);
+    return 0;
 }
 
 /* The control arrays, where the file has them; 0 with a message where they are wrong. */
@@ -58,12 +85,14 @@ static int open_controls(af_reduced *m, const af_file *f) {
         return 0;
     k = m->controls = (int)shape[0];
     for (i = 0; i < k; i++) {
-        if (m->kinds[i] > 1 || (i > 0 && m->kinds[i] < m->kinds[i - 1])) {
-            af_say(f->error, f->error_size, "%s: array control_kinds: 0 (pressures) then 1 "
-                   "(activations) expected, entry %ld is %d", f->name, i, m->kinds[i]);
+        if (m->kinds[i] > 2 || (i > 0 && m->kinds[i] < m->kinds[i - 1])) {
+            af_say(f->error, f->error_size, "%s: array control_kinds: 0 (pressures), 1 "
+                   "(activations) then 2 (cables) expected, entry %ld is %d", f->name, i,
+                   m->kinds[i]);
             return 0;
         }
         if (!m->kinds[i]) m->pressures++;
+        if (m->kinds[i] == 2) m->cables++;
     }
     if (!(m->values = (double *)af_array(f, "control_values", 0, "float64", 1, shape)))
         return 0;
@@ -74,6 +103,7 @@ static int open_controls(af_reduced *m, const af_file *f) {
     if (shape[0] != k || shape[1] != r || shape[2] != r) goto shape;
     if (!(m->part3 = (double *)af_array(f, "control_S3", 0, "float64", 4, shape))) return 0;
     if (shape[0] != m->pressures || shape[1] != r || shape[2] != r || shape[3] != r) goto shape;
+    if (m->cables && !open_cables(m, f)) return 0;
     m->base1 = copy_of(m->c1, r);
     m->base2 = copy_of(m->C2, r * r);
     m->base3 = copy_of(m->S3, r * r * r);
@@ -103,12 +133,13 @@ int af_reduced_check_controls(const af_reduced *m, const double *values, const c
     const char *name = names;
     for (c = 0; c < m->controls; c++) {
         double v = values[c];
-        if (!isfinite(v) || (m->kinds[c] && !(v >= 0.0 && v < 1.0))) {
+        if (!isfinite(v) || (m->kinds[c] == 1 && !(v >= 0.0 && v < 1.0)) ||
+            (m->kinds[c] == 2 && !(v >= 0.0))) {
             for (i = 0; names && i < c; i++) name += strlen(name) + 1;
             af_say(error, error_size, "controls: %s%s%scontrol %ld is %s; got %g",
                    names ? "'" : "", names ? name : "", names ? "', " : "", c,
-                   m->kinds[c] ? "an activation, in [0, 1)" : "a pressure, a finite number "
-                   "of Pa", v);
+                   m->kinds[c] == 1 ? "an activation, in [0, 1)" : m->kinds[c] == 2 ?
+                   "a cable, a tension >= 0 N" : "a pressure, a finite number of Pa", v);
             return AF_BAD_INPUT;
         }
     }
@@ -124,7 +155,7 @@ int af_reduced_set_controls(af_reduced *m, const double *values, const char *nam
     if (m->pressures) memcpy(m->S3, m->base3, (size_t)(r * r * r) * sizeof(double));
     for (c = 0; c < m->controls; c++) {
         double v = m->values[c] = values[c];
-        double beta = m->kinds[c] ? v * (2.0 - v) : v;
+        double beta = m->kinds[c] == 1 ? v * (2.0 - v) : m->kinds[c] == 2 ? 0.0 : v;
         const double *p1 = m->part1 + c * r, *p2 = m->part2 + c * r * r;
         if (beta == 0.0) continue;
         for (i = 0; i < r; i++) m->c1[i] += beta * p1[i];
@@ -163,8 +194,9 @@ af_reduced *af_reduced_open(const af_file *f, int n, const double *rest) {
     if (!(m->W4 = (double *)af_array(f, "W4", 1, "float64", 2, shape))) goto fail;
     if (shape[0] != m->triples || shape[1] != r) goto shape;
     /* work: A, Ap (T each); X, Y, H, L, V, J (r^2 each); g, p, x, load, terms, t1, lam,
-       q_hat (r each) */
-    m->work = (double *)malloc((size_t)(2 * m->triples + 6 * r * r + 8 * r + 1) * sizeof(double));
+       q_hat (r each); the cables' Hessian (r^2), gradient and step (r each) */
+    m->work = (double *)malloc((size_t)(2 * m->triples + 7 * r * r + 10 * r + 1)
+                               * sizeof(double));
     m->constant = (double *)calloc((size_t)r + 1, sizeof(double));
     if (!m->work || !m->constant) {
         af_say(f->error, f->error_size, "no memory for a model of r = %ld", r);
@@ -266,6 +298,70 @@ int af_reduced_set_force(af_reduced *m, const double *force) {
     return AF_OK;
 }
 
+/* The pulled cables' gradient into g and Hessian into H (r, r), both zeroed first; returns
+ * whether any cable is pulled. */
+static int cable_terms(const af_reduced *m, const double *q, double *g, double *H) {
+    long r = m->r, c, j, i, a, b, k, row = 0;
+    int any = 0;
+    for (i = 0; i < r; i++) g[i] = 0.0;
+    for (i = 0; i < r * r; i++) H[i] = 0.0;
+    for (c = 0; c < m->cables; c++) {
+        double T = m->values[m->controls - m->cables + c];
+        for (j = 0; j < m->segments[c]; j++, row++) {
+            const double *D = m->cable_D + row * 3 * r;
+            double d[3], t[3], l = 0.0, P[9];
+            if (!(T > 0.0)) continue;
+            any = 1;
+            for (a = 0; a < 3; a++) {
+                d[a] = m->cable_a[row * 3 + a] + af_dot(D + a * r, q, r);
+                l += d[a] * d[a];
+            }
+            l = sqrt(l);
+            if (!(l > 0.0)) continue;
+            for (a = 0; a < 3; a++) t[a] = d[a] / l;
+            for (a = 0; a < 3; a++)
+                for (b = 0; b < 3; b++) P[a * 3 + b] = T * ((a == b) - t[a] * t[b]) / l;
+            for (i = 0; i < r; i++) {
+                double s = 0.0;
+                for (a = 0; a < 3; a++) s += t[a] * D[a * r + i];
+                g[i] += T * s;
+            }
+            for (i = 0; i < r; i++) {
+                double PD[3];
+                for (a = 0; a < 3; a++)
+                    PD[a] = P[a * 3] * D[i] + P[a * 3 + 1] * D[r + i] + P[a * 3 + 2] * D[2 * r + i];
+                for (k = 0; k < r; k++)
+                    H[i * r + k] += PD[0] * D[k] + PD[1] * D[r + k] + PD[2] * D[2 * r + k];
+            }
+        }
+    }
+    return any;
+}
+
+/* The pulled cables' sum of T (L(q + step) - L(q)). */
+static double cable_change(const af_reduced *m, const double *q, const double *step) {
+    long r = m->r, c, j, a, row = 0;
+    double total = 0.0;
+    for (c = 0; c < m->cables; c++) {
+        double T = m->values[m->controls - m->cables + c];
+        for (j = 0; j < m->segments[c]; j++, row++) {
+            const double *D = m->cable_D + row * 3 * r;
+            double d[3], e[3], ld = 0.0, le = 0.0, num = 0.0;
+            if (!(T > 0.0)) continue;
+            for (a = 0; a < 3; a++) {
+                d[a] = m->cable_a[row * 3 + a] + af_dot(D + a * r, q, r);
+                e[a] = af_dot(D + a * r, step, r);
+                num += (2.0 * d[a] + e[a]) * e[a];
+                ld += d[a] * d[a];
+                le += (d[a] + e[a]) * (d[a] + e[a]);
+            }
+            ld = sqrt(ld) + sqrt(le);
+            total += T * num / (ld > 0.0 ? ld : 1.0);
+        }
+    }
+    return total;
+}
+
 /* Minimize |x - q_hat|^2 inertia / 2 + V(x) - load.x from x (r,) in place to a reduced
  * gradient of tolerance + rtol |dV/dq(x0)| or the round-off floor: the iterations taken, or
  * AF_NOT_CONVERGED with a message. q_hat is read only where inertia > 0. */
@@ -275,18 +371,20 @@ static int minimize(af_reduced *m, double *x, const double *q_hat, double inerti
     long r = m->r, rr = r * r, i, k, it;
     double *A = m->work, *Ap = A + m->triples, *X = Ap + m->triples, *Y = X + rr,
            *H = Y + rr, *L = H + rr, *V = L + rr, *J = V + rr, *g = J + rr, *p = g + r,
-           *terms = p + 3 * r, *t1 = terms + r, *lam = t1 + r;
+           *terms = p + 3 * r, *t1 = terms + r, *lam = t1 + r, *cH = lam + 2 * r,
+           *cg = cH + rr, *ts = cg + r;
     double residual = 0.0, eps = 2.220446049250313e-16;
     w4_times(m, x, A);
     for (it = 0; it <= max_iter; it++) {
-        double a1, a2, a3, pure, mixed, step = 1.0, floor_;
+        double a1, a2, a3, pure, mixed, step = 1.0, floor_, pull = 0.0;
+        int pulled = m->cables && cable_terms(m, x, cg, cH);
         af_contract(A, x, X, r);
         s3_times(m, x, Y);
         for (i = 0; i < r; i++) {
             double s = m->c1[i];
             for (k = 0; k < r; k++)
                 s += (m->C2[i * r + k] + 3.0 * Y[i * r + k] + 4.0 * X[i * r + k]) * x[k];
-            g[i] = s;
+            g[i] = pulled ? s + cg[i] : s;
         }
         if (it == 0) tolerance += rtol * sqrt(af_dot(g, g, r));
         for (i = 0; i < r; i++) {
@@ -295,6 +393,8 @@ static int minimize(af_reduced *m, double *x, const double *q_hat, double inerti
                 H[i * r + k] = m->C2[i * r + k] + 6.0 * Y[i * r + k] + 12.0 * X[i * r + k]
                                + (i == k ? inertia : 0.0);
         }
+        if (pulled)      /* cH: the whole Hessian; H keeps the quartic's part for the search */
+            for (i = 0; i < rr; i++) cH[i] += H[i];
         residual = sqrt(af_dot(g, g, r));
         if (!isfinite(residual)) {
             af_say(error, error_size, "step: the reduced force is not finite at iteration %ld",
@@ -302,24 +402,33 @@ static int minimize(af_reduced *m, double *x, const double *q_hat, double inerti
             return AF_NOT_CONVERGED;
         }
         for (i = 0; i < r; i++) {
+            const double *row = pulled ? cH + i * r : H + i * r;
             double s = 0.0;
-            for (k = 0; k < r; k++) s += fabs(H[i * r + k]) * fabs(x[k]);
+            for (k = 0; k < r; k++) s += fabs(row[k]) * fabs(x[k]);
             terms[i] = s + fabs(load[i]) + fabs(m->c1[i]);
         }
         floor_ = FLOOR * eps * (double)r * sqrt(af_dot(terms, terms, r));
         if (residual <= (tolerance > floor_ ? tolerance : floor_)) return (int)it;
         if (it == max_iter) break;
-        af_newton_direction(H, g, p, L, V, lam, J, t1, r, CLAMP, 0);
+        af_newton_direction(pulled ? cH : H, g, p, L, V, lam, J, t1, r, CLAMP, 0);
         a1 = af_dot(g, p, r);
         if (!(a1 < 0.0)) break;
         a2 = 0.5 * form(H, p, r);
+        if (pulled) pull = af_dot(cg, p, r);
         w4_times(m, p, Ap);
         cubic_forms(A, Ap, p, r, &mixed, &pure);
         s3_times(m, p, Y);
         a3 = form(Y, p, r) + 4.0 * mixed;
-        while (step * (a2 + step * (a3 + step * pure)) > -(1.0 - AF_ARMIJO) * a1
-               && step >= SMALLEST_STEP)
+        while (step >= SMALLEST_STEP) {
+            double cables = 0.0;
+            if (pulled) {
+                for (k = 0; k < r; k++) ts[k] = step * p[k];
+                cables = cable_change(m, x, ts) / step - pull;
+            }
+            if (!(step * (a2 + step * (a3 + step * pure)) + cables > -(1.0 - AF_ARMIJO) * a1))
+                break;
             step *= 0.5;
+        }
         if (step < SMALLEST_STEP) break;
         for (k = 0; k < r; k++) x[k] += step * p[k];
         for (k = 0; k < m->triples; k++) A[k] += step * Ap[k];

@@ -8,11 +8,14 @@ W4 (T, r), T = r (r + 1) (r + 2) / 6, the coefficients of the energy (runtime.Re
 masses (n,) kg; held (n, 3) uint8; tets (m, 4) int32, the mesh it was built on; surface (k, 3)
 int32, the boundary triangles; with a display mesh, the basis interpolated at its vertices
 (physics on the model's mesh, drawing on the display's). A model with controls (named
-pressures, activations; anisofem.reduced.controls) adds control_kinds (k,) uint8 (0 a
-pressure, 1 an activation), control_values (k,) their values as the scene wrote them,
-control_c1 (k, r), control_C2 (k, r, r) and control_S3 (p, r, r, r), p the pressures (which
-come first): each control's part of the energy per unit of its coefficient (a pressure's
-value, an activation a's a (2 - a)); the header's controls lists their names. The header:
+pressures, activations, cables; anisofem.reduced.controls) adds control_kinds (k,) uint8 (0
+a pressure, 1 an activation, 2 a cable, in that order), control_values (k,) their values as
+the scene wrote them, control_c1 (k, r), control_C2 (k, r, r) and control_S3 (p, r, r, r), p
+the pressures: each control's part of the energy per unit of its coefficient (a pressure's
+value, an activation a's a (2 - a); zero for a cable), and with cables cable_segments (c,)
+int32, each cable's segment count, cable_a (S, 3) the segments at rest, m, and cable_D (S, 3,
+r) their rate in q (a cable's energy T sum_j |a_j + D_j q|); the header's controls lists the
+names. The header:
 model_format
 REDUCED_FORMAT, title, n, m, r, modes, snapshots (the principal directions fitted to declared
 loads, 0 for a modal basis), frequencies (Hz), c0 (J), build_seconds, validation
@@ -89,16 +92,24 @@ def control_arrays(parts, r):
     """The control arrays of a model's ControlParts (module docstring); none without."""
     if not parts:
         return {}
-    cables = [p.name for p in parts if p.kind == "tension"]
-    if cables:
-        raise ValueError(f"model: the runtimes take no cables yet (a cable's length is not a "
-                         f"polynomial of the coordinates); this model has {', '.join(cables)}")
     pressures = [p for p in parts if p.kind == "pressure"]
-    return {"control_kinds": np.array([p.kind == "activation" for p in parts], np.uint8),
-            "control_values": np.array([p.value for p in parts], np.float64),
-            "control_c1": np.array([p.c1 for p in parts]),
-            "control_C2": np.array([p.C2 for p in parts]),
-            "control_S3": np.array([p.S3 for p in pressures]).reshape(len(pressures), r, r, r)}
+    cables = [p for p in parts if p.kind == "tension"]
+    zero = (np.zeros(r), np.zeros((r, r)))
+    arrays = {"control_kinds": np.array([KIND_CODES[p.kind] for p in parts], np.uint8),
+              "control_values": np.array([p.value for p in parts], np.float64),
+              "control_c1": np.array([zero[0] if p.kind == "tension" else p.c1 for p in parts]),
+              "control_C2": np.array([zero[1] if p.kind == "tension" else p.C2 for p in parts]),
+              "control_S3": np.array([p.S3 for p in pressures]).reshape(len(pressures), r, r,
+                                                                         r)}
+    if cables:
+        arrays.update({"cable_segments": np.array([len(c.a) for c in cables], np.int32),
+                       "cable_a": np.concatenate([c.a for c in cables]),
+                       "cable_D": np.concatenate([c.D for c in cables])})
+    return arrays
+
+
+#: control_kinds' code of each kind of control (pressures, activations, cables: in that order).
+KIND_CODES = {"pressure": 0, "activation": 1, "tension": 2}
 
 
 def declared(loads):
