@@ -216,3 +216,25 @@ def test_the_runtimes_pull_the_cable_like_the_model(cable_model, tmp_path):
                           timeout=300)
     assert done.returncode == 0 and "runtime error" not in done.stderr, done.stderr
     assert re.match(r"ok 1 \d+ 50 \S+ controls 1 reach [01]$", done.stdout.strip()), done.stdout
+
+
+def test_the_c_runtime_reaches_with_a_cable_like_the_model(cable_model, tmp_path):
+    """af_reach on a cable model against ReducedModel.reach: the same tension (1e-7 of its
+    range) and tip (1e-9 m), from a slack start."""
+    from export import native
+    from export.writers.reduced import write
+    if native.compiler() is None:
+        pytest.skip("no C compiler")
+    model = cable_model
+    path = str(tmp_path / "finger")
+    write(model, path)
+    c = native.CReducedSimulator(path, native.build(str(tmp_path / "lib")))
+    c.set_constant_force(model.scene.external_force)
+    tip = np.flatnonzero(np.abs(model.scene.mesh.vertices[:, 0] - L) < 1e-12)
+    target = model.positions(model.solve(controls=[0.4])[0])[tip].mean(axis=0)
+    ours = model.reach(list(tip), target)
+    controls, position, reached, _ = c.reach(tip, np.full(tip.size, 1.0 / tip.size), target,
+                                             [0.0], [0.6])
+    assert ours.reached and reached
+    assert abs(controls[0] - ours.controls[0]) <= 1e-7 * 0.6
+    assert np.abs(position - ours.position).max() <= 1e-9

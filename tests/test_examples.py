@@ -25,6 +25,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ("two_region_part.py", "two_region_part.png", "converged: True"),
     ("tentacle.py", "tentacle.png", "drew out/tentacle.png"),
     ("actuator_control.py", "actuator_control.png", "drew out/actuator_control.png"),
+    ("cable_finger.py", "cable_finger.png", "drew out/cable_finger.png"),
     ("identify.py", None, "stopped after")])
 def test_example_runs_and_draws(tmp_path, script, picture, says):
     script, *args = script.split()
@@ -52,6 +53,12 @@ def test_example_runs_and_draws(tmp_path, script, picture, says):
         assert float(line.split()[3]) < 0.5, line
         line = next(x for x in r.stdout.splitlines() if x.startswith("full FEM"))
         assert float(line.split("tip within ")[1].split()[0]) < 0.1, line
+    if script == "cable_finger.py":  # three targets reached, the FEM within 0.1 mm under the
+        # tensions found, the last out of reach; the closed loop within 0.2 mm of its path
+        rows = [line.split("|") for line in r.stdout.splitlines() if line.count("|") == 3][1:]
+        assert len(rows) == 4 and all(float(row[3]) < 0.1 for row in rows[:3]), rows
+        line = next(x for x in r.stdout.splitlines() if x.startswith("closed loop"))
+        assert float(line.split("tip within ")[1].split()[0]) < 0.2, line
     if script == "actuator.py":  # the ramp's ParaView collection: one .vtu per pressure; the
         # crossed winding bends without twisting, the graded one twists as it bends
         assert len(list((tmp_path / "out").glob("actuator*_0*.vtu"))) == 11

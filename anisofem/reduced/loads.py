@@ -36,7 +36,7 @@ CONE_DIRECTIONS = 4
 #: split into connected pieces (the tip of a cantilever, each arm's end of a T).
 END_SHARE = 0.9
 
-#: With more than two declared controls, the build also solves for all of them at once at
+#: With more than one declared control, the build also solves for all of them at once at
 #: this many points per control, drawn uniformly in their ranges from COMBINED_SEED (the
 #: validation draws from seed 0).
 COMBINED = 2
@@ -293,7 +293,7 @@ def build_cases(scene, loads):
     to CONE_DIRECTIONS points on the cone's rim and on the cone at half its angle (one-case
     chains); a carry widens the cone to its turn and adds its inertia (Carry.inertia) at
     SHARES; each declared control from its written value toward each end of its range, each
-    pair of them together toward each pair of ends, and with more than two, all of them
+    pair of them together toward each pair of ends, and with more than one, all of them
     toward COMBINED points per control drawn in their ranges (seed COMBINED_SEED), at
     SHARES."""
     none = {}
@@ -320,7 +320,7 @@ def build_cases(scene, loads):
     ends = [{name: end} for name in names for end in away[name]]
     ends += [{a: x, b: y} for i, a in enumerate(names) for b in names[i + 1:]
              for x in away[a] for y in away[b]]
-    if len(names) > 2:   # all of them at once: COMBINED draws per control from the ranges
+    if len(names) > 1:   # all of them at once: COMBINED draws per control from the ranges
         rng = np.random.default_rng(COMBINED_SEED)
         ends += [{name: float(rng.uniform(*span)) for name, span in loads.controls}
                  for _ in range(COMBINED * len(names))]

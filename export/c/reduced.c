@@ -338,6 +338,25 @@ static int cable_terms(const af_reduced *m, const double *q, double *g, double *
     return any;
 }
 
+/* dL/dq (r,) into g of cable `cable` (index among the cables) at q. */
+static void cable_slope(const af_reduced *m, int cable, const double *q, double *g) {
+    long r = m->r, c, j, i, a, row = 0;
+    for (c = 0; c < cable; c++) row += m->segments[c];
+    for (i = 0; i < r; i++) g[i] = 0.0;
+    for (j = 0; j < m->segments[cable]; j++, row++) {
+        const double *D = m->cable_D + row * 3 * r;
+        double d[3], l = 0.0;
+        for (a = 0; a < 3; a++) {
+            d[a] = m->cable_a[row * 3 + a] + af_dot(D + a * r, q, r);
+            l += d[a] * d[a];
+        }
+        l = sqrt(l);
+        if (!(l > 0.0)) continue;
+        for (i = 0; i < r; i++)
+            g[i] += (d[0] * D[i] + d[1] * D[r + i] + d[2] * D[2 * r + i]) / l;
+    }
+}
+
 /* The pulled cables' sum of T (L(q + step) - L(q)). */
 static double cable_change(const af_reduced *m, const double *q, const double *step) {
     long r = m->r, c, j, a, row = 0;
@@ -469,15 +488,19 @@ int af_reduced_static(af_reduced *m, double *q, double rtol, int max_iter, char 
 void af_reduced_control_slopes(af_reduced *m, const double *q, double *slopes) {
     long r = m->r, rr = r * r, i, k, c;
     double *A = m->work, *X = A + 2 * m->triples, *Y = X + rr, *H = Y + rr, *L = H + rr,
-           *V = L + rr, *J = V + rr, *g = J + rr, *p = g + r, *t1 = g + 5 * r, *lam = g + 6 * r;
+           *V = L + rr, *J = V + rr, *g = J + rr, *p = g + r, *t1 = g + 5 * r, *lam = g + 6 * r,
+           *cH = g + 8 * r, *cg = cH + rr;
+    int pulled = m->cables && cable_terms(m, q, cg, cH);
     w4_times(m, q, A);
     af_contract(A, q, X, r);
     s3_times(m, q, Y);
-    for (i = 0; i < rr; i++) H[i] = m->C2[i] + 6.0 * Y[i] + 12.0 * X[i];
+    for (i = 0; i < rr; i++) H[i] = m->C2[i] + 6.0 * Y[i] + 12.0 * X[i] + (pulled ? cH[i] : 0.0);
     for (c = 0; c < m->controls; c++) {
         const double *p1 = m->part1 + c * r, *p2 = m->part2 + c * rr;
-        double v = m->values[c], slope = m->kinds[c] ? 2.0 - 2.0 * v : 1.0;
-        for (i = 0; i < r; i++) {
+        double v = m->values[c], slope = m->kinds[c] == 1 ? 2.0 - 2.0 * v : 1.0;
+        if (m->kinds[c] == 2) {
+            cable_slope(m, (int)(c - (m->controls - m->cables)), q, g);
+        } else for (i = 0; i < r; i++) {
             double s = p1[i];
             for (k = 0; k < r; k++) s += p2[i * r + k] * q[k];
             if (c < m->pressures) {
