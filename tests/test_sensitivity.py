@@ -211,3 +211,36 @@ def test_rollout_pressure_derivative(order):
     fd = (J(af.simulate(scene.loaded(1 + h / 2e3), steps, dt, rtol=1e-12, warn=False))
           - J(af.simulate(scene.loaded(1 - h / 2e3), steps, dt, rtol=1e-12, warn=False))) / (2 * h)
     assert S.pressure[0] == pytest.approx(fd, rel=1e-6)
+
+
+@pytest.mark.parametrize("regime", ["ordinary", "extreme"])
+@pytest.mark.parametrize("law", ["stvk", "neohookean"])
+def test_control_derivatives(regime, law):
+    """The derivative of the tip height in each control of a cantilever with an activation
+    control (its upper half's fibers), a cable along its top and a load pulling its tip,
+    against Richardson-extrapolated central differences of solves, within 1e-6: ordinary (kappa
+    2 E, activation 0.1, tension 0.02 N) and extreme (kappa 100 E, activation 0.5 for
+    Neo-Hookean, tension 0.2 N; StVK at activation 0.1: from 0.2 on, the upper half's pull
+    curls it until its elements turn inside out)."""
+    kappa, a, T = {"ordinary": (2e5, 0.1, 0.02), "extreme": (1e7, 0.5, 0.2)}[regime]
+    if law == "stvk" and regime == "extreme":
+        a = 0.1
+    base = cantilever(1, law, 1e5, 0.4, kappa, np.tile([0.0, 0.2], (120, 1)))
+    mesh = base.mesh
+    top = mesh.vertices[mesh.tets].mean(axis=1)[:, 2] > 0
+    points = [(x, 0.0, 0.003) for x in np.linspace(0.0, LENGTH, 5)]
+    scene = af.Scene(mesh, base.material, fixed=base.fixed_mask, gravity=(0, 0, -9.81),
+                     activation=af.Activation(top, a, "top"),
+                     cable=af.Cable(points, T, "pull"))
+    J, gradient = tip_height(scene)
+    S = static_sensitivity(scene, solved(scene), gradient)
+    slopes = {"top": float(S.activation[top].sum()), "pull": float(S.tension[0])}
+    for name, value, h in (("top", a, 1e-3), ("pull", T, 1e-3 * T)):
+        def change(step):
+            return J(solved(scene.with_controls({name: value + step})).x)
+
+        def central(change, h):
+            return (change(h) - change(-h)) / (2 * h)
+        fd = (4 * central(change, h / 2) - central(change, h)) / 3
+        assert slopes[name] == pytest.approx(fd, rel=1e-6), name
+        assert abs(fd) > 1e-12

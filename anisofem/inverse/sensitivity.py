@@ -23,7 +23,8 @@ sin a cos b, sin b): azimuth a about z from x and elevation b toward z (so it st
     lambda^T dg/dd = 4 kappa (2 (u . h) C d + (I4 - s^2) (F^T h + G_lambda^T u)).
 
 A pressure's magnitude p: g holds p dW/dx (anisofem.physics.pressure), so lambda^T dg/dp is lambda
-against the cavity's force at unit pressure.
+against the cavity's force at unit pressure; a cable's tension T: g holds T dL/dx
+(anisofem.physics.cables), so lambda^T dg/dT is lambda against dL/dx.
 """
 from dataclasses import dataclass, fields
 
@@ -36,8 +37,9 @@ from ..physics.material import lame_slopes
 from ..physics.potential import Potential, check_positions
 from ..solvers.stability import stability
 
-#: The parameter kinds: per element, except pressure (one per Scene.pressures entry).
-KINDS = ("young", "poisson", "kappa", "fiber_angles", "pressure", "activation")
+#: The parameter kinds: per element, except pressure (one per Scene.pressures entry) and
+#: tension (one per Scene.cables entry).
+KINDS = ("young", "poisson", "kappa", "fiber_angles", "pressure", "activation", "tension")
 
 
 @dataclass
@@ -47,7 +49,8 @@ class Sensitivity:
     fiber_direction (m, 3) per element, d/dd of the direction taken as free (its part along d
     is no change of a unit direction; any other parametrization chains through it); pressure (k,)
     one per scene pressure, J per Pa; activation (m,) per element, J per unit activation (at
-    the scene's activations: a fiber's rest stretch s = 1 - a); adjoint (n, 3) the solution
+    the scene's activations: a fiber's rest stretch s = 1 - a); tension (c,) one per cable, J
+    per N; adjoint (n, 3) the solution
     lambda of H lambda = dJ/dx
     (zero on fixed components), m/N times the objective's unit. Sum a per-element array over
     a region's elements for a parameter shared by the region."""
@@ -58,6 +61,7 @@ class Sensitivity:
     fiber_direction: np.ndarray
     pressure: np.ndarray
     activation: np.ndarray
+    tension: np.ndarray
     adjoint: np.ndarray
 
 
@@ -196,10 +200,16 @@ class _StateTerms:
             cavity.at(cavity.magnitude / as_written.magnitude if as_written.magnitude
                       else 1.0).energy(x, unit)
             self.units.append(unit)
+        self.cable_units = []
+        for cable, as_written in zip(scene.cables, (written or scene).cables):
+            unit = np.zeros_like(x)
+            cable.at(cable.tension / as_written.tension if as_written.tension
+                     else 1.0).energy(x, unit)
+            self.cable_units.append(unit)
 
     def contract(self, lam):
         """(young, poisson, kappa (m,), fiber_angles (m, 2), fiber_direction (m, 3), pressure
-        (k,), activation (m,)): lambda^T dg/dp for lam (n, 3)."""
+        (k,), activation (m,), tension (c,)): lambda^T dg/dp for lam (n, 3)."""
         el, w = self.el, self.el.weights
         Gl = np.einsum("eai,eqaj->eqij", lam[el.tets], el.grads)
         s_mu = np.einsum("eq,eqij,eqij->e", w, self.dP_mu, Gl)
@@ -215,4 +225,5 @@ class _StateTerms:
         s_d = np.einsum("eq,eqi->ei", w, g_d)                                # (m, 3)
         s_young, s_poisson = lame_slopes(el.mu, el.lam, s_mu, s_lam)
         return (s_young, s_poisson, s_kappa, np.einsum("ei,eki->ek", s_d, self.dd), s_d,
-                np.array([float(np.sum(unit * lam)) for unit in self.units]), s_activation)
+                np.array([float(np.sum(unit * lam)) for unit in self.units]), s_activation,
+                np.array([float(np.sum(unit * lam)) for unit in self.cable_units]))
