@@ -20,6 +20,8 @@ import subprocess
 
 import numpy as np
 
+from .runtime import control_vector
+
 FOLDER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "c")
 #: The runtime's sources, in build order, and its headers.
 SOURCES = tuple(os.path.join(FOLDER, f"{name}.c") for name in
@@ -173,20 +175,7 @@ class CModel:
         """Set the controls for every later step: a mapping name -> value (the others keep
         theirs) or one value per control. ValueError for an unknown name or a wrong count;
         RuntimeError with the runtime's message for a bad value."""
-        now = self.control_values
-        if isinstance(values, dict):
-            for name, value in values.items():
-                if name not in self.controls:
-                    raise ValueError(f"controls: no control {name!r}; the model has: "
-                                     f"{', '.join(self.controls) or 'none'}")
-                now[self.controls.index(name)] = value
-        else:
-            given = np.asarray(values, dtype=float).ravel()
-            if given.size != len(self.controls):
-                raise ValueError(f"controls: expected {len(self.controls)} values "
-                                 f"({', '.join(self.controls)}), got {given.size}")
-            now = given
-        now = np.ascontiguousarray(now, dtype=np.float64)
+        now = np.ascontiguousarray(control_vector(values, self.controls, self.control_values))
         if not self.controls:
             return
         self._check(self._c.af_set_controls(self._handle, _pointer(now)), "af_set_controls")

@@ -558,19 +558,7 @@ class ReducedSimulator:
         theirs) or one value per control, in the order of `controls`. ValueError naming the
         control for an unknown name, a value that is not finite or an activation outside
         [0, 1) (the controls unchanged)."""
-        now = self.control_values.copy()
-        if isinstance(values, dict):
-            for name, value in values.items():
-                if name not in self.controls:
-                    raise ValueError(f"controls: no control {name!r}; the model has: "
-                                     f"{', '.join(self.controls) or 'none'}")
-                now[self.controls.index(name)] = value
-        else:
-            given = np.asarray(values, dtype=float).ravel()
-            if given.size != len(self.controls):
-                raise ValueError(f"controls: expected {len(self.controls)} values "
-                                 f"({', '.join(self.controls)}), got {given.size}")
-            now = given
+        now = control_vector(values, self.controls, self.control_values)
         now = np.array([self._check_control(i, v) for i, v in enumerate(now)])
         if not self.controls:
             return
@@ -656,6 +644,25 @@ class ReducedSimulator:
             A = A + t * Ap
         raise FloatingPointError(f"step: Newton stopped at a reduced gradient of {residual:.3g} "
                                  f"after {it} iterations (tolerance {tolerance:.3g})")
+
+
+def control_vector(values, names, now):
+    """The controls' values (k,) after setting `values` (a mapping name -> value, the others
+    keeping theirs in now (k,), or one value per name); ValueError for an unknown name or a
+    wrong count."""
+    out = np.array(now, dtype=float)
+    if isinstance(values, dict):
+        for name, value in values.items():
+            if name not in names:
+                raise ValueError(f"controls: no control {name!r}; the model has: "
+                                 f"{', '.join(names) or 'none'}")
+            out[names.index(name)] = value
+        return out
+    given = np.asarray(values, dtype=float).ravel()
+    if given.size != len(names):
+        raise ValueError(f"controls: expected {len(names)} values ({', '.join(names)}), got "
+                         f"{given.size}")
+    return given
 
 
 def _cable_terms(pulled, q, r):

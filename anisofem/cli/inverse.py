@@ -58,11 +58,8 @@ def fit_command(args):
     if args.output:
         fitted = fitting.fitted_table(first.table, scenes[0], result.values, args.scenes[0],
                                       args.output, regions)
-        with atomic_path(args.output, ".toml") as tmp:
-            with open(tmp, "w") as fh:
-                fh.write(f"# {args.scenes[0]} with the values fitted by python -m anisofem fit\n"
-                         + dump(fitted))
-        print(f"-> {args.output}")
+        _write_scene(args.output, f"{args.scenes[0]} with the values fitted by python -m "
+                                  f"anisofem fit", fitted)
     return 0 if result.converged else 1
 
 
@@ -100,11 +97,8 @@ def design_command(args):
         region["fiber"] = {"helix": {"axis": axis.tolist(), "origin": origin.tolist(),
                                      "crossed": crossed,
                                      "segments": [round(float(a), 6) for a in result.angles]}}
-        with atomic_path(args.output, ".toml") as tmp:
-            with open(tmp, "w") as fh:
-                fh.write(f"# {args.scene} with fiber angles designed by python -m anisofem "
-                         f"design\n" + dump(table))
-        print(f"-> {args.output}")
+        _write_scene(args.output, f"{args.scene} with fiber angles designed by python -m "
+                                  f"anisofem design", table)
     return 0 if result.converged else 1
 
 
@@ -226,11 +220,8 @@ def control_command(args):
           f"({100 * worst / size:.3g}% of the body)")
     if args.output:
         table = controlled_table(scene_file, result, args.output)
-        with atomic_path(args.output, ".toml") as tmp:
-            with open(tmp, "w") as fh:
-                fh.write(f"# {args.scene} with the controls python -m anisofem control found, "
-                         f"on curves\n" + dump(table))
-        print(f"-> {args.output}")
+        _write_scene(args.output, f"{args.scene} with the controls python -m anisofem control "
+                                  f"found, on curves", table)
     return 0 if result.converged else 1
 
 
@@ -250,6 +241,14 @@ def controlled_table(scene_file, result, output_path):
         control = out["controls"][name]
         control["value"], control["curve"] = largest, f"{name}_path"
     return out
+
+
+def _write_scene(path, comment, table):
+    """Write a scene file's table as TOML at path (atomically), under a comment line."""
+    with atomic_path(path, ".toml") as tmp:
+        with open(tmp, "w") as fh:
+            fh.write(f"# {comment}\n" + dump(table))
+    print(f"-> {path}")
 
 
 def _trial_failed(message):

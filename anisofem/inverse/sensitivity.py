@@ -165,6 +165,14 @@ def _definite(potential, x, name):
                          f"state); the derivative is not defined") from None
 
 
+def _unit_force(load, value, written, x):
+    """(n, 3) the gradient at x of a load (a CavityLoad or a CableLoad, linear in its value)
+    per unit of the value as written: the load at value / written (1 where written is 0)."""
+    unit = np.zeros_like(x)
+    load.at(value / written if written else 1.0).energy(x, unit)
+    return unit
+
+
 class _StateTerms:
     """What lambda^T dg/dp needs of a state x (n, 3), computed once: each quadrature point's F,
     C, dP/dmu, dP/dlam and fiber terms, and each pressure's force at unit magnitude. written:
@@ -194,18 +202,11 @@ class _StateTerms:
                                      axis=1),
                             np.stack([-np.cos(a) * np.sin(b), -np.sin(a) * np.sin(b),
                                       np.cos(b)], axis=1)], axis=1)          # (m, 2, 3)
-        self.units = []
-        for cavity, as_written in zip(scene.pressures, (written or scene).pressures):
-            unit = np.zeros_like(x)
-            cavity.at(cavity.magnitude / as_written.magnitude if as_written.magnitude
-                      else 1.0).energy(x, unit)
-            self.units.append(unit)
-        self.cable_units = []
-        for cable, as_written in zip(scene.cables, (written or scene).cables):
-            unit = np.zeros_like(x)
-            cable.at(cable.tension / as_written.tension if as_written.tension
-                     else 1.0).energy(x, unit)
-            self.cable_units.append(unit)
+        as_written = written or scene
+        self.units = [_unit_force(cavity, cavity.magnitude, now.magnitude, x) for cavity, now
+                      in zip(scene.pressures, as_written.pressures)]
+        self.cable_units = [_unit_force(cable, cable.tension, now.tension, x) for cable, now
+                            in zip(scene.cables, as_written.cables)]
 
     def contract(self, lam):
         """(young, poisson, kappa (m,), fiber_angles (m, 2), fiber_direction (m, 3), pressure
