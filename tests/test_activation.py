@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize import brentq
 
 import anisofem as af
-from anisofem.reduced import FramedModel, ReducedModel
+from anisofem.reduced import FramedModel
 from test_derivatives import deformed, fd_gradient, fd_hessian, min_altitude, random_tet, rel_err
 
 E, NU = 1e5, 0.45

@@ -9,8 +9,9 @@ to their mass (a hand or a hook grabbing a region, a controller's actuator), in 
 or in given ones. `cone` lets the scene's gravity turn by up to that many degrees (a body
 carried around). `controls` gives the range of each of the scene's controls a model must
 follow: {"inflate": (0.0, 20e3)}. A Carry moves the held vertices rigidly (the framed model's
-base): a turn, a move, and the shortest time either takes. Without a declaration (default_loads) a model
-handles the scene's own loads and a drag of half the body's weight at each free end.
+base): a turn, a move, and the shortest time either takes. Without a declaration
+(default_loads) a model handles the scene's own loads, a drag of half the body's weight at
+each free end, and the range each control on a load curve takes.
 """
 import math
 from dataclasses import dataclass, field

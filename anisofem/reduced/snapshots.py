@@ -69,9 +69,9 @@ def _solve_states(scene, loads):
 
 def principal_directions(displacements, mass, count, against=None):
     """The `count` principal directions (N, count) of displacement snapshots (N, s) over the
-    free unknowns, each scaled to unit mass-norm first (one that does not move left out), with the part along the columns of
-    `against` (N, a; mass-orthonormal) removed; mass-orthonormal. Fewer where the snapshots
-    span fewer."""
+    free unknowns, each scaled to unit mass-norm first (one that does not move left out),
+    with the part along the columns of `against` (N, a; mass-orthonormal) removed;
+    mass-orthonormal. Fewer where the snapshots span fewer."""
     norms = np.sqrt(np.einsum("i,is,is->s", mass, displacements, displacements))
     S = displacements[:, norms > 0] / norms[norms > 0]   # a state that does not move: none
     if against is not None:
