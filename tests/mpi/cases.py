@@ -1,6 +1,7 @@
 """The scenes the distributed tests solve, built the same way by the test (serially) and by
 run_case.py (under mpirun)."""
 import math
+import os
 
 import meshio
 import numpy as np
@@ -18,15 +19,19 @@ def _held(mesh, material):
 
 def gmsh_part(folder):
     """A gmsh .msh file of the 8 x 2 x 2 box whose tets are in two regions (physical groups 1
-    and 2: the near and the far half), as gmsh writes a part of two volumes."""
+    and 2: the near and the far half), as gmsh writes a part of two volumes. Each rank writes
+    it under its own name and renames it into place: a rank never reads another's half-written
+    file."""
     mesh = af.box_beam(cells=(8, 2, 2))
     near = mesh.vertices[mesh.tets].mean(axis=1)[:, 0] < 0.05
     path = f"{folder}/part.msh"
+    mine = f"{folder}/part-{os.getpid()}.msh"
     blocks = [("tetra", mesh.tets[near]), ("tetra", mesh.tets[~near])]
     tags = [np.full(near.sum(), 1), np.full((~near).sum(), 2)]
-    meshio.write(path, meshio.Mesh(mesh.vertices, blocks,
+    meshio.write(mine, meshio.Mesh(mesh.vertices, blocks,
                                    cell_data={"gmsh:physical": tags, "gmsh:geometrical": tags}),
                  file_format="gmsh22", binary=False)
+    os.replace(mine, path)
     return path
 
 
