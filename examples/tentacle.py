@@ -3,10 +3,10 @@ band's activation a control, and the controls that bring its tip to a target fou
 equilibrium in its reduced model (inverse statics, ReducedModel.reach), checked against the
 full FEM and, where a C compiler is found, solved again by the C runtime (af_reach).
 
-The tentacle is a 0.2 m cylinder of radius 15 mm along x (StVK, E = 100 kPa, nu = 0.45, fibers
-along it with kappa = 500 kPa), held at its base under gravity along -z; the fibers of each
-quarter of its section (up +z, down -z, left +y, right -y) contract by an activation in [0,
-0.1] (their rest stretch 1 - a). Its reduced model is fitted to those ranges (4 modes, the
+The tentacle is examples/scenes/tentacle.toml: a 0.2 m cylinder of radius 15 mm along x (StVK,
+E = 100 kPa, nu = 0.45, fibers along it with kappa = 500 kPa), held at its base under gravity
+along -z; the fibers of each quarter of its section (up +z, down -z, left +y, right -y)
+contract by an activation in [0, 0.1] (their rest stretch 1 - a). Its reduced model is fitted to those ranges (4 modes, the
 static response to each band and 14 directions fitted to static equilibria under single,
 paired and combined activations: r = 22).
 
@@ -29,13 +29,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import anisofem as af  # noqa: E402
 from anisofem.io.output import scratch_path  # noqa: E402
+from anisofem.io.scenefile import SceneFile  # noqa: E402
 from anisofem.reduced import Loads, ReducedModel  # noqa: E402
 
-#: The bands of fibers around the axis: name -> the angle of its middle from +y toward +z.
-BANDS = {"up": 90.0, "down": -90.0, "left": 0.0, "right": 180.0}
-#: Each band's activation range.
-RANGE = (0.0, 0.1)
-LENGTH, RADIUS = 0.2, 0.015
+HERE = os.path.dirname(os.path.abspath(__file__))
+LENGTH = 0.2
 #: Targets for the tip (m): four within reach (at rest it hangs to (0.1995, 0, -0.0142)),
 #: then one above it.
 TARGETS = ((0.185, 0.04, 0.0), (0.185, -0.035, 0.02), (0.19, 0.0, 0.03), (0.185, 0.02, -0.05),
@@ -43,15 +41,9 @@ TARGETS = ((0.185, 0.04, 0.0), (0.185, -0.035, 0.02), (0.19, 0.0, 0.03), (0.185,
 
 
 def tentacle():
-    """The tentacle's Scene: its bands' activations are its controls."""
-    mesh = af.cylinder_beam(length=LENGTH, radius=RADIUS, cells_along=16, section_cells=2)
-    center = mesh.vertices[mesh.tets].mean(axis=1)
-    angle = np.degrees(np.arctan2(center[:, 2], center[:, 1]))
-    bands = [af.Activation(np.abs((angle - middle + 180.0) % 360.0 - 180.0) < 45.0, 0.0, name)
-             for name, middle in BANDS.items()]
-    material = af.Material(1e5, 0.45, 1000.0, (1.0, 0.0, 0.0), 5e5)
-    return af.Scene(mesh, material, fixed=af.metrics.end_vertices(mesh, 0, "min"),
-                    gravity=(0.0, 0.0, -9.81), activation=bands)
+    """(the tentacle's Scene, its bands' ranges {name: (low, high)}): the scene file's."""
+    scene_file = SceneFile(os.path.join(HERE, "scenes", "tentacle.toml"))
+    return scene_file.scene, scene_file.control_ranges
 
 
 def c_runtime(model, folder):
@@ -70,10 +62,9 @@ def c_runtime(model, folder):
 
 
 def main():
-    scene = tentacle()
+    scene, ranges = tentacle()
     t0 = time.perf_counter()
-    model = ReducedModel(scene, modes=4, snapshots=14,
-                         loads=Loads(controls={name: RANGE for name in BANDS}))
+    model = ReducedModel(scene, modes=4, snapshots=14, loads=Loads(controls=ranges))
     print(f"tentacle: {scene.mesh.n_tets} tets; reduced model r = {model.r}, built in "
           f"{time.perf_counter() - t0:.1f} s")
     tip = np.flatnonzero(scene.mesh.vertices[:, 0] > LENGTH - 1e-9)
@@ -81,7 +72,7 @@ def main():
     folder = os.path.dirname(scratch_path("tentacle.png"))
     os.makedirs(folder, exist_ok=True)
     c = c_runtime(model, folder)
-    low, high = np.array([RANGE] * len(BANDS)).T
+    low, high = np.array([ranges[name] for name in model.controls]).T
     print(f"{'target (m)':>22} | {'controls: ' + ' '.join(model.controls):>28} | model "
           f"(mm) | FEM (mm) | reach (ms) | C (ms)")
     shapes, q = [], None

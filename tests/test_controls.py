@@ -529,17 +529,17 @@ def test_the_trades_reduced_rungs_follow_controls_on_curves():
 
 
 def test_the_tentacle_follows_activations_that_change_every_step():
-    """examples/tentacle.py's tentacle (four bands of fibers) and its reduced model fitted to
+    """examples/scenes/tentacle.toml (four bands of fibers) and its reduced model fitted to
     their ranges (6 modes, 24 fitted directions) against the FEM, three bands' activations
     changing smoothly every step: the tip within 1% of its largest motion over 40 steps."""
     sys.path.insert(0, os.path.join(ROOT, "examples"))
     try:
-        from tentacle import BANDS, LENGTH, RANGE, tentacle
+        from tentacle import LENGTH, tentacle
     finally:
         sys.path.pop(0)
-    scene = tentacle()
-    model = ReducedModel(scene, modes=6, snapshots=24,
-                         loads=Loads(controls={name: RANGE for name in BANDS}), validate=False)
+    scene, ranges = tentacle()
+    model = ReducedModel(scene, modes=6, snapshots=24, loads=Loads(controls=ranges),
+                         validate=False)
     dt, steps = 0.02, 40
 
     def controller(t):

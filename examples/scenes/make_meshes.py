@@ -1,7 +1,8 @@
 """Write the example scene files' meshes next to them, as Gmsh files with named physical groups
-(what Gmsh's own Python API would write): actuator.msh (anisofem.physics.meshgen.actuator) and
+(what Gmsh's own Python API would write): actuator.msh (anisofem.physics.meshgen.actuator),
 part.msh (a 0.08 m beam in two halves, "left" and "right", with its ends named "base" and
-"end").
+"end") and tentacle.msh (a 0.2 m cylinder in four bands around its axis, "up", "down",
+"left" and "right", with its ends named "base" and "tip").
 
     python examples/scenes/make_meshes.py
 """
@@ -10,7 +11,7 @@ import os
 import numpy as np
 
 from anisofem.io.meshes import write_tagged_mesh
-from anisofem.physics.meshgen import actuator, box_beam
+from anisofem.physics.meshgen import actuator, box_beam, cylinder_beam
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -25,7 +26,27 @@ def part_mesh():
     return mesh, volumes, surfaces, {"left": 1, "right": 2, "base": 3, "end": 4}
 
 
-MESHES = {"actuator.msh": actuator, "part.msh": part_mesh}
+#: The tentacle's bands: name -> the angle of its middle from +y toward +z, degrees.
+BANDS = {"up": 90.0, "down": -90.0, "left": 0.0, "right": 180.0}
+
+
+def tentacle_mesh():
+    """(mesh, volumes, surfaces, names) of the tentacle: a cylinder along x, 0.2 m long and
+    15 mm in radius, each tet in the band whose middle is nearest its centroid's angle about
+    the axis."""
+    mesh = cylinder_beam(length=0.2, radius=0.015, cells_along=16, section_cells=2)
+    X, faces = mesh.vertices, mesh.boundary_faces
+    center = X[mesh.tets].mean(axis=1)
+    angle = np.degrees(np.arctan2(center[:, 2], center[:, 1]))
+    apart = np.abs((angle[:, None] - np.array(list(BANDS.values())) + 180.0) % 360.0 - 180.0)
+    volumes = 1 + np.argmin(apart, axis=1)
+    x = X[faces][:, :, 0]
+    surfaces = {5: faces[(x < 1e-12).all(axis=1)], 6: faces[(x > 0.2 - 1e-12).all(axis=1)]}
+    names = {name: k + 1 for k, name in enumerate(BANDS)} | {"base": 5, "tip": 6}
+    return mesh, volumes, surfaces, names
+
+
+MESHES = {"actuator.msh": actuator, "part.msh": part_mesh, "tentacle.msh": tentacle_mesh}
 
 if __name__ == "__main__":
     for name, make in MESHES.items():
