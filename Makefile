@@ -99,6 +99,13 @@ web/scenes/%-reduced.json: export/writers/reduced.py export/runtime.py export/fr
 	$(PY) -m export bake-reduced $* -o web/scenes/$*-reduced \
 	  $(if $(filter $*,$(WEB_FRAMED)),--framed,--modes 4 --snapshots 16)
 
+# the tentacle has a reduced model only, with its four bands of fibers as controls (sliders)
+web/scenes/tentacle-reduced.json: examples/scenes/tentacle.toml examples/scenes/tentacle.msh \
+                                  export/writers/reduced.py anisofem/reduced/*.py $(VENV)/.installed
+	mkdir -p web/scenes
+	$(PY) -m export reduced examples/scenes/tentacle.toml --modes 4 --snapshots 14 \
+	  -o web/scenes/tentacle-reduced
+
 # the C runtime (export/c, less its file loader) built to WebAssembly by zig's C compiler (the
 # ziglang wheel from PyPI): the page's reduced and framed models step with it
 ZIG_SPEC ?= ziglang==0.17.1
@@ -114,7 +121,7 @@ web/anisofem.wasm: $(WASM_SOURCES) export/c/anisofem.h export/c/af_internal.h $(
 
 web-assets: web/node_modules/.package-lock.json web/anisofem.wasm web/models/directional.onnx \
             web/models/meshgraphnets.onnx $(WEB_SCENES:%=web/scenes/%.json) \
-            $(WEB_SCENES:%=web/scenes/%-reduced.json)
+            $(WEB_SCENES:%=web/scenes/%-reduced.json) web/scenes/tentacle-reduced.json
 
 web: web-assets
 	@echo "serving the page at http://127.0.0.1:$(WEB_PORT)/index.html (Ctrl-C stops)"

@@ -1,6 +1,7 @@
 // The page: a baked scene stepped in real time by model.onnx or by the scene's reduced model,
-// drawn with three.js, with a force applied by dragging. URL parameters: scene (cantilever,
-// cylinder, t, y), stepper (network or reduced), model (the .onnx file, default
+// drawn with three.js, with a force applied by dragging and, for a model with controls (the
+// tentacle's four bands of fibers), a slider per control. URL parameters: scene (cantilever,
+// cylinder, t, y, tentacle), stepper (network or reduced), model (the .onnx file, default
 // models/directional.onnx), angle (fiber angle, degrees), paused (1: start paused; the
 // end-to-end test steps it through window.anisognn).
 import * as THREE from "three";
@@ -11,7 +12,9 @@ import { loadModel, loadScene, Simulation } from "./stepper.js";
 const params = new URLSearchParams(location.search);
 const ui = { scene: el("scene"), stepper: el("stepper"), angle: el("angle"), angleValue: el("angle-value"),
              carry: el("carry"), pause: el("pause"), reset: el("reset"), stats: el("stats"),
-             message: el("message"), scaleHigh: el("scale-high") };
+             message: el("message"), scaleHigh: el("scale-high"), controls: el("controls") };
+// scenes with a reduced model only (no baked scene for the network)
+const REDUCED_ONLY = ["tentacle"];
 // spring constant of a drag, N/m per kg of the dragged vertices' mass (a 1 cm pull accelerates
 // them at about 5 g)
 const DRAG_STIFFNESS = 5000.0;
@@ -35,7 +38,7 @@ world.add(sun);
 
 const state = { sim: null, session: null, sceneData: null, body: null, ghost: null,
                 paused: params.get("paused") === "1", drag: null, times: [], busy: false,
-                lastFrame: null, owed: 0, carry: false };
+                lastFrame: null, owed: 0, carry: false, name: null };
 
 function el(id) { return document.getElementById(id); }
 
@@ -57,25 +60,54 @@ async function start() {
 // the scene `name` with the chosen stepper: the network (model.onnx, loaded once) on the baked
 // scene, or the scene's reduced models (scenes/NAME-reduced, one per fiber angle)
 async function openScene(name, angle) {
+  if (REDUCED_ONLY.includes(name)) ui.stepper.value = "reduced";
   const reduced = ui.stepper.value === "reduced";
   if (!reduced && !state.session) {
     state.session = await loadModel(params.get("model") || "models/directional.onnx");
   }
   state.sceneData = await loadScene(`scenes/${name}${reduced ? "-reduced" : ""}`);
-  const angles = state.sceneData.header.fiber_angles;
+  const angles = state.sceneData.header.fiber_angles || [null];
   ui.angle.max = String(angles.length - 1);
+  ui.angle.disabled = angles.length < 2;
   const wanted = angle === null || angle === undefined ? 45 : Number(angle);
   const index = Math.max(0, angles.findIndex((a) => a === wanted));
   ui.angle.value = String(index);
-  ui.angleValue.textContent = String(angles[index]);
+  ui.angleValue.textContent = angles[index] === null ? "-" : String(angles[index]);
   if (state.sim && state.sim.free) state.sim.free();
   state.sim = null;
   state.sim = reduced ? await ModelSimulation.create(state.sceneData, angles[index])
                       : new Simulation(state.session, state.sceneData, angles[index]);
+  state.name = name;
   state.times = [];
   ui.carry.disabled = !state.sim.framed;
+  buildControls();
   buildMeshes();
   say("");
+}
+
+// a slider per control of the model (none for the others), over the range its file declares
+function buildControls() {
+  ui.controls.replaceChildren();
+  const names = state.sim.controls || [];
+  const ranges = (state.sceneData.header.loads || {}).controls || {};
+  const values = names.length ? state.sim.controlValues() : [];
+  names.forEach((name, i) => {
+    const [low, high] = ranges[name] || [0, 1];
+    const label = document.createElement("label");
+    const shown = document.createElement("span");
+    const input = document.createElement("input");
+    Object.assign(input, { type: "range", min: String(low), max: String(high),
+                           step: String((high - low) / 100), value: String(values[i]) });
+    input.dataset.control = name;
+    shown.textContent = values[i].toFixed(3);
+    input.addEventListener("input", () => {
+      shown.textContent = Number(input.value).toFixed(3);
+      state.sim.setControls(Array.from(ui.controls.querySelectorAll("input"),
+                                       (x) => Number(x.value)));
+    });
+    label.append(`${name}: `, shown, input);
+    ui.controls.append(label);
+  });
 }
 
 // the base ([R_g | c_g], 12 numbers row by row) of the carried held end at time t (s)
@@ -271,9 +303,12 @@ ui.pause.addEventListener("click", () => {
 ui.reset.addEventListener("click", () => { if (state.sim) { state.sim.reset(); updateBody(); } });
 ui.carry.addEventListener("change", () => { state.carry = ui.carry.checked; });
 ui.angle.addEventListener("input", () => {
-  const angle = state.sceneData.header.fiber_angles[Number(ui.angle.value)];
+  const angles = state.sceneData.header.fiber_angles;
+  if (!angles) return;
+  const angle = angles[Number(ui.angle.value)];
   ui.angleValue.textContent = String(angle);
   state.sim.setFiberAngle(angle);
+  buildControls();
 });
 ui.stepper.addEventListener("change", async () => {
   try {
@@ -387,7 +422,31 @@ window.anisognn = {
     }
     return best;
   },
-  scene() { return state.sceneData ? state.sceneData.header.scene : null; },
+  scene() { return state.sceneData ? state.sceneData.header.scene || state.name : null; },
+  // a reduced model's rollout from rest under gravity with its controls set before each step
+  // to schedule[k] (one value per control); the positions after every step (flat)
+  async controlled(schedule) {
+    state.paused = true;
+    while (state.busy) await new Promise((resolve) => setTimeout(resolve, 5));
+    state.sim.reset();
+    state.times = [];
+    const positions = [];
+    for (const values of schedule) {
+      state.sim.setControls(values);
+      state.times.push(await state.sim.step(null, null));
+      positions.push(Array.from(state.sim.x));
+    }
+    updateBody();
+    return { positions, controls: state.sim.controls, n: state.sim.n };
+  },
+  // move control i's slider to value as a user would (its input event); the controls' values
+  // the model then holds
+  slide(i, value) {
+    const input = ui.controls.querySelectorAll("input")[i];
+    input.value = String(value);
+    input.dispatchEvent(new Event("input"));
+    return state.sim.controlValues();
+  },
   stepper() {
     return state.sim instanceof ModelSimulation ? "reduced" : "network";
   },

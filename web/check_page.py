@@ -15,8 +15,10 @@ Chromium), and checks that
   foot carried (the page's "swing the held end"), within REDUCED_BOUND of
   framed_runtime.FramedSimulator's stepped with the same bases, the page stating its
   validation error; the cantilever's reduced model and the T's and Y's framed ones under a
-  swinging drag within DRAG_BOUND of the numpy runtimes at every step; a reduced model's
-  corrupt file shows the runtime's message.
+  swinging drag within DRAG_BOUND of the numpy runtimes at every step; the tentacle's
+  reduced model with its four controls set every step within DRAG_BOUND of the numpy
+  runtime's, with a slider per control that sets its control; a reduced model's corrupt file
+  shows the runtime's message.
 Prints the in-browser and the onnxruntime (CPU) ms per step, and each reduced model's step
 time in the page (the median and mean over 300 steps).
 """
@@ -143,6 +145,24 @@ def drag_gaps(drags):
     return gaps
 
 
+def controlled_gap(run):
+    """(the largest gap over every step of the page's controlled rollout of the tentacle
+    against runtime.ReducedSimulator's under the same controls, over the largest displacement;
+    the largest displacement, m)."""
+    path = os.path.join(HERE, "scenes", "tentacle-reduced")
+    sim = runtime.ReducedSimulator(path)
+    gravity = sim.masses[:, None] * np.asarray(sim.header["gravity"])
+    q, w = sim.rest_state()
+    expected = []
+    for values in run["schedule"]:
+        q, w = sim.step(q, w, gravity, sim.header["dt"], controls=values)
+        expected.append(sim.positions(q))
+    expected = np.asarray(expected)
+    got = np.asarray(run["positions"]).reshape(expected.shape)
+    largest = float(np.abs(expected - sim.rest_positions).max())
+    return float(np.abs(got - expected).max()) / largest, largest
+
+
 def framed_reference(bases):
     """(positions at FRAMED_CHECKPOINTS (k, n, 3), largest displacement (m), ms per step, the
     model's largest validation tip error) of framed_runtime.FramedSimulator's rollout of the
@@ -233,6 +253,16 @@ def main():
             failures.append(f"{name}'s reduced model under the drag in the page against the numpy "
                             f"runtime: {gap:.2e} of the largest displacement, more than "
                             f"{DRAG_BOUND}")
+    tentacle = page["tentacle"]
+    controlled, largest_c = controlled_gap(tentacle)
+    if not controlled <= DRAG_BOUND:
+        failures.append(f"the tentacle's controlled rollout in the page against the numpy "
+                        f"runtime: {controlled:.2e} of the largest displacement, more than "
+                        f"{DRAG_BOUND}")
+    if (tentacle["message"] or tentacle["sliders"] != 4
+            or abs(tentacle["slid"][1] - 0.07) > 1e-12):
+        failures.append(f"the tentacle's sliders: {tentacle['sliders']} of 4, a slide to 0.07 "
+                        f"left its control at {tentacle['slid'][1]}; {tentacle['message']}")
     if "cannot load" not in page["bad_model_message"]:
         failures.append(f"bad model message: {page['bad_model_message']!r}")
     if "cannot step" not in page["cut_scene_message"]:
@@ -264,6 +294,10 @@ def main():
               f"{gap:.1e} of the largest displacement ({largest_d * 1e3:.1f} mm) over "
               f"{len(page['drags'][name]['forces'])} steps; a step in the page: median "
               f"{np.median(times):.3f} ms, mean {times.mean():.3f} ms over {len(times)} steps")
+    print(f"the tentacle's controls ({', '.join(tentacle['controls'])}) set every step: the page "
+          f"against the numpy runtime {controlled:.1e} of the largest displacement "
+          f"({largest_c * 1e3:.1f} mm) over {len(tentacle['schedule'])} steps; "
+          f"{tentacle['sliders']} sliders")
     print(f"bad model: {page['bad_model_message']}")
     print(f"cut scene: {page['cut_scene_message']}")
     print(f"bad reduced model: {page['bad_reduced_message']}")

@@ -8,7 +8,8 @@
 // from the menu) step; then the same with the reduced models (OUT_DIR/reduced.png), and the
 // T's framed model, its foot carried, at steps 1, 10 and 50 (with each step's base) and the
 // validation the page states; the cantilever's reduced model and the T's and Y's framed ones
-// under a swinging drag (every step's positions), and each step's time over a longer drag.
+// under a swinging drag (every step's positions), and each step's time over a longer drag; the
+// tentacle's reduced model with its four controls set every step, and a slider moved.
 import fs from "node:fs";
 import path from "node:path";
 import { chromium } from "playwright-core";
@@ -19,6 +20,8 @@ const FRAMED_CHECKPOINTS = [1, 10, 50];
 // the reduced models' drag: DRAG_STEPS steps recorded, then TIMED_STEPS timed
 const DRAG_STEPS = 200;
 const TIMED_STEPS = 300;
+// the tentacle's controlled rollout
+const CONTROL_STEPS = 100;
 
 // forces (N) per step on one vertex: 0.3 of the body's weight turning in the x-z plane (a
 // period of 80 steps) for the first three quarters of the steps, then released
@@ -106,6 +109,21 @@ try {
   result.reduced = await page.evaluate((k) => window.anisognn.run(k), checkpoints);
   await page.screenshot({ path: path.join(out, "reduced.png") });
   result.reducedDrag = await dragUp(page);
+
+  // the tentacle's reduced model, its four bands of fibers set before every step (compared
+  // with runtime.py's ReducedSimulator under the same controls), and a slider moved as a user
+  // would
+  await page.selectOption("#scene", "tentacle");
+  await page.waitForFunction(() => window.anisognn.scene() === "tentacle", null,
+                             { timeout: 60000 });
+  const schedule = Array.from({ length: CONTROL_STEPS }, (_, k) =>
+    [0.05 * (1 - Math.cos(k / 8)), 0, 0.05 * (1 - Math.cos(k / 6)), 0.02 * (1 - Math.cos(k / 10))]);
+  result.tentacle = await page.evaluate((s) => window.anisognn.controlled(s), schedule);
+  result.tentacle.schedule = schedule;
+  result.tentacle.message = await page.textContent("#message");
+  result.tentacle.sliders = await page.locator("#controls input").count();
+  result.tentacle.slid = await page.evaluate(() => window.anisognn.slide(1, 0.07));
+  await page.screenshot({ path: path.join(out, "tentacle.png") });
 
   // a file that is not a model
   const bad = await browser.newPage();

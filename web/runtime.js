@@ -39,7 +39,8 @@ function copyIn(bytes) {
 function doubles(ptr, count) { return new Float64Array(runtime.memory.buffer, ptr, count); }
 
 // A model file's model at one fiber angle in the C runtime, with the interface the page steps
-// (n, dt, x, steps, reset, step, setFiberAngle, fiberAngle, validation, framed, r, domains).
+// (n, dt, x, steps, reset, step, setFiberAngle, fiberAngle, validation, framed, r, domains,
+// controls, controlValues, setControls).
 // scene: {header, text, buffer, url} as stepper.js's loadScene returns them.
 export class ModelSimulation {
   static async create(scene, fiberAngle, url = "anisofem.wasm") {
@@ -58,27 +59,33 @@ export class ModelSimulation {
     this.setFiberAngle(fiberAngle);
   }
 
+  // the file's model at fiber angle `angle` (a file of one model, without fiber_angles: null)
   setFiberAngle(angle) {
-    const index = this.header.fiber_angles.indexOf(angle);
+    const angles = this.header.fiber_angles;
+    const index = angles ? angles.indexOf(angle) : 0;
     if (index < 0) throw new Error(`reduced model: no fiber angle ${angle}`);
     this.free();
     const header = encoder.encode(this.scene.text);
     const text = copyIn(header);
     const bin = copyIn(new Uint8Array(this.scene.buffer));
-    const tag = copyIn(encoder.encode(String(angle)));
+    const tag = angles ? copyIn(encoder.encode(String(angle))) : 0;
     const error = runtime.malloc(ERROR_SIZE);
     this.model = runtime.af_load_memory(text, header.length, bin, this.scene.buffer.byteLength,
                                         tag, error, ERROR_SIZE);
     const message = this.model ? ""
       : cString(error).replace(/^the header/, `${this.scene.url}.json`);
-    for (const ptr of [text, bin, tag, error]) runtime.free(ptr);
+    for (const ptr of [text, bin, tag, error]) if (ptr) runtime.free(ptr);
     if (!this.model) throw new Error(`reduced model: ${message}`);
-    this.fiberAngle = angle;
-    this.validation = this.header.validation[index];
+    this.fiberAngle = angles ? angle : null;
+    this.validation = angles ? this.header.validation[index] : this.header.validation;
     this.size = runtime.af_state_size(this.model);
-    this.r = this.framed ? this.header.r[index] : this.size / 2;
+    this.r = this.framed ? (angles ? this.header.r[index] : this.header.r) : this.size / 2;
+    const count = runtime.af_controls(this.model);
+    this.controls = Array.from({ length: count }, (_, i) =>
+      cString(runtime.af_control_name(this.model, i)));
     this.buffers = { state: runtime.malloc(8 * this.size), force: runtime.malloc(24 * this.n),
-                     base: runtime.malloc(96), x: runtime.malloc(24 * this.n) };
+                     base: runtime.malloc(96), x: runtime.malloc(24 * this.n),
+                     controls: runtime.malloc(8 * Math.max(count, 1)) };
     const masses = doubles(runtime.af_masses(this.model), this.n);
     const gravity = doubles(this.buffers.force, 3 * this.n);
     for (let i = 0; i < 3 * this.n; i++) {
@@ -87,6 +94,17 @@ export class ModelSimulation {
     this.check(runtime.af_set_constant_force(this.model, this.buffers.force), "gravity");
     this.x = new Float64Array(3 * this.n);
     this.reset();
+  }
+
+  // the controls' values now (one per name in this.controls)
+  controlValues() {
+    return this.controls.map((_, i) => runtime.af_control_value(this.model, i));
+  }
+
+  // set the controls (one value per name in this.controls) for every later step
+  setControls(values) {
+    doubles(this.buffers.controls, values.length).set(values);
+    this.check(runtime.af_set_controls(this.model, this.buffers.controls), "controls");
   }
 
   check(code, what) {

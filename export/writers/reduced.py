@@ -18,7 +18,8 @@ r) their rate in q (a cable's energy T sum_j |a_j + D_j q|); the header's contro
 names. The header:
 model_format
 REDUCED_FORMAT, title, n, m, r, modes, snapshots (the principal directions fitted to declared
-loads, 0 for a modal basis), frequencies (Hz), c0 (J), build_seconds, validation
+loads, 0 for a modal basis), frequencies (Hz), c0 (J), build_seconds, dt (the time step it was
+validated at, s), validation
 (anisofem.reduced.model.Validation: the tip and field errors against the full FEM, statically
 or on `cases` unseen loads), gravity (m/s^2) and material.
 
@@ -37,6 +38,7 @@ import numpy as np
 
 from anisofem import Material, Scene, TetMesh
 from anisofem.reduced import FramedModel, ReducedModel
+from anisofem.reduced.model import VALIDATION_DT
 from anisofem.physics.points import node_weights
 from anisofem.physics.scene import GRAVITY
 
@@ -80,6 +82,7 @@ def write(model, path, title="", gravity=None, display=None):
               "build_seconds": model.build_seconds,
               "validation": (None if model.validation is None
                              else dataclasses.asdict(model.validation)),
+              "dt": VALIDATION_DT,
               "loads": declared(model.loads),
               "gravity": None if gravity is None else [float(g) for g in gravity],
               "material": {key: np.asarray(getattr(material, key)).tolist()
@@ -206,6 +209,7 @@ def write_framed(model, path, title="", gravity=None, display=None):
               "build_seconds": model.build_seconds,
               "validation": (None if model.validation is None
                              else dataclasses.asdict(model.validation)),
+              "dt": VALIDATION_DT,
               "loads": declared(model.loads),
               "gravity": None if gravity is None else [float(g) for g in gravity],
               "material": {key: np.asarray(getattr(scene.material, key)).tolist()
