@@ -557,3 +557,33 @@ def test_the_tentacle_follows_activations_that_change_every_step():
                             axis=1).max()
     assert full.converged and travel > 0.03
     assert worst <= 0.01 * travel, (worst, travel)
+
+
+@pytest.mark.parametrize("control, message", [
+    ('[controls.c]\nactivation = "stiff"\nvalue = 1.5\n',
+     r"controls\.c\.value: control 'c': an activation must be in \[0, 1\)"),
+    ('[controls.c]\ncable = [[0, 0, 0.003], [0.04, 0, 0.003]]\nvalue = -0.5\n',
+     r"controls\.c\.value: control 'c': a cable's tension must be >= 0 N"),
+    ('[controls.c]\nactivation = "stiff"\nvalue = nan\n',
+     r"controls\.c\.value: control 'c': an activation must be in \[0, 1\)|expected a finite"),
+    ('[controls.c]\nactivation = "soft"\nvalue = 0.1\n',
+     r"controls: activation 'c': \d+ of its elements have no fibers"),
+    ('[controls.c]\ncable = [[0, 0, 0.003], [0.04, 0, 0.3]]\nvalue = 0.1\n',
+     r"controls: cable 'c': point 1 at \[0.04, 0.0, 0.3\] m lies outside the mesh"),
+    ('[controls.c]\nactivation = "stiff"\nvalue = 0.1\ncurve = "nope"\n',
+     r"controls\.c\.curve: no curve 'nope'")])
+def test_the_command_line_names_a_bad_control_in_one_line(tmp_path, control, message):
+    """A scene file's bad control ends `python -m anisofem solve` with exit status 2 and one
+    line naming the file, the key and the problem."""
+    import subprocess
+    from test_scenefile import scene_file, two_halves
+    two_halves(tmp_path)
+    text = ('mesh = "bar.msh"\n[regions.stiff]\nfiber = [1, 0, 0]\nfiber_stiffness = 1e5\n'
+            '[[boundary]]\nwhere = "base"\nheld = true\n' + control)
+    path = scene_file(tmp_path, text)
+    done = subprocess.run([sys.executable, "-m", "anisofem", "solve", str(path), "-o",
+                           str(tmp_path / "out.vtu")], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and re.search(message, lines[0]), done.stderr

@@ -244,3 +244,34 @@ def test_control_derivatives(regime, law):
         fd = (4 * central(change, h / 2) - central(change, h)) / 3
         assert slopes[name] == pytest.approx(fd, rel=1e-6), name
         assert abs(fd) > 1e-12
+
+
+@pytest.mark.parametrize("regime", ["ordinary", "extreme"])
+def test_pressure_control_derivative(regime):
+    """A pneumatic actuator (anisofem.actuator, Neo-Hookean) with its cavity's pressure a
+    control: the derivative of its tip's height in the pressure against Richardson central
+    differences of solves, within 1e-6; ordinary (nu 0.45, kappa 5 E, no activation) and
+    extreme (nu 0.499, kappa 100 E, its layer's fibers activated by 0.5)."""
+    nu, kappa, a = {"ordinary": (0.45, 5e5, 0.0), "extreme": (0.499, 1e7, 0.5)}[regime]
+    mesh, volumes, surfaces, _ = af.actuator(cells=(4, 2, 8), cavity=0.5, length=0.06)
+    fibers = np.where((volumes == 2)[:, None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    material = af.Material(1e5, nu, 1000.0, fibers, kappa, model="neohookean")
+    scene = af.Scene(mesh, material, fixed=np.unique(surfaces[4]),
+                     pressure=af.Pressure(surfaces[3], 3e3, name="push"),
+                     activation=af.Activation(volumes == 2, a, "curl"))
+    tip = np.flatnonzero(mesh.vertices[:, 2] > 0.06 - 1e-9)
+    gradient = np.zeros_like(mesh.vertices)
+    gradient[tip, 1] = 1.0 / tip.size
+
+    def J(x):
+        return float(x[tip, 1].mean())
+    S = static_sensitivity(scene, solved(scene), gradient)
+
+    def change(step):
+        return J(solved(scene.with_controls({"push": 3e3 + step})).x)
+
+    def central(h):
+        return (change(h) - change(-h)) / (2 * h)
+    fd = (4 * central(1.0) - central(2.0)) / 3
+    assert S.pressure[0] == pytest.approx(fd, rel=1e-6)
+    assert abs(fd) > 1e-12
