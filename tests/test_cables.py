@@ -160,17 +160,10 @@ def test_the_reduced_model_pulls_a_cable_exactly_and_follows_it(cable_model):
 
     def controller(t):
         return {"pull": 0.3 * (1 - np.cos(10 * t))}
-    full = af.simulate(scene, steps, dt, controls=controller)
-    tip = np.abs(mesh.vertices[:, 0] - L) < 1e-12
-    q, w, worst = np.zeros(model.r), np.zeros(model.r), 0.0
-    for k in range(steps):
-        q, w, report = model.step(q, w, dt, controls=controller((k + 1) * dt))
-        assert report.converged
-        gap = model.positions(q)[tip].mean(0) - full.positions[k + 1][tip].mean(0)
-        worst = max(worst, float(np.linalg.norm(gap)))
-    travel = np.linalg.norm(full.positions[:, tip].mean(1) - mesh.vertices[tip].mean(0),
-                            axis=1).max()
-    assert full.converged and worst <= 0.01 * travel, (worst, travel)
+    from test_controls import rollout_gap
+    worst, travel = rollout_gap(model, controller, np.abs(mesh.vertices[:, 0] - L) < 1e-12,
+                                dt, steps)
+    assert worst <= 0.01 * travel, (worst, travel)
 
 
 def test_the_runtimes_pull_the_cable_like_the_model(cable_model, tmp_path):

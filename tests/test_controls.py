@@ -145,6 +145,24 @@ def test_the_reduced_energy_under_controls_is_the_fems(order):
             1e-9 * np.abs(force).max()
 
 
+def rollout_gap(model, controller, tip, dt, steps):
+    """(the largest distance between the reduced model's tip and the FEM's over `steps` steps
+    of dt from rest, both under controller(t) at each step's end; the FEM tip's largest
+    motion), m; tip: the vertices (a mask or indices) whose mean is the tip. Every step of
+    both converges."""
+    full = af.simulate(model.scene, steps, dt, controls=controller)
+    assert full.converged
+    q, w, worst = np.zeros(model.r), np.zeros(model.r), 0.0
+    for k in range(steps):
+        q, w, report = model.step(q, w, dt, controls=controller((k + 1) * dt))
+        assert report.converged
+        gap = model.positions(q)[tip].mean(0) - full.positions[k + 1][tip].mean(0)
+        worst = max(worst, float(np.linalg.norm(gap)))
+    travel = np.linalg.norm(full.positions[:, tip].mean(1) - full.positions[0, tip].mean(0),
+                            axis=1).max()
+    return worst, float(travel)
+
+
 #: The controls' ranges the finger's reduced model is built for.
 RANGES = {"curl": (0.0, 0.15), "squeeze": (0.0, 0.1), "push": (-2e4, 2e4)}
 
@@ -161,19 +179,10 @@ def test_a_reduced_rollout_follows_controls_that_change_every_step():
     def controller(t):
         return {"curl": 0.15 * (1 - np.cos(8 * t)) / 2, "squeeze": 0.2 * t,
                 "push": 1.5e4 * np.sin(12 * t)}
-    full = af.simulate(scene, steps, dt, controls=controller)
+    worst, travel = rollout_gap(model, controller, scene.mesh.vertices[:, 2] > 0.06 - 1e-9,
+                                dt, steps)
+    assert travel > 0.01 and worst <= 0.01 * travel, (worst, travel)
     q, w = np.zeros(model.r), np.zeros(model.r)
-    tip = scene.mesh.vertices[:, 2] > 0.06 - 1e-9
-    worst = 0.0
-    for k in range(steps):
-        q, w, report = model.step(q, w, dt, controls=controller((k + 1) * dt))
-        assert report.converged
-        gap = model.positions(q)[tip].mean(0) - full.positions[k + 1][tip].mean(0)
-        worst = max(worst, float(np.linalg.norm(gap)))
-    travel = np.linalg.norm(full.positions[:, tip].mean(1) - full.positions[0, tip].mean(0),
-                            axis=1).max()
-    assert full.converged and travel > 0.01
-    assert worst <= 0.01 * travel, (worst, travel)
     with pytest.raises(ValueError, match="controls: no control 'left'"):
         model.step(q, w, dt, controls={"left": 0.1})
     with pytest.raises(ValueError, match=r"control 'squeeze': an activation must be in \[0, 1\)"):
@@ -545,18 +554,9 @@ def test_the_tentacle_follows_activations_that_change_every_step():
     def controller(t):
         return {"up": 0.05 * (1 - np.cos(4 * t)), "down": 0.0,
                 "left": 0.05 * (1 - np.cos(3 * t)), "right": 0.02 * (1 - np.cos(5 * t))}
-    full = af.simulate(scene, steps, dt, controls=controller)
-    tip = np.flatnonzero(scene.mesh.vertices[:, 0] > LENGTH - 1e-9)
-    q, w, worst = np.zeros(model.r), np.zeros(model.r), 0.0
-    for k in range(steps):
-        q, w, report = model.step(q, w, dt, controls=controller((k + 1) * dt))
-        assert report.converged
-        gap = model.positions(q)[tip].mean(0) - full.positions[k + 1][tip].mean(0)
-        worst = max(worst, float(np.linalg.norm(gap)))
-    travel = np.linalg.norm(full.positions[:, tip].mean(1) - full.positions[0, tip].mean(0),
-                            axis=1).max()
-    assert full.converged and travel > 0.03
-    assert worst <= 0.01 * travel, (worst, travel)
+    worst, travel = rollout_gap(model, controller,
+                                scene.mesh.vertices[:, 0] > LENGTH - 1e-9, dt, steps)
+    assert travel > 0.03 and worst <= 0.01 * travel, (worst, travel)
 
 
 @pytest.mark.parametrize("control, message", [
