@@ -73,22 +73,28 @@ def write(model, path, title="", gravity=None, display=None):
               "tets": mesh.tets.astype(np.int32),
               "surface": runtime.surface_triangles(mesh.vertices, mesh.tets).astype(np.int32)}
     arrays.update(control_arrays(model.parts, r))
-    material = scene.material
     header = {"model_format": runtime.REDUCED_FORMAT, "title": title, "n": mesh.n_vertices,
               "controls": [p.name for p in model.parts],
               "m": mesh.n_tets, "physics_tets": scene.mesh.n_tets, "r": r,
               "modes": len(model.frequencies), "snapshots": model.fitted,
               "frequencies": [float(f) for f in model.frequencies], "c0": float(P.c0),
-              "build_seconds": model.build_seconds,
-              "validation": (None if model.validation is None
-                             else dataclasses.asdict(model.validation)),
-              "dt": VALIDATION_DT,
-              "loads": declared(model.loads),
-              "gravity": None if gravity is None else [float(g) for g in gravity],
-              "material": {key: np.asarray(getattr(material, key)).tolist()
-                           for key in ("young", "poisson", "density")}}
+              **checked_header(model, gravity)}
     write_arrays(path, arrays, header)
     return header
+
+
+def checked_header(model, gravity):
+    """The header entries both kinds of model file carry: build_seconds, validation, the time
+    step it was validated at (dt, s), the loads it was built for, gravity (m/s^2, or None) and
+    the material's young, poisson and density."""
+    return {"build_seconds": model.build_seconds,
+            "validation": (None if model.validation is None
+                           else dataclasses.asdict(model.validation)),
+            "dt": VALIDATION_DT,
+            "loads": declared(model.loads),
+            "gravity": None if gravity is None else [float(g) for g in gravity],
+            "material": {key: np.asarray(getattr(model.scene.material, key)).tolist()
+                         for key in ("young", "poisson", "density")}}
 
 
 def control_arrays(parts, r):
@@ -206,14 +212,7 @@ def write_framed(model, path, title="", gravity=None, display=None):
               "joint_layer": int(joints.tets.shape[0] if model.cubature is None
                                  else model.cubature.of),
               "size": model.size,
-              "build_seconds": model.build_seconds,
-              "validation": (None if model.validation is None
-                             else dataclasses.asdict(model.validation)),
-              "dt": VALIDATION_DT,
-              "loads": declared(model.loads),
-              "gravity": None if gravity is None else [float(g) for g in gravity],
-              "material": {key: np.asarray(getattr(scene.material, key)).tolist()
-                           for key in ("young", "poisson", "density")}}
+              **checked_header(model, gravity)}
     write_arrays(path, arrays, header)
     return header
 
