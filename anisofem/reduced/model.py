@@ -220,19 +220,15 @@ class ReducedModel:
         name -> value or one value per control, in the order of `controls`)."""
         return control_values(self.parts, values)
 
-    def polynomial_at(self, values=None):
-        """The energy's Polynomial with the controls at values (control_values); the cables'
-        part is not a polynomial (pulled)."""
+    def energy_at(self, values=None):
+        """(the energy's Polynomial, [(CablePart, tension)] of the cables pulled) with the
+        controls at values (control_values): a cable's part is not a polynomial."""
         if not self.parts:
-            return self.polynomial
-        return controlled(self.polynomial, self.parts, self.control_values(values))
-
-    def pulled(self, values=None):
-        """[(CablePart, tension)] of the cables pulled at values (control_values)."""
-        if not self.parts:
-            return []
-        return [(part, value) for part, value in zip(self.parts, self.control_values(values))
-                if part.kind == "tension" and value > 0]
+            return self.polynomial, []
+        values = self.control_values(values)
+        return (controlled(self.polynomial, self.parts, values),
+                [(part, value) for part, value in zip(self.parts, values)
+                 if part.kind == "tension" and value > 0])
 
     def reach(self, effector, target, bounds=None, tolerance=None, controls=None, q0=None):
         """The controls within bounds that bring `effector` (a vertex index, or a rest point
@@ -302,16 +298,18 @@ class ReducedModel:
     def energy(self, q, controls=None):
         """The energy V(q), J: elastic, with the pressures', activations' and cables'
         (controls: see control_values)."""
-        return self.polynomial_at(controls).energy(q) + sum(
-            T * part.length(q) for part, T in self.pulled(controls))
+        P, pulled = self.energy_at(controls)
+        return P.energy(q) + sum(T * part.length(q) for part, T in pulled)
 
     def force(self, q, hessian=False, controls=None):
         """dV/dq (r,) in N (U^T of the full gradient of the elastic and actuators' energy at
         x0 + U q), and with hessian=True also d2V/dq2 (r, r) in N/m."""
-        g, H = self.polynomial_at(controls).gradient(q, True)
-        for part, T in self.pulled(controls):
+        P, pulled = self.energy_at(controls)
+        g, H = P.gradient(q, True) if hessian else (P.gradient(q), None)
+        for part, T in pulled:
             g = g + T * part.slope(q)
-            H = H + T * part.hessian(q)
+            if hessian:
+                H = H + T * part.hessian(q)
         return (g, H) if hessian else g
 
     def solve(self, force=None, q0=None, rtol=1e-8, max_iter=50, controls=None):
@@ -342,8 +340,7 @@ class ReducedModel:
         from q (inertia 1/dt^2, or 0 for statics) to a gradient norm of tolerance + rtol
         |dV/dq(q)| (N: rtol times the problem's force size) or the round-off floor
         (anisofem.reduced.kernels.newton; with a cable pulled, pulled_newton)."""
-        P = self.polynomial_at(controls)
-        pulled = self.pulled(controls)
+        P, pulled = self.energy_at(controls)
         q_hat = q if q_hat is None else q_hat
         if pulled:
             return pulled_newton(P, pulled, load, q, q_hat, inertia, tolerance, rtol, max_iter)
