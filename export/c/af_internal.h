@@ -78,12 +78,12 @@ void af_reduced_basis_rows(const af_reduced *m, const int *nodes, const double *
                            int count, double *e0, double *E);
 /* Inverse statics (reach.c): AF_OK (reached), AF_OUT_OF_REACH, or a negative code; the
  * controls found, the effector's position there and the iterations taken; the model's
- * controls left as they were. start: the first descent's controls (NULL: the controls now);
- * q0 (r,): where its first equilibrium's Newton starts where warm (else 0), overwritten by
+ * controls left as they were. The first descent starts from the controls now; q0 (r,):
+ * where its first equilibrium's Newton starts where warm (else 0), overwritten by
  * the answer's equilibrium. */
 int af_reduced_reach(af_reduced *m, const int *nodes, const double *weights, int count,
                      const double *target, const double *low, const double *high,
-                     double tolerance, int max_iter, const double *start, double *q0,
+                     double tolerance, int max_iter, double *q0,
                      int warm, double *controls, double *position, int *iterations,
                      char *error, size_t error_size);
 int af_reduced_controls(const af_reduced *m);

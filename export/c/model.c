@@ -428,7 +428,7 @@ int af_reach(af_model *m, const int *nodes, const double *weights, int count,
         !(m->reach_q = (double *)calloc((size_t)af_reduced_size(m->reduced), sizeof(double))))
         return AF_NO_MEMORY;
     result = af_reduced_reach(m->reduced, nodes, weights, count, target, low, high, tolerance,
-                              REACH_ITERATIONS, NULL, m->reach_q, m->warm, controls, position,
+                              REACH_ITERATIONS, m->reach_q, m->warm, controls, position,
                               &m->iterations, m->error, ERROR_SIZE);
     m->warm = result >= 0;
     return result;

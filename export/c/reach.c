@@ -28,8 +28,6 @@ typedef struct {
     signed char *bound;
     int *free_;
     af_reduced *m;
-    char *error;
-    size_t error_size;
 } reach_t;
 
 typedef struct {
@@ -238,7 +236,7 @@ static outcome descend(reach_t *w, int max_iter, int warm) {
 
 int af_reduced_reach(af_reduced *m, const int *nodes, const double *weights, int count,
                      const double *target, const double *low, const double *high,
-                     double tolerance, int max_iter, const double *start, double *q0,
+                     double tolerance, int max_iter, double *q0,
                      int warm, double *controls, double *position, int *iterations,
                      char *error, size_t error_size) {
     long k = af_reduced_controls(m), r = af_reduced_size(m), c;
@@ -260,8 +258,6 @@ int af_reduced_reach(af_reduced *m, const int *nodes, const double *weights, int
     w.k = k;
     w.r = r;
     w.m = m;
-    w.error = error;
-    w.error_size = error_size;
     w.E = block;
     w.low = w.E + 3 * r;
     w.high = w.low + k;
@@ -288,7 +284,7 @@ int af_reduced_reach(af_reduced *m, const int *nodes, const double *weights, int
     memcpy(w.target, target, sizeof w.target);
     w.tolerance = tolerance;
     for (c = 0; c < k; c++) {
-        double v = start ? start[c] : now[c];
+        double v = now[c];
         w.low[c] = low[c];
         w.high[c] = high[c];
         w.width[c] = high[c] - low[c];
