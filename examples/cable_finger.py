@@ -95,7 +95,7 @@ def follow_path(model, tip):
         c.set_constant_force(model.scene.external_force)
     q, w = model.solve()[0], np.zeros(model.r)
     tips, wanted, tensions, seconds = [rest], [rest], [], 0.0
-    integral = np.zeros(3)
+    integral, found = np.zeros(3), None
     for k in range(1, steps + 1):
         flex = FLEX * np.sin(np.pi * k * DT / DURATION) ** 2
         path_point = model.positions(model.solve(controls=[flex, 0.0])[0])[tip].mean(axis=0)
@@ -106,7 +106,9 @@ def follow_path(model, tip):
             c.step(q, w, None, DT, controls=controls)
             x = c.positions(q)
         else:
-            controls = model.reach(list(tip), target, q0=q).controls
+            found = model.reach(list(tip), target, controls=found.controls if found else None,
+                                q0=found.q if found else None)
+            controls = found.controls
             q, w, _ = model.step(q, w, DT, controls=controls)
             x = model.positions(q)
         seconds += time.perf_counter() - t0

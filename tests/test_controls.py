@@ -365,7 +365,8 @@ def test_reach_names_bad_bounds(fitted):
 
 def test_the_c_runtime_reaches_like_the_model(written):
     """af_reach against ReducedModel.reach on the same file: the same controls (1e-7 of each
-    range) and effector (1e-9 m) for reachable targets, and the same out-of-reach answer."""
+    range) and effector (1e-9 m) for reachable targets, and the same out-of-reach answer, each
+    target from rest and in a control loop."""
     from export import native
     if native.compiler() is None:
         pytest.skip("no C compiler")
@@ -378,16 +379,22 @@ def test_the_c_runtime_reaches_like_the_model(written):
     targets = [model.positions(model.solve(controls=[rng.uniform(*RANGES[n]) for n in
                                                      model.controls])[0])[tip]
                for _ in range(4)] + [model.x0[tip] + [0.0, 0.05, 0.0]]
-    q = None   # af_reach starts each equilibrium's Newton from the last reach's
-    for target in targets:
-        ours = model.reach(tip, target, q0=q)
-        q = ours.q
-        controls, position, reached, message = c.reach([tip], [1.0], target, low, high)
-        assert reached == ours.reached
-        assert np.abs(controls - ours.controls).max() <= 1e-7 * np.abs(high - low).max()
-        assert np.abs(position - ours.position).max() <= 1e-9
-        assert reached or message.startswith("out of reach")
-    assert c.control_values.tolist() == [0.0, 0.0, 0.0]   # af_reach leaves them as they were
+    for loop in (False, True):   # each target from rest; then a control loop, where af_reach
+        found = None             # starts from the last answer and its equilibrium
+        c.set_controls(np.zeros(3))
+        for target in targets:
+            ours = model.reach(tip, target, controls=found.controls if loop and found else None,
+                               q0=found.q if loop and found else None)
+            controls, position, reached, message = c.reach([tip], [1.0], target, low, high)
+            assert reached == ours.reached
+            assert np.abs(controls - ours.controls).max() <= 1e-7 * np.abs(high - low).max()
+            assert np.abs(position - ours.position).max() <= 1e-9
+            assert reached or message.startswith("out of reach")
+            found = ours
+            if loop:
+                c.set_controls(controls)
+            else:   # af_reach leaves them as they were
+                assert c.control_values.tolist() == [0.0, 0.0, 0.0]
     with pytest.raises(RuntimeError, match="reach: the bounds of 'curl' must have low < high"):
         c.reach([tip], [1.0], targets[0], [-1, 0.2, 0], [1, 0.1, 0.1])
     with pytest.raises(RuntimeError, match="'curl', control 1 is an activation"):

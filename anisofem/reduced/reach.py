@@ -110,9 +110,9 @@ def reach(model, effector, target, bounds=None, tolerance=None, controls=None, q
     """The controls within bounds that bring `effector` (a vertex index, or a rest point
     (3,) m) of a ReducedModel to `target` (3,), m, at static equilibrium under the scene's
     loads (module docstring), from controls (default: the model's written values, clipped to
-    the bounds) and their equilibrium's Newton from q0 (a previous Reach's q in a control
-    loop; default 0). tolerance: the distance counted as reached, m (default TOLERANCE times
-    the body's size). Returns a Reach."""
+    the bounds) and their equilibrium's Newton from q0 (in a control loop, the last Reach's q
+    with its controls; default 0). tolerance: the distance counted as reached, m (default
+    TOLERANCE times the body's size). Returns a Reach."""
     if not model.parts:
         raise ValueError("model: it has no controls (named pressures, activations) to set")
     e0, E = effector_rows(model, effector)

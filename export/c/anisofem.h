@@ -100,13 +100,14 @@ AF_API int af_set_controls(af_model *model, const double *values);
  * effector, the point sum_i weights[i] x[nodes[i]] over count nodes (a vertex: one node of
  * weight 1; a material point: its tet's nodes and shape functions there; a region's mean), to
  * target (3 doubles, m) at static equilibrium under the constant force. From the controls now
- * (clipped to the bounds; in a control loop, the last answer set by af_set_controls), the
- * equilibrium's Newton from the last reach's, and where that ends short, again from the
- * bounds' middle; the nearer is kept. tolerance: the distance counted as reached, m (<= 0: 1e-4 of the body's
- * size). Writes the controls found into controls and the effector there into position (3);
- * leaves the model's controls as they were (af_set_controls applies the answer). Returns
- * AF_OK (reached), AF_OUT_OF_REACH (the nearest point found; af_error says how far), or a
- * negative code naming the bad input in af_error. */
+ * (clipped to the bounds), their equilibrium's Newton from the last reach's where the controls
+ * now are the ones it found (a control loop that sets each answer by af_set_controls), else
+ * from rest; where that ends short, again from the bounds' middle; the nearer is kept.
+ * tolerance: the distance counted as reached, m (<= 0: 1e-4 of the body's size). Writes the
+ * controls found into controls and the effector there into position (3); leaves the model's
+ * controls as they were (af_set_controls applies the answer). Returns AF_OK (reached),
+ * AF_OUT_OF_REACH (the nearest point found; af_error says how far), or a negative code naming
+ * the bad input in af_error. */
 AF_API int af_reach(af_model *model, const int *nodes, const double *weights, int count,
                     const double *target, const double *low, const double *high,
                     double tolerance, double *controls, double *position);

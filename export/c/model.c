@@ -18,8 +18,8 @@ struct af_model {
     unsigned char *held;
     int *surface, *tets;
     char *control_names;                /* the controls' names, each ended by a NUL */
-    int controls, warm;                 /* warm: reach_q holds the last reach's equilibrium */
-    double *reach_q;
+    int controls, warm;                 /* warm: reach_q holds the last reach's equilibrium, */
+    double *reach_q, *reach_u;          /* at the controls reach_u it found */
     af_reduced *reduced;
     af_framed *framed;
     char error[ERROR_SIZE];
@@ -30,7 +30,7 @@ void af_free(af_model *m) {
     af_reduced_close(m->reduced);
     af_framed_close(m->framed);
     free(m->rest); free(m->masses); free(m->next); free(m->held); free(m->surface);
-    free(m->tets); free(m->control_names); free(m->reach_q);
+    free(m->tets); free(m->control_names); free(m->reach_q); free(m->reach_u);
     free(m);
 }
 
@@ -427,10 +427,15 @@ int af_reach(af_model *m, const int *nodes, const double *weights, int count,
     if (!m->reach_q &&
         !(m->reach_q = (double *)calloc((size_t)af_reduced_size(m->reduced), sizeof(double))))
         return AF_NO_MEMORY;
+    if (!m->reach_u && !(m->reach_u = (double *)calloc((size_t)m->controls, sizeof(double))))
+        return AF_NO_MEMORY;
+    for (i = 0; i < m->controls && m->warm; i++)   /* the last answer's q starts a Newton */
+        m->warm = af_reduced_control(m->reduced, i) == m->reach_u[i];  /* at its controls */
     result = af_reduced_reach(m->reduced, nodes, weights, count, target, low, high, tolerance,
                               REACH_ITERATIONS, m->reach_q, m->warm, controls, position,
                               &m->iterations, m->error, ERROR_SIZE);
     m->warm = result >= 0;
+    if (m->warm) memcpy(m->reach_u, controls, (size_t)m->controls * sizeof(double));
     return result;
 }
 
