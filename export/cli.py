@@ -276,6 +276,9 @@ def _checked(v):
     """How far a model's Validation (or None) found it from the full FEM, as a clause."""
     if v is None:
         return ""
+    if v.inverted and not v.cases:
+        return (f"; not validated: the full FEM turned elements inside out in all {v.inverted} "
+                f"drawn cases")
     where = f"on {v.cases} unseen loads" if v.cases else "in the static answer"
     return (f"; tip {100 * v.tip_error:.2g}% and field {100 * v.field_error:.2g}% off the "
             f"full FEM {where}")

@@ -220,3 +220,15 @@ def test_a_carry_adds_its_inertia_to_the_build_and_draws_carries_within_it(long_
             assert angle <= 40 + 1e-9 and np.linalg.norm(R @ h + c - h) <= 0.05 + 1e-12
         assert np.allclose(base(0.4), base(1.0))
         assert angle >= 0.3 * 40 - 1e-9
+
+
+def test_a_build_whose_loads_fold_the_body_says_so(long_beam):
+    """A drag pushing the tip back along the beam at 20 times its weight turns StVK elements
+    inside out in the snapshots: they are left out and the build warns, naming how many."""
+    end = af.metrics.end_vertices(long_beam.mesh, 0, "max")
+    weight = long_beam.masses.sum() * 9.81
+    folding = Loads(drags=(Drag(end, 20 * weight, directions=[(-1, 0, 0)]),))
+    with pytest.warns(af.InversionWarning, match=r"of the 4 static snapshots, 3 turned "
+                      r"elements inside out .* stand on 1\."):
+        model = ReducedModel(long_beam, modes=4, snapshots=4, loads=folding, validate=False)
+    assert (model.snapshots.kept, model.snapshots.inverted) == (1, 3)

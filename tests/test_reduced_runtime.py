@@ -334,6 +334,22 @@ def test_the_command_warns_where_the_linear_basis_does_not_hold(tmp_path, capsys
                      r"basis holds; more --snapshots, or --framed", err), err
 
 
+def test_the_command_says_where_the_loads_fold_the_body(tmp_path, capsys):
+    """A drag pushing the 0.2 m beam's tip back along it at 20 times its weight: the snapshots
+    and every validation case turn elements inside out; the command says both, no percentage
+    of nothing."""
+    import anisofem as af
+    with pytest.warns(af.InversionWarning, match="3 turned elements inside out and 0 did not "
+                      "converge"):
+        main(["reduced", "box", "--cells", "10", "2", "2", "--size", "0.2", "0.02", "0.02",
+              "--modes", "2", "--snapshots", "2", "--drag", "x-max", "16", "-1", "0", "0",
+              "-o", str(tmp_path / "f")])
+    said = capsys.readouterr()
+    assert re.search(r"not validated: the full FEM turned elements inside out in all \d+ "
+                     r"drawn cases", said.out), said.out
+    assert "nan" not in said.out
+
+
 def test_the_trade_notes_a_body_a_linear_basis_does_not_hold():
     """linear_basis_note: where every linear reduced rung misses and a framed one does not."""
     from anisofem.studies.trade import linear_basis_note

@@ -14,6 +14,7 @@ import copy
 import math
 import os
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +24,7 @@ from .._validate import as_float_array
 from ..physics.densities import STVK
 from ..physics.inversion import volume_change
 from ..physics.metrics import moving_tip
+from ..solvers.newton import InversionWarning
 from ..solvers.solve import Stepper, solve
 from ..physics.potential import Potential
 from ..physics.scene import check_scene
@@ -187,6 +189,15 @@ class ReducedModel:
         full FEM's static equilibria under the declared loads added (snapshots, fitted)."""
         free = self.scene.free_dofs
         states, self.snapshots = static_states(self.scene, self.loads)
+        report = self.snapshots
+        if report.inverted or report.failed:
+            warnings.warn(
+                f"reduced model: of the {report.kept + report.inverted + report.failed} static "
+                f"snapshots, {report.inverted} turned elements inside out and {report.failed} "
+                f"did not converge, and were left out (StVK's energy there is unphysical): the "
+                f"fitted directions stand on {report.kept}. The declared loads fold this body; "
+                f"solve the scene with Material(..., model='neohookean') to see what it does",
+                InversionWarning, stacklevel=3)
         displacements = (states - self.x0).reshape(len(states), -1)[:, free].T
         fitted = principal_directions(displacements, mass, count, against=U)
         both = _basis.mass_orthonormal(np.hstack([U, fitted]), mass)
