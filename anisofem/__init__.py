@@ -23,6 +23,8 @@ from .physics.potential import element_energy, energy, gradient, hessian
 from .physics.pressure import Pressure
 from .physics.controls import Activation
 from .physics.cables import Cable
+from .physics.contact import Contact
+from .physics.obstacles import Box, Capsule, Plane, Sphere
 from .physics.curves import LoadCurve
 from .physics.scene import Scene, default_scene
 from .io.scenefile import load_scene
@@ -31,7 +33,7 @@ from .solvers.solve import Rollout, StepResult, Stepper, simulate, solve, step
 __all__ = ["inversion", "methods", "metrics", "read_mesh", "write_mesh", "trade", "trade_table", "Material",
            "TetMesh", "actuator", "box_beam", "cylinder_beam", "hexes_to_tets", "t_shape", "tube", "y_shape",
            "ConvergenceWarning", "InversionWarning", "NewtonResult", "element_energy", "energy",
-           "gradient", "hessian", "Pressure", "Activation", "Cable", "LoadCurve", "Scene", "Rollout", "StepResult", "Stepper", "default_scene",
+           "gradient", "hessian", "Pressure", "Activation", "Cable", "Contact", "Plane", "Sphere", "Box", "Capsule", "LoadCurve", "Scene", "Rollout", "StepResult", "Stepper", "default_scene",
            "simulate", "solve", "step", "load_scene"]
 
 

@@ -93,6 +93,8 @@ def from_scene(scene, dtype=torch.float32):
     if scene.pressures or scene.cables:
         raise ValueError(f"scene: the network takes nodal forces; this scene has "
                          f"{'pressure loads' if scene.pressures else 'cables'}")
+    if scene.contact is not None:
+        raise ValueError("scene: the network takes no contact (step it with anisofem.step)")
     if (scene.elements.rest2 != 1.0).any():
         raise ValueError("scene: the network was trained on passive fibers; this scene activates "
                          "some (Material's activation)")

@@ -81,6 +81,9 @@ def _context(scene, comm, *options):
         raise ValueError(f"scene: the petsc engine takes nodal forces, gravity and tractions; "
                          f"this scene has {'pressure loads' if scene.pressures else 'cables'} "
                          f"(solve it with anisofem.solve)")
+    if scene.contact is not None:
+        raise ValueError("scene: the petsc engine does not take contact (solve it with "
+                         "anisofem.solve)")
     comm = PETSc.COMM_WORLD if comm is None else comm
     _share_cores(comm)
     _agree(comm, scene, *options)

@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from . import kernels
+from .contact import ContactTerm
 from .._validate import as_float_array, as_scalar
 from .scene import Scene
 
@@ -45,6 +46,8 @@ class Potential:
         if x_start is None:
             x_start = self.x_hat if self.dynamic else scene.initial_positions()
         self.x_start = check_positions(scene, x_start, "x_start")
+        self.contact = (ContactTerm(scene, self.x_start, dt if self.dynamic else None)
+                        if scene.contact is not None else None)
 
     def loaded(self, share):
         """The same problem under `share` (0 to 1) of its load (load continuation,
@@ -83,8 +86,8 @@ class Potential:
                                                  want_grad=True)
         external, kinetic = self._loads(self.x_start, kernels.EMPTY_GRAD)
         pressure = self._pressure(self.x_start, elastic)
-        return (float(e_iso.sum()) + float(e_fib.sum()) + external + kinetic + pressure,
-                elastic)
+        return (float(e_iso.sum()) + float(e_fib.sum()) + external + kinetic + pressure
+                + self._contact(self.x_start), elastic)
 
     def _elastic(self, x, want_grad=False, layout=None, project=False):
         """Elastic part: (e_iso (m,), e_fib (m,), gradient (n, 3) or None, Hessian data or
@@ -99,14 +102,16 @@ class Potential:
 
     def terms(self, x):
         """Energy terms in J: isotropic, fiber, external, kinetic, pressure (-p times each
-        cavity's volume change, and each cable's tension times its length, summed), total; and
+        cavity's volume change, and each cable's tension times its length, summed), contact
+        (the barrier's and friction's, anisofem.physics.contact), total; and
         per-element elastic energies (m,) under "elements"."""
         e_iso, e_fib, _, _ = self._elastic(x)
         external, kinetic = self._loads(x, kernels.EMPTY_GRAD)
         out = {"isotropic": float(e_iso.sum()), "fiber": float(e_fib.sum()),
-               "external": external, "kinetic": kinetic, "pressure": self._pressure(x)}
+               "external": external, "kinetic": kinetic, "pressure": self._pressure(x),
+               "contact": self._contact(x)}
         out["total"] = (out["isotropic"] + out["fiber"] + out["external"] + out["kinetic"]
-                        + out["pressure"])
+                        + out["pressure"] + out["contact"])
         out["elements"] = e_iso + e_fib
         return out
 
@@ -130,7 +135,10 @@ class Potential:
         e_iso, e_fib, grad, data = self._elastic(x, want_grad, layout, project)
         external, kinetic = self._loads(x, grad if want_grad else kernels.EMPTY_GRAD)
         pressure = self._pressure(x, grad if want_grad else None)
-        value = float(e_iso.sum()) + float(e_fib.sum()) + external + kinetic + pressure
+        value = (float(e_iso.sum()) + float(e_fib.sum()) + external + kinetic + pressure
+                 + self._contact(x, grad if want_grad else None))
+        if layout is not None and self.contact is not None:
+            self.contact.add_hessian(x, layout, data, project)
         if layout is not None and not project:
             for cavity in self.scene.pressures:
                 cavity.add_hessian(x, layout, data)
@@ -149,6 +157,28 @@ class Potential:
         for load in self.scene.pressures + self.scene.cables:
             total += load.energy(x, grad)
         return total
+
+    def _contact(self, x, grad=None):
+        """The contact's energy, J (inf where a node reached an obstacle); adds its gradient
+        to grad (n, 3) when given."""
+        return 0.0 if self.contact is None else self.contact.energy(x, grad)
+
+    def step_limit(self, x, p):
+        """The largest share in (0, 1] of the move p (over the free unknowns) from x (n, 3)
+        that keeps every surface node clear of the obstacles (1 without contact)."""
+        if self.contact is None:
+            return 1.0
+        dx = np.zeros_like(x)
+        dx.ravel()[self.scene.free_dofs] = p
+        return self.contact.max_step(x, dx)
+
+    def feasible(self, x0):
+        """x0 (n, 3), or with contact the point of the way from x_start to it where it would
+        first come too close to an obstacle (a solve's start must be clear of them)."""
+        if self.contact is None:
+            return x0
+        share = self.contact.max_step(self.x_start, x0 - self.x_start)
+        return x0 if share >= 1.0 else self.x_start + share * (x0 - self.x_start)
 
     def _loads(self, x, grad):
         """(external, kinetic) energies in J; adds their gradient to grad unless it is empty."""

@@ -14,6 +14,7 @@ from .densities import STVK
 from .material import Material
 from .mesh import TetMesh, block_coloring
 from .cables import Cable, CableLoad
+from .contact import Contact, surface_nodes
 from .controls import Activation, control_mapping, control_number
 from .curves import Timed
 from .pressure import CavityLoad, Pressure
@@ -21,6 +22,10 @@ from .pressure import CavityLoad, Pressure
 
 #: Scene.gradient_roundoff's margin over the smallest gradient norm Newton reaches.
 ROUNDOFF_FACTOR = 2.0
+#: Scene.energy_roundoff's margin over eps mu V per Neo-Hookean element: a sliding block of
+#: 40 elements at E = 10 MPa rose 1.5e-15 J (0.05 of eps sum mu V) over a Newton step that cut
+#: the gradient 600x.
+ENERGY_ROUNDOFF_FACTOR = 4.0
 
 
 @dataclass(frozen=True)
@@ -85,6 +90,8 @@ class Scene:
     cable : an anisofem.Cable or a sequence of them: tendons routed through the body, each
         pulled with a tension, a control (anisofem.physics.cables); `cables` holds them bound
         to the mesh.
+    contact : an anisofem.Contact: rigid obstacles the body's surface cannot pass, with
+        friction (anisofem.physics.contact); ValueError where the body starts inside one.
 
     Controls (`controls`, their names; `control_values`) are set by with_controls, by load
     curves (following) and by simulate's `controls`.
@@ -95,7 +102,7 @@ class Scene:
 
     def __init__(self, mesh, material=None, *, fixed=None, fixed_positions=None, gravity=None,
                  body_force=None, nodal_force=None, traction=None, traction_faces=None,
-                 pressure=None, activation=None, cable=None):
+                 pressure=None, activation=None, cable=None, contact=None):
         if not isinstance(mesh, TetMesh):
             raise TypeError(f"mesh: expected an anisofem.TetMesh, got {type(mesh).__name__}")
         material = Material.paper() if material is None else material
@@ -128,6 +135,7 @@ class Scene:
         self.activations = _activations(activation, self._params)
         self.cables = _cable_loads(mesh, cable)
         _check_names(self.pressures, self.activations, self.cables)
+        self.contact = _contact(contact, mesh, self.initial_positions())
         self.timed = ()
         for arr in (self.fixed_mask, self.fixed_positions, self.masses, self.external_force,
                     self.gravity):
@@ -439,6 +447,16 @@ class Scene:
         """(m,) bool: the elements with the Neo-Hookean base (the others are StVK)."""
         return self.elements.model != STVK
 
+    @cached_property
+    def energy_roundoff(self):
+        """The round-off of G's elastic part, J: the Neo-Hookean energy mu/2 (I1 - 3) -
+        mu ln J is formed from terms of about 3 mu / 2 per volume, so each element's is about
+        eps mu V; ENERGY_ROUNDOFF_FACTOR times their sum (0 for StVK, whose strain is formed
+        before it is squared)."""
+        nh = self.neohookean
+        return float(ENERGY_ROUNDOFF_FACTOR * np.finfo(float).eps
+                     * (self._params["mu"][nh] * self.mesh.rest_volumes[nh]).sum())
+
     def outside_domain(self, x):
         """How many elements have infinite energy at positions x (n, 3): Neo-Hookean ones with
         det F <= 0 (StVK is defined everywhere). A solve cannot start there."""
@@ -522,6 +540,24 @@ def _cable_loads(mesh, cable):
         if not isinstance(c, Cable):
             raise TypeError(f"cable: expected anisofem.Cable objects, got {type(c).__name__}")
     return tuple(CableLoad(mesh, c) for c in given)
+
+
+def _contact(contact, mesh, x):
+    """contact (a Contact, or None) checked against the body at x (n, 3): ValueError naming an
+    obstacle the surface starts inside or on."""
+    if contact is None:
+        return None
+    if not isinstance(contact, Contact):
+        raise TypeError(f"contact: expected an anisofem.Contact, got {type(contact).__name__}")
+    nodes, _ = surface_nodes(mesh)
+    for o in contact.obstacles:
+        d, _ = o.distance(x[nodes])
+        if (d <= 0).any():
+            worst = int(np.argmin(d))
+            raise ValueError(f"contact: the body starts inside obstacle {o.name!r} ({o.kind}): "
+                             f"{int((d <= 0).sum())} surface nodes, the deepest "
+                             f"{-1e3 * d[worst]:.3g} mm in at ({', '.join(f'{v:.4g}' for v in x[nodes[worst]])})")
+    return contact
 
 
 def _check_names(pressures, activations, cables):

@@ -505,6 +505,8 @@ def check_polynomial_scene(scene, model):
     whose energy is a polynomial in a reduced model's coordinates (`model` names the
     model)."""
     check_scene(scene)
+    if scene.contact is not None:
+        raise ValueError(f"scene: the {model} does not take contact; step it with the FEM")
     if (scene.elements.model != STVK).any():
         raise ValueError(f"scene: the {model} needs the StVK base material (its energy is a "
                          f"polynomial in the reduced coordinates); this scene has Neo-Hookean "

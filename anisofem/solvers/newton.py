@@ -39,11 +39,13 @@ ENERGY_NOISE = 1e-13
 #: a saddle) lowered G by 2e-14 J of 0.2 J, below the noise level; asking the gradient to halve
 #: stalled it at 1e-6 of the load
 NOISE_PROGRESS = 0.9
-#: A rise of G below this share of |G| with the gradient norm down 100x is round-off too: a
-#: converging step of a small Neo-Hookean cantilever raised G by 4e-13 of |G| while its
-#: gradient fell 20,000x (taking this as the noise level above made a StVK cantilever at
-#: 10,000 g stall instead)
+#: A rise of G below this share of |G| (or Scene.energy_roundoff) with the gradient norm down
+#: 100x is round-off too: a converging step of a small Neo-Hookean cantilever raised G by
+#: 4e-13 of |G| while its gradient fell 20,000x (taking this as the noise level above made a
+#: StVK cantilever at 10,000 g stall instead)
 ENERGY_ROUNDOFF = 1e-11
+#: The methods that take contact: those that assemble the Hessian at every iterate.
+CONTACT_METHODS = ("newton", "cg")
 
 
 class ConvergenceWarning(RuntimeWarning):
@@ -129,6 +131,10 @@ def minimize(potential, x0, method="auto", *, warn=True, accept=None, deadline=N
     deadline: a time.perf_counter() time after which it stops, not converged (TIME_SPENT).
     """
     method = methods.make(method, potential.scene.n_free, **options)
+    if potential.contact is not None and method.name not in CONTACT_METHODS:
+        raise ValueError(f"method: {method.name!r} keeps factors of earlier Hessians, which "
+                         f"know nothing of a contact that has begun; with contact use "
+                         f"{' or '.join(repr(m) for m in CONTACT_METHODS)}")
     t0 = time.perf_counter()
     method.start(potential)
     with method.threads():
@@ -161,7 +167,7 @@ def _iterate(potential, x0, method, accept, deadline=None):
     """The loop of minimize: (x, converged, iterations, residuals, energy, message)."""
     scene = potential.scene
     free = scene.free_dofs
-    x = np.array(x0, dtype=float)
+    x = potential.feasible(np.array(x0, dtype=float))
     energy, grad = potential.energy_gradient(x)
     if not math.isfinite(energy):
         raise ValueError(f"x0: the potential is {energy} at the start (elements outside the "
@@ -225,7 +231,7 @@ def _line_search(potential, x, energy, g, gnorm, free, p, curvature=0.0):
             slope >= -1e-14 * _norm(p) * gnorm and not curvature < 0):
         return None
     noise = ENERGY_NOISE * max(abs(energy), 1e-300)
-    alpha = 1.0
+    alpha = potential.step_limit(x, p)    # contact: no node reaches an obstacle on the way
     while alpha >= MIN_STEP:
         xt = x.copy()
         xt.ravel()[free] += alpha * p
@@ -236,7 +242,8 @@ def _line_search(potential, x, energy, g, gnorm, free, p, curvature=0.0):
                 return xt, et, gt, alpha * p
         elif et <= energy + ARMIJO * alpha * (slope + 0.5 * alpha * curvature):
             return xt, et, gt, alpha * p
-        elif et - energy <= ENERGY_ROUNDOFF * abs(energy) and \
+        elif et - energy <= max(ENERGY_ROUNDOFF * abs(energy),
+                                potential.scene.energy_roundoff) and \
                 _norm(gt.ravel()[free]) < 0.01 * gnorm:
             return xt, et, gt, alpha * p
         alpha *= 0.5

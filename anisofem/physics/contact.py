@@ -1,0 +1,238 @@
+"""Contact with rigid obstacles by Incremental Potential Contact (Li et al. 2020): a barrier
+that grows without bound as a surface node nears an obstacle, and a smoothed Coulomb friction
+potential, both added to the incremental potential, with every Newton step clipped so that no
+node reaches an obstacle along its way (anisofem.physics.obstacles.first_touch).
+
+Barrier, per surface node i and obstacle o at distance d < dhat:
+    B = kappa sum A_i b(d),   b(d) = -(d - dhat)^2 ln(d / dhat),
+A_i the node's share of the rest surface area (m^2), so kappa (N/m^3) sets a contact pressure
+-kappa b'(d) that does not depend on the mesh; default kappa = E / dhat, E the stiffest
+element's Young's modulus (a pressure of E at d = 0.43 dhat, 3 E eps^2 at d = (1 - eps) dhat).
+The gradient is kappa A b'(d) n and the Hessian kappa A (b''(d) n n^T + b'(d) D^2 d), D^2 d
+the obstacle's curvature (b' < 0: negative semi-definite there; the PSD-projected Hessian
+clamps each node's 3 x 3 block).
+
+Friction, in a backward-Euler step only, lagged at the step's start x_n (IPC's lagged
+friction, one lag per step): each node in contact there gets its normal force
+lambda = -kappa A b'(d) and tangent projector T = I - n n^T, and the step adds
+    D = sum mu lambda f0(|u|),   u = T (x - x_n),
+f0 Coulomb's |u| smoothed below eps_u = smoothing velocity times dt (f0(y) = -y^3 / (3 eps^2)
++ y^2 / eps + eps / 3): a node sliding slower than the smoothing velocity sticks elastically,
+faster it feels mu lambda against its motion. Statics has no friction (it has no motion to
+resist).
+"""
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import as_scalar
+from .obstacles import Obstacle
+
+#: The default contact distance dhat over the body's size (its rest bounding box diagonal).
+DISTANCE_SHARE = 1e-3
+#: The default smoothing velocity of friction, m/s, over the body's size per second.
+SMOOTHING_SHARE = 1e-3
+#: A step keeps each node at least this share of its distance now from every obstacle.
+KEEP = 0.1
+
+
+@dataclass(frozen=True)
+class Contact:
+    """Contact of the body with rigid obstacles: obstacles (a sequence of anisofem Plane,
+    Sphere, Box, Capsule); distance dhat, m, at which the barrier starts (default 1e-3 of the
+    body's size); friction mu >= 0 (an obstacle's own coefficient wins); stiffness kappa,
+    N/m^3 (default E / dhat); smoothing, m/s, the velocity below which friction sticks
+    (default 1e-3 of the body's size per second)."""
+    obstacles: tuple
+    distance: float = None
+    friction: float = 0.0
+    stiffness: float = None
+    smoothing: float = None
+
+    def __post_init__(self):
+        obstacles = ((self.obstacles,) if isinstance(self.obstacles, Obstacle)
+                     else tuple(self.obstacles))
+        if not obstacles:
+            raise ValueError("contact: obstacles: give at least one")
+        for o in obstacles:
+            if not isinstance(o, Obstacle):
+                raise TypeError(f"contact: obstacles: expected anisofem obstacles (Plane, "
+                                f"Sphere, Box, Capsule), got {type(o).__name__}")
+        object.__setattr__(self, "obstacles", obstacles)
+        for key in ("distance", "stiffness", "smoothing"):
+            value = getattr(self, key)
+            if value is not None:
+                value = as_scalar(value, f"contact {key}")
+                if not value > 0:
+                    raise ValueError(f"contact: {key} must be > 0, got {value:g}")
+                object.__setattr__(self, key, value)
+        friction = as_scalar(self.friction, "contact friction")
+        if friction < 0:
+            raise ValueError(f"contact: friction must be >= 0, got {friction:g}")
+        object.__setattr__(self, "friction", friction)
+
+
+class ContactTerm:
+    """A scene's contact in one problem: the barrier (and, with dt, the friction lagged at
+    x_lag (n, 3)) over the mesh's surface nodes."""
+
+    def __init__(self, scene, x_lag=None, dt=None):
+        contact, mesh = scene.contact, scene.mesh
+        self.obstacles = contact.obstacles
+        self.nodes, self.area = surface_nodes(mesh)
+        size = body_size(mesh)
+        self.dhat = contact.distance or DISTANCE_SHARE * size
+        self.kappa = contact.stiffness or stiffest_modulus(scene) / self.dhat
+        self.friction = ()
+        if dt is not None and x_lag is not None:
+            smoothing = contact.smoothing or SMOOTHING_SHARE * size
+            self.friction = self._lagged(x_lag[self.nodes], contact, smoothing * dt)
+        self._positions = {}
+
+    def _lagged(self, x, contact, eps):
+        """Per obstacle with friction, (mu lambda (c,), rows (c,), T (c, 3, 3), x_lag (c, 3),
+        eps) of the nodes within dhat of it at x (k, 3)."""
+        out = []
+        for o in self.obstacles:
+            mu = contact.friction if o.friction is None else o.friction
+            if mu <= 0:
+                continue
+            d, n = o.distance(x)
+            rows = np.flatnonzero((d > 0) & (d < self.dhat))
+            if not rows.size:
+                continue
+            force = -self.kappa * self.area[rows] * barrier_slope(d[rows], self.dhat)
+            T = np.eye(3) - n[rows, :, None] * n[rows, None, :]
+            out.append((mu * force, rows, T, x[rows].copy(), eps))
+        return tuple(out)
+
+    def energy(self, x, grad=None):
+        """The barrier's and friction's energy at positions x (n, 3), J (inf where a node
+        reached an obstacle); adds their gradient to grad (n, 3) when given."""
+        xs = x[self.nodes]
+        total, g = 0.0, np.zeros_like(xs)
+        for o in self.obstacles:
+            d, n = o.distance(xs)
+            if (d <= 0).any():
+                return math.inf
+            near = d < self.dhat
+            if near.any():
+                a, dn = self.area[near], d[near]
+                total += self.kappa * float(a @ barrier(dn, self.dhat))
+                g[near] += (self.kappa * a * barrier_slope(dn, self.dhat))[:, None] * n[near]
+        for weight, rows, T, start, eps in self.friction:
+            u = np.einsum("kij,kj->ki", T, xs[rows] - start)
+            y = np.sqrt(np.einsum("ij,ij->i", u, u))
+            total += float(weight @ smoothed(y, eps))
+            g[rows] += (weight * slope_over(y, eps))[:, None] * u
+        if grad is not None:
+            np.add.at(grad, self.nodes, g)
+        return total
+
+    def node_hessians(self, x, project=False):
+        """(k, 3, 3) each surface node's Hessian block of the barrier and friction at x (n, 3);
+        project: each block clamped to positive semi-definite."""
+        xs = x[self.nodes]
+        H = np.zeros((len(xs), 3, 3))
+        for o in self.obstacles:
+            d, n, curvature = o.geometry(xs)
+            near = (d > 0) & (d < self.dhat)
+            if near.any():
+                a, dn, nn = self.area[near], d[near], n[near]
+                H[near] += self.kappa * a[:, None, None] * (
+                    barrier_curvature(dn, self.dhat)[:, None, None] * nn[:, :, None]
+                    * nn[:, None, :] + barrier_slope(dn, self.dhat)[:, None, None]
+                    * curvature[near])
+        for weight, rows, T, start, eps in self.friction:
+            u = np.einsum("kij,kj->ki", T, xs[rows] - start)
+            y = np.sqrt(np.einsum("ij,ij->i", u, u))
+            unit = u / np.maximum(y, 1e-300)[:, None]     # (f0'' - f0' / y) along u
+            along = np.where(y < eps, -y / (eps * eps), -1.0 / np.maximum(y, 1e-300))
+            H[rows] += weight[:, None, None] * (slope_over(y, eps)[:, None, None] * T
+                                                + along[:, None, None] * unit[:, :, None]
+                                                * unit[:, None, :])
+        if project:
+            lam, V = np.linalg.eigh(H)
+            H = np.einsum("kij,kj,klj->kil", V, np.maximum(lam, 0.0), V)
+        return H
+
+    def add_hessian(self, x, layout, data, project=False):
+        """Add the nodes' blocks into data, the entries of `layout`."""
+        if id(layout) not in self._positions:
+            where = layout.positions(self.nodes[:, None])
+            self._positions[id(layout)] = (layout, where >= 0, where[where >= 0])
+        _, keep, where = self._positions[id(layout)]
+        H = self.node_hessians(x, project)
+        np.add.at(data, where, H.reshape(len(H), -1)[keep])
+
+    def max_step(self, x, dx):
+        """The largest share in (0, 1] of the move dx (n, 3) from x (n, 3) along which no
+        surface node comes closer to an obstacle than KEEP of its distance now."""
+        xs, ds = x[self.nodes], dx[self.nodes]
+        moving = np.einsum("ij,ij->i", ds, ds) > 0
+        share = 1.0
+        for o in self.obstacles:
+            d, _ = o.distance(xs[moving])
+            share = min(share, float(o.first_touch(xs[moving], ds[moving], KEEP * d).min(
+                initial=1.0)))
+        return share
+
+    def distances(self, x):
+        """(k, obstacles) every surface node's distance to every obstacle at x (n, 3), m."""
+        xs = x[self.nodes]
+        return np.column_stack([o.distance(xs)[0] for o in self.obstacles])
+
+
+def barrier(d, dhat):
+    """b(d) = -(d - dhat)^2 ln(d / dhat) for 0 < d < dhat, m^2."""
+    return -(d - dhat) ** 2 * np.log(d / dhat)
+
+
+def barrier_slope(d, dhat):
+    """b'(d), m."""
+    return -2.0 * (d - dhat) * np.log(d / dhat) - (d - dhat) ** 2 / d
+
+
+def barrier_curvature(d, dhat):
+    """b''(d)."""
+    return -2.0 * np.log(d / dhat) - 4.0 * (d - dhat) / d + (d - dhat) ** 2 / (d * d)
+
+
+def smoothed(y, eps):
+    """f0(y): |u| smoothed below eps, m."""
+    return np.where(y < eps, -y ** 3 / (3 * eps * eps) + y * y / eps + eps / 3.0, y)
+
+
+def slope_over(y, eps):
+    """f0'(y) / y, 1/m (2 / eps at y = 0)."""
+    return np.where(y < eps, -y / (eps * eps) + 2.0 / eps, 1.0 / np.maximum(y, 1e-300))
+
+
+def surface_nodes(mesh):
+    """(nodes (k,), area (k,) m^2): the nodes of the mesh's boundary faces (corners; midside
+    nodes too on quadratic tets) and each one's share of the rest boundary area, each face's
+    split evenly over its 3 (linear) or 6 (quadratic) nodes: every node of the surface feels
+    the barrier."""
+    faces = mesh.boundary_faces
+    X = mesh.vertices
+    area = 0.5 * np.linalg.norm(np.cross(X[faces[:, 1]] - X[faces[:, 0]],
+                                         X[faces[:, 2]] - X[faces[:, 0]]), axis=1)
+    if mesh.order == 2:
+        faces = np.column_stack([faces] + [mesh.edge_nodes(faces[:, [a, b]])
+                                           for a, b in ((0, 1), (1, 2), (2, 0))])
+    share = np.zeros(mesh.n_vertices)
+    for c in range(faces.shape[1]):
+        np.add.at(share, faces[:, c], area / faces.shape[1])
+    nodes = np.unique(faces)
+    return nodes, share[nodes]
+
+
+def body_size(mesh):
+    """The diagonal of the mesh's rest bounding box, m."""
+    return float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+
+
+def stiffest_modulus(scene):
+    """The largest Young's modulus among the scene's elements (of the base material), Pa."""
+    return float(np.max(scene.material.per_element(scene.mesh.n_tets)["young"]))
