@@ -1,0 +1,249 @@
+"""Contact with rigid obstacles (anisofem.physics.obstacles, .contact): the obstacles' distance
+derivatives and continuous collision test, the barrier's and friction's derivatives against
+central differences, drop tests that never pass an obstacle, Coulomb's slope, and bad input."""
+import itertools
+
+import numpy as np
+import pytest
+
+import anisofem as af
+from anisofem.physics.contact import ContactTerm, body_size
+from anisofem.physics.curves import Timed
+from anisofem.physics.potential import Potential
+
+OBSTACLES = {
+    "plane": af.Plane((0.0, 0.0, -0.1), (0.3, -0.2, 1.0)),
+    "sphere": af.Sphere((0.1, 0.0, -0.2), 0.15),
+    "capsule": af.Capsule((-0.2, 0.0, -0.2), (0.3, 0.1, -0.25), 0.1),
+    "box": af.Box((0.0, 0.0, -0.3), (0.2, 0.15, 0.1),
+                  rotation=[[0.8, -0.6, 0.0], [0.6, 0.8, 0.0], [0.0, 0.0, 1.0]]),
+}
+
+
+def outside_points(obstacle, rng, k=200):
+    """k points outside obstacle, at distances from 1 mm to 0.2 m, away from its kinks."""
+    points = []
+    while len(points) < k:
+        x = rng.uniform(-0.6, 0.6, size=(4 * k, 3))
+        d, _ = obstacle.distance(x)
+        keep = x[(d > 1e-3) & (d < 0.2)]
+        points.extend(keep[:k - len(points)])
+    return np.array(points)
+
+
+@pytest.mark.parametrize("kind", sorted(OBSTACLES))
+def test_distance_derivatives_match_central_differences(kind):
+    """The normal is the distance's gradient and the curvature its Hessian, to 1e-6 relative,
+    at 200 points outside each obstacle (a box's edges and corners, a capsule's caps)."""
+    o = OBSTACLES[kind]
+    x = outside_points(o, np.random.default_rng(1))
+    d, n, H = o.geometry(x)
+    h = 1e-6
+    for axis in range(3):
+        e = np.zeros(3)
+        e[axis] = h
+        dp, np_ = o.distance(x + e)
+        dm, nm = o.distance(x - e)
+        assert np.allclose((dp - dm) / (2 * h), n[:, axis], atol=1e-6)
+        assert np.allclose((np_ - nm) / (2 * h), H[:, :, axis], atol=1e-4 * np.abs(H).max())
+    assert np.allclose(np.linalg.norm(n, axis=1), 1.0)
+
+
+@pytest.mark.parametrize("kind", sorted(OBSTACLES))
+def test_first_touch_never_passes_the_floor_and_stops_near_it(kind):
+    """Points flung at an obstacle: the share first_touch returns keeps every point at or above
+    its floor all along the way (checked at 2,000 stations), and where the move would cross
+    it, it stops within 1% of the floor."""
+    o = OBSTACLES[kind]
+    rng = np.random.default_rng(2)
+    x = outside_points(o, rng, 100)
+    d0, n0 = o.distance(x)
+    dx = -n0 * rng.uniform(0.5, 3.0, size=(100, 1)) * d0[:, None] + rng.normal(
+        scale=0.05, size=(100, 3))
+    floor = 0.1 * d0
+    s = o.first_touch(x, dx, floor)
+    stations = np.linspace(0.0, 1.0, 2001)
+    for i in range(100):
+        d_way, _ = o.distance(x[i] + np.outer(stations * s[i], dx[i]))
+        assert d_way.min() >= floor[i] * (1 - 1e-9)
+        if s[i] < 1.0:
+            d_end, _ = o.distance((x[i] + s[i] * dx[i])[None])
+            assert d_end[0] <= floor[i] * 1.01
+    assert (s < 1.0).sum() > 30
+
+
+def near_ground(cells=(4, 1, 1), order=1, lift=3e-5, material=None, **contact):
+    """A 0.04 x 0.01 x 0.01 m bar lying `lift` m above the ground z = 0 (within its barrier's
+    reach), under gravity."""
+    mesh = af.box_beam(size=(0.04, 0.01, 0.01), cells=cells)
+    mesh = af.TetMesh(mesh.vertices - mesh.vertices.min(axis=0) + [0, 0, lift], mesh.tets)
+    if order == 2:
+        mesh = mesh.raised()
+    material = material or af.Material(1e5, 0.45, 1000.0, np.array([1.0, 0, 0]), 1e5)
+    return af.Scene(mesh, material, gravity=(0, 0, -9.81),
+                    contact=af.Contact([af.Plane(name="ground")], **contact))
+
+
+def central_differences(pot, x, direction, h):
+    """(dG along direction, the gradient's change along it) by central differences."""
+    ep, gp = pot.energy_gradient(x + h * direction)
+    em, gm = pot.energy_gradient(x - h * direction)
+    return (ep - em) / (2 * h), (gp - gm) / (2 * h)
+
+
+@pytest.mark.parametrize("order", [1, 2])
+@pytest.mark.parametrize("stiffness", [None, 1e14])
+def test_barrier_and_friction_derivatives_match_central_differences(order, stiffness):
+    """A step's potential with the barrier and friction (nodes sliding past and inside the
+    smoothing, friction 0.5): its gradient along random directions and its Hessian times them
+    within 1e-6 of central differences, at the default stiffness and at 10^14 N/m^3."""
+    scene = near_ground(order=order, friction=0.5, stiffness=stiffness)
+    rng = np.random.default_rng(3)
+    x0 = scene.initial_positions()
+    dt = 0.01
+    x_start = x0 + rng.normal(scale=2e-6, size=x0.shape) * [1, 1, 0]
+    pot = Potential(scene, x_start + dt * np.array([0.01, 0.0, 0.0]), dt, x_start=x_start)
+    term = pot.contact
+    assert term.friction, "some nodes within reach of the ground at the step's start"
+    eps = term.friction[0][4]
+    x = x_start + rng.normal(scale=1e-6, size=x0.shape)
+    x[:, 2] = x0[:, 2] + rng.uniform(-1e-5, 1e-5, size=len(x))   # within the barrier
+    x[::3, 0] += 5 * eps    # some nodes sliding past the smoothing, the others inside it
+    layout = scene.full_layout
+    _, g, data = pot.hessian_data(x, layout)
+    H = layout.matrix(data)
+    for _ in range(3):
+        p = rng.normal(size=x.shape)
+        p /= np.linalg.norm(p)
+        slope, change = central_differences(pot, x, p, 1e-9)
+        assert abs(slope - float((g * p).sum())) <= 1e-6 * np.abs(g).sum()
+        Hp = (H @ p.ravel()).reshape(-1, 3)
+        assert np.abs(change - Hp).max() <= 1e-6 * np.abs(Hp).max() + 1e-9 * np.abs(H).max()
+
+
+def test_projected_contact_blocks_are_positive_semi_definite():
+    """Against a sphere the barrier's block has a negative curvature part; the projected
+    Hessian clamps it: every node's block PSD."""
+    mesh = af.box_beam(size=(0.04, 0.01, 0.01), cells=(4, 1, 1))
+    ball = af.Sphere((0.02, 0.005, -0.006 - 2e-5), 0.001)   # under a bottom node
+    scene = af.Scene(mesh, af.Material(1e5, 0.45, 1000.0), contact=af.Contact([ball]))
+    term = ContactTerm(scene)
+    x = scene.initial_positions()
+    exact = term.node_hessians(x)
+    projected = term.node_hessians(x, project=True)
+    assert np.linalg.eigvalsh(exact).min() < 0
+    assert np.linalg.eigvalsh(projected).min() >= -1e-9 * np.abs(projected).max()
+
+
+def body(kind):
+    """A Neo-Hookean body 2 cm above the ground: the 0.2 m beam, the T, a tentacle-like rod."""
+    material = af.Material(1e5, 0.45, 1000.0, np.array([1.0, 0, 0]), 1e5, model="neohookean")
+    if kind == "beam":
+        mesh = af.box_beam(size=(0.2, 0.02, 0.02), cells=(20, 2, 2))
+    elif kind == "tee":
+        mesh = af.t_shape()
+    else:
+        mesh = af.cylinder_beam(length=0.2, radius=0.015)
+    X = mesh.vertices - [0, 0, mesh.vertices[:, 2].min() - 0.02]
+    return af.TetMesh(X, mesh.tets), material
+
+
+@pytest.mark.parametrize("kind", ["beam", "tee", "rod"])
+def test_drops_never_pass_the_ground_or_a_box(kind):
+    """Each body dropped onto the ground with a box on it at 1, 10 and 100 g, dt 0.005 to 0.05
+    s: every step converged, no surface node ever at or below an obstacle (nor at any Newton
+    iterate: the solve's every iterate is clipped), no element inverted; it comes to rest
+    within the barrier's reach of the ground."""
+    mesh, material = body(kind)
+    X = mesh.vertices
+    middle = X.mean(axis=0)
+    box = af.Box((middle[0], middle[1], 0.005), (0.02, 0.05, 0.005), name="block")
+    ground = af.Plane(name="ground")
+    for g, dt in itertools.product((1, 10, 100), (0.005, 0.02, 0.05)):
+        scene = af.Scene(mesh, material, gravity=(0, 0, -9.81 * g),
+                         contact=af.Contact([ground, box]))
+        term = ContactTerm(scene)
+        steps = int(round(np.sqrt(2 * 0.03 / (9.81 * g)) * 3 / dt)) + 5   # falls, then rests
+        roll = af.simulate(scene, steps, dt=dt, warn=False)
+        assert roll.completed and roll.converged, (kind, g, dt)
+        for s in roll.steps:
+            assert term.distances(s.x).min() > 0, (kind, g, dt)
+            assert s.newton.inversion.inverted == 0
+        assert term.distances(roll.steps[-1].x).min() < term.dhat
+
+
+def test_a_cube_on_a_slope_follows_coulomb():
+    """A stiff cube on a plane tilted by atan(0.5) (the tilt turned on over 0.3 s): with
+    friction 0.5 it stays (its slide over 1 s below the smoothing velocity times 1 s); with
+    0.49 and 0.3 it slides with acceleration g (sin t - mu cos t) within 5%."""
+    theta, g, dt = np.arctan(0.5), 9.81, 0.01
+    mesh = af.box_beam(size=(0.02, 0.02, 0.02), cells=(2, 2, 2))
+    mesh = af.TetMesh(mesh.vertices - mesh.vertices.min(axis=0) + [0, 0, 3e-5], mesh.tets)
+    material = af.Material(1e7, 0.4, 1000.0, model="neohookean")
+    push = np.zeros((mesh.n_vertices, 3))
+    for mu in (0.5, 0.49, 0.3):
+        def scene_of(force):
+            return af.Scene(mesh, material, gravity=(0, 0, -g * np.cos(theta)),
+                            nodal_force=force, contact=af.Contact([af.Plane()], friction=mu))
+        settled = af.simulate(scene_of(None), 30, dt=dt, warn=False).steps[-1]
+        m = scene_of(None).masses
+        push[:, 0] = m * g * np.sin(theta)
+        tilted = scene_of(push).following([Timed(af.LoadCurve([0, 0.3, 10], [0, 1, 1]),
+                                                 force=push)])
+        roll = af.simulate(tilted, 100, dt=dt, x0=settled.x, v0=settled.v, warn=False)
+        assert roll.converged
+        slide = np.array([m @ (s.x[:, 0] - settled.x[:, 0]) for s in roll.steps]) / m.sum()
+        t = dt * np.arange(1, len(slide) + 1)
+        if mu == 0.5:
+            assert abs(slide[-1]) < 1e-3 * body_size(mesh) * 1.0, slide[-1]
+        else:
+            late = t > 0.4
+            a = 2 * np.polyfit(t[late], slide[late], 2)[0]
+            assert a == pytest.approx(g * (np.sin(theta) - mu * np.cos(theta)), rel=0.05)
+
+
+def test_bad_contact_input_is_refused_in_one_line():
+    mesh = af.box_beam(size=(0.04, 0.01, 0.01), cells=(4, 1, 1))
+    material = af.Material(1e5, 0.45, 1000.0)
+    with pytest.raises(ValueError, match=r"contact: the body starts inside obstacle 'floor' "
+                       r"\(plane\): \d+ surface nodes, the deepest 5 mm in at"):
+        af.Scene(mesh, material, contact=af.Contact([af.Plane(name="floor")]))
+    for kwargs, message in (({"distance": 0.0}, "contact: distance must be > 0"),
+                            ({"distance": -1e-3}, "contact: distance must be > 0"),
+                            ({"friction": -0.1}, "contact: friction must be >= 0"),
+                            ({"stiffness": 0.0}, "contact: stiffness must be > 0")):
+        with pytest.raises(ValueError, match=message):
+            af.Contact([af.Plane()], **kwargs)
+    with pytest.raises(ValueError, match="contact: obstacles: give at least one"):
+        af.Contact([])
+    with pytest.raises(TypeError, match="expected anisofem obstacles"):
+        af.Contact(["ground"])
+    with pytest.raises(ValueError, match="ball: radius must be > 0"):
+        af.Sphere((0, 0, 0), -1.0, name="ball")
+    with pytest.raises(ValueError, match="wall: friction must be >= 0"):
+        af.Plane(name="wall", friction=-1)
+    with pytest.raises(ValueError, match="block: rotation must be a rotation matrix"):
+        af.Box((0, 0, 0), (1, 1, 1), rotation=2 * np.eye(3), name="block")
+    scene = near_ground()
+    with pytest.raises(ValueError, match="method: 'reuse' keeps factors"):
+        af.simulate(scene, 2, method="reuse")
+
+
+def test_no_newton_iterate_or_trial_point_reaches_the_ground(monkeypatch):
+    """The 0.2 m beam dropped at 100 g with dt = 0.05 s: every point any line search tries (a
+    superset of the Newton iterates) keeps every surface node above the ground."""
+    mesh, material = body("beam")
+    scene = af.Scene(mesh, material, gravity=(0, 0, -981.0),
+                     contact=af.Contact([af.Plane(name="ground")]))
+    closest = []
+    energy = ContactTerm.energy
+
+    def watched(self, x, grad=None):
+        closest.append(float(self.distances(x).min()))
+        return energy(self, x, grad)
+
+    monkeypatch.setattr(ContactTerm, "energy", watched)
+    roll = af.simulate(scene, 10, dt=0.05, warn=False)
+    assert roll.converged
+    assert len(closest) > 50 and min(closest) > 0
+    assert min(closest) < ContactTerm(scene).dhat     # it did reach the barrier
