@@ -247,3 +247,66 @@ def test_no_newton_iterate_or_trial_point_reaches_the_ground(monkeypatch):
     assert roll.converged
     assert len(closest) > 50 and min(closest) > 0
     assert min(closest) < ContactTerm(scene).dhat     # it did reach the barrier
+
+
+SCENE = """mesh = "beam.msh"
+gravity = [0, 0, -9.81]
+
+[material]
+law = "neohookean"
+young = 1e5
+poisson = 0.45
+
+[contact]
+friction = 0.4
+{extra}
+[contact.obstacles.ground]
+plane = {{point = [0, 0, -0.03], normal = [0, 0, 1]}}
+
+[contact.obstacles.ball]
+{ball}
+friction = 0.1
+"""
+BALL = "sphere = {center = [0.05, 0, -0.05], radius = 0.03}"
+
+
+@pytest.fixture(scope="module")
+def beam_file(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("contact")
+    af.write_mesh(str(folder / "beam.msh"), af.box_beam(size=(0.1, 0.02, 0.02),
+                                                        cells=(10, 2, 2)))
+    return folder
+
+
+def test_a_scene_file_declares_obstacles(beam_file):
+    """[contact] with a ground plane and a ball of its own friction: the beam falls onto the
+    ball and drapes over it, above both."""
+    (beam_file / "drop.toml").write_text(SCENE.format(extra="", ball=BALL))
+    scene = af.load_scene(str(beam_file / "drop.toml"))
+    ground, ball = scene.contact.obstacles
+    assert (ground.name, ball.name, ball.friction, scene.contact.friction) == (
+        "ground", "ball", 0.1, 0.4)
+    roll = af.simulate(scene, 20, dt=0.02, warn=False)
+    assert roll.converged
+    term = ContactTerm(scene)
+    lowest = min(float(term.distances(s.x).min()) for s in roll.steps)
+    assert 0 < lowest < term.dhat
+    assert roll.steps[-1].x[:, 2].min() < -0.02   # its ends hang below the ball's top
+
+
+@pytest.mark.parametrize("extra, ball, message", [
+    ("distance = 0", BALL, r"contact: distance must be > 0"),
+    ("frictoin = 0.1", BALL, r"contact.frictoin: unknown key; did you mean 'friction'\?"),
+    ("", "sphere = {center = [0.05, 0, -0.05]}",
+     r"contact.obstacles.ball.sphere: expected \{center, radius\}"),
+    ("", "sphere = {center = [0.05, 0, -0.05], radius = -1}",
+     r"contact.obstacles.ball.sphere: ball: radius must be > 0"),
+    ("", "cube = {center = [0, 0, 0]}", r"contact.obstacles.ball.cube: unknown key"),
+    ("", "sphere = {center = [0.05, 0, 0], radius = 0.02}",
+     r"contact: the body starts inside obstacle 'ball' \(sphere\)"),
+])
+def test_a_scene_file_with_bad_contact_fails_in_one_line(beam_file, extra, ball, message):
+    from anisofem.io.scenefile import SceneFileError
+    (beam_file / "bad.toml").write_text(SCENE.format(extra=extra, ball=ball))
+    with pytest.raises(SceneFileError, match=message):
+        af.load_scene(str(beam_file / "bad.toml"))

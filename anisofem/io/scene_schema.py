@@ -17,6 +17,8 @@ SCHEMA = {
                     "sets every step",
         "curves": "[curves.NAME] tables: load curves that boundary entries and controls "
                   "follow in time",
+        "contact": "a [contact] table: rigid obstacles the body's surface cannot pass "
+                   "(default: none)",
     },
     "material": {
         "law": f"the base law: {' or '.join(MODELS)} (default stvk)",
@@ -69,6 +71,24 @@ SCHEMA = {
         "range": "[low, high]: the values a reduced model of the scene is built to follow "
                  "(python -m export reduced fits its snapshots to them)",
     },
+    "contact": {
+        "obstacles": "[contact.obstacles.NAME] tables, at least one",
+        "distance": "m, the distance at which the barrier starts (default 1e-3 of the body's "
+                    "size)",
+        "friction": "Coulomb's coefficient, >= 0 (default 0), in time steps only",
+        "stiffness": "the barrier's stiffness, N/m^3 (default E / distance)",
+        "smoothing": "m/s, the sliding speed below which friction sticks (default 1e-3 of "
+                     "the body's size per second)",
+    },
+    "obstacle": {
+        "plane": "{point = [x, y, z], normal = [nx, ny, nz]}: the half-space on the normal's "
+                 "side",
+        "sphere": "{center = [x, y, z], radius = r} (m)",
+        "box": "{center = [x, y, z], half = [hx, hy, hz]} (m), along the axes",
+        "capsule": "{a = [x, y, z], b = [x, y, z], radius = r}: the points within r of the "
+                   "segment ab",
+        "friction": "this obstacle's coefficient, >= 0 (default: [contact]'s)",
+    },
     "rotation": {
         "axis": "[ax, ay, az]",
         "origin": "[ox, oy, oz] m (default 0)",
@@ -86,7 +106,8 @@ def schema_markdown():
     """SCHEMA as the Markdown tables of docs/scenes.md."""
     titles = {"scene": "Top level", "material": "[material] and [regions.NAME]",
               "helix": "fiber = {helix = {...}}", "boundary": "[[boundary]]",
-              "controls": "[controls.NAME]",
+              "controls": "[controls.NAME]", "contact": "[contact]",
+              "obstacle": "[contact.obstacles.NAME]",
               "rotation": "rotation = {...} of a [[boundary]]", "curves": "[curves.NAME]"}
     lines = []
     for kind, keys in SCHEMA.items():

@@ -17,11 +17,13 @@ import warnings
 import numpy as np
 
 from ..physics.cables import Cable
+from ..physics.contact import Contact
 from ..physics.controls import Activation
 from ..physics.curves import LoadCurve, Timed
 from ..physics.fibers import helix_directions, helix_frame, segments
 from ..physics.material import MODELS, Material
 from ..physics.meshgen import of_order
+from ..physics.obstacles import KINDS
 from ..physics.pressure import Pressure
 from ..physics.scene import Scene, traction_force
 from .meshes import read_tagged_mesh
@@ -35,6 +37,11 @@ PLACE_TOLERANCE = 1e-9
 
 #: Fiber directions of a cell field are unit length within this.
 UNIT_TOLERANCE = 1e-6
+
+
+#: Each obstacle shape's geometry keys, in its constructor's order.
+OBSTACLE_KEYS = {"plane": ("point", "normal"), "sphere": ("center", "radius"),
+                 "box": ("center", "half"), "capsule": ("a", "b", "radius")}
 
 
 class SceneFileError(ValueError):
@@ -129,15 +136,18 @@ class _Reader:
         parts += timed
         gravity = _vector(self, table["gravity"], "gravity") if "gravity" in table else None
         body = _vector(self, table["body_force"], "body_force") if "body_force" in table else None
+        contact = self.contact(table["contact"]) if "contact" in table else None
         try:
             scene = Scene(self.mesh, material, fixed=held, fixed_positions=positions,
                           gravity=gravity, body_force=body,
                           pressure=loads["pressure"] + pressures, activation=activations,
-                          cable=cables, nodal_force=loads["force"])
+                          cable=cables, nodal_force=loads["force"], contact=contact)
         except ValueError as err:
-            raise self.error("controls" if str(err).startswith(("activation", "controls",
-                                                                "cable")) else "boundary",
-                             str(err)) from None
+            said = str(err)
+            if said.startswith("contact: "):
+                raise self.error("contact", said.removeprefix("contact: ")) from None
+            raise self.error("controls" if said.startswith(("activation", "controls", "cable"))
+                             else "boundary", said) from None
         return scene.following(parts) if parts else scene
 
     # materials and fibers
@@ -420,6 +430,43 @@ class _Reader:
             raise self.error(f"{key}.axis", "a direction needs a nonzero vector")
         origin = _vector(self, spec.get("origin", [0.0, 0.0, 0.0]), f"{key}.origin")
         return axis / np.linalg.norm(axis), origin, _number(self, spec["angle"], f"{key}.angle")
+
+    def contact(self, table):
+        """The [contact] table -> an anisofem.Contact."""
+        _keys(self, table, "contact", "contact")
+        obstacles = table.get("obstacles")
+        if not isinstance(obstacles, dict) or not obstacles:
+            raise self.error("contact.obstacles", "expected [contact.obstacles.NAME] tables, "
+                                                  "at least one")
+        given = {k: _number(self, table[k], f"contact.{k}")
+                 for k in ("distance", "friction", "stiffness", "smoothing") if k in table}
+        try:
+            return Contact([self.obstacle(name, spec) for name, spec in obstacles.items()],
+                           **given)
+        except ValueError as err:
+            raise self.error("contact", str(err).removeprefix("contact: ")) from None
+
+    def obstacle(self, name, spec):
+        """A [contact.obstacles.NAME] table -> its anisofem obstacle."""
+        key = f"contact.obstacles.{name}"
+        _keys(self, spec, "obstacle", key)
+        shapes = [k for k in OBSTACLE_KEYS if k in spec]
+        if len(shapes) != 1:
+            raise self.error(key, f"give one of {', '.join(OBSTACLE_KEYS)}")
+        shape = shapes[0]
+        where = f"{key}.{shape}"
+        geometry = spec[shape]
+        if not isinstance(geometry, dict) or set(geometry) != set(OBSTACLE_KEYS[shape]):
+            raise self.error(where, f"expected {{{', '.join(OBSTACLE_KEYS[shape])}}}, got "
+                                    f"{geometry!r}")
+        values = [(_number if k == "radius" else _vector)(self, geometry[k], f"{where}.{k}")
+                  for k in OBSTACLE_KEYS[shape]]
+        friction = (_number(self, spec["friction"], f"{key}.friction") if "friction" in spec
+                    else None)
+        try:
+            return KINDS[shape](*values, name=name, friction=friction)
+        except ValueError as err:
+            raise self.error(where, str(err)) from None
 
     def curves(self, table):
         if not isinstance(table, dict):

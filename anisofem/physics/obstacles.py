@@ -34,6 +34,9 @@ class Obstacle:
         if self.friction is not None and self.friction < 0:
             raise ValueError(f"{self.name}: friction must be >= 0, got {self.friction:g}")
 
+    def __repr__(self):
+        return f"{type(self).__name__}(name={self.name!r})"
+
     def distance(self, x):
         """(d (k,), normal (k, 3)) of points x (k, 3), m."""
         d, n, _ = self.geometry(x, curvature=False)
