@@ -310,3 +310,117 @@ def test_a_scene_file_with_bad_contact_fails_in_one_line(beam_file, extra, ball,
     (beam_file / "bad.toml").write_text(SCENE.format(extra=extra, ball=ball))
     with pytest.raises(SceneFileError, match=message):
         af.load_scene(str(beam_file / "bad.toml"))
+
+
+def two_blocks(gap=2e-3, shift=(0.003, 0.002), material=None, **contact):
+    """A 2 cm cube held at the origin and a second one `gap` m above it, shifted by `shift`, in
+    one mesh, with self-contact."""
+    cube = af.box_beam(size=(0.02, 0.02, 0.02), cells=(2, 2, 2))
+    X = cube.vertices - cube.vertices.min(axis=0)
+    upper = X + [shift[0], shift[1], 0.02 + gap]
+    mesh = af.TetMesh(np.vstack([X, upper]), np.vstack([cube.tets, cube.tets + len(X)]))
+    material = material or af.Material(1e5, 0.4, 1000.0, model="neohookean")
+    held = np.zeros((mesh.n_vertices, 3), bool)
+    held[:len(X)] = True
+    return mesh, material, held, len(X)
+
+
+def test_a_block_dropped_on_a_block_never_passes_into_it():
+    """Self-contact (ipctk): a cube dropped onto a held cube of the same mesh at 1, 10 and 100
+    g: every step converged, no intersection by ipctk's own test at any step, no inverted
+    element, and it rests within the barrier's reach."""
+    pytest.importorskip("ipctk")
+    mesh, material, held, lower = two_blocks()
+    for g in (1, 10, 100):
+        scene = af.Scene(mesh, material, gravity=(0, 0, -9.81 * g), fixed=held,
+                         contact=af.Contact(self_contact=True, friction=0.5))
+        itself = ContactTerm(scene).itself
+        roll = af.simulate(scene, 30, dt=0.01, warn=False)
+        assert roll.completed and roll.converged, g
+        for s in roll.steps:
+            assert not itself.ipctk.has_intersections(itself.mesh, itself.vertices(s.x))
+            assert itself.nearest(s.x) > 0
+            assert s.newton.inversion.inverted == 0
+        assert itself.nearest(roll.steps[-1].x) < itself.dhat
+        assert roll.steps[-1].x[lower:, 2].min() > 0.02
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.5])
+def test_self_contact_derivatives_match_central_differences(friction):
+    """A step's potential with the two blocks within the barrier's reach (and friction lagged
+    at the step's start): gradient and Hessian within 1e-6 of central differences."""
+    pytest.importorskip("ipctk")
+    mesh, material, held, lower = two_blocks(gap=3e-5)
+    scene = af.Scene(mesh, material, gravity=(0, 0, -9.81), fixed=held,
+                     contact=af.Contact(self_contact=True, friction=friction))
+    rng = np.random.default_rng(4)
+    x_start = scene.initial_positions()
+    x_start[lower:, :2] += 1e-6
+    pot = Potential(scene, x_start, 0.01, x_start=x_start)
+    x = x_start.copy()
+    x[lower:] += rng.normal(scale=3e-6, size=(mesh.n_vertices - lower, 3))
+    x[lower:, 0] += 1e-5
+    layout = scene.full_layout
+    _, g, data = pot.hessian_data(x, layout)
+    H = layout.matrix(data) + pot.coupled_hessian(x, layout)
+    assert pot.contact.itself.nearest(x) < pot.contact.dhat
+    for _ in range(3):
+        p = np.zeros_like(x)
+        p[lower:] = rng.normal(size=(mesh.n_vertices - lower, 3))
+        p /= np.linalg.norm(p)
+        slope, change = central_differences(pot, x, p, 1e-9)
+        assert abs(slope - float((g * p).sum())) <= 1e-6 * np.abs(g).sum()
+        Hp = (H @ p.ravel()).reshape(-1, 3)
+        assert np.abs(change - Hp).max() <= 1e-6 * np.abs(Hp).max()
+    assert np.abs((af.hessian(scene, x, x_hat=x_start, dt=0.01) - H).toarray()).max() == 0.0
+
+
+def test_a_block_slides_on_a_slab_by_coulomb():
+    """Self-contact friction: a 2 cm cube on a held slab of the same mesh, under gravity tilted
+    by atan(0.5) (turned on over 0.1 s) with friction 0.3, slides with g (sin t - mu cos t)
+    within 5%."""
+    pytest.importorskip("ipctk")
+    theta, g, dt, mu = np.arctan(0.5), 9.81, 0.01, 0.3
+    slab = af.box_beam(size=(0.3, 0.04, 0.01), cells=(15, 2, 1))
+    cube = af.box_beam(size=(0.02, 0.02, 0.02), cells=(2, 2, 2))
+    S = slab.vertices - slab.vertices.min(axis=0)
+    C = cube.vertices - cube.vertices.min(axis=0) + [0.013, 0.011, 0.01 + 5e-5]
+    mesh = af.TetMesh(np.vstack([S, C]), np.vstack([slab.tets, cube.tets + len(S)]))
+    lower = len(S)
+    held = np.zeros((mesh.n_vertices, 3), bool)
+    held[:lower] = True
+    material = af.Material(1e7, 0.4, 1000.0, model="neohookean")
+    m = af.Scene(mesh, material, fixed=held).masses
+    push = np.zeros((mesh.n_vertices, 3))
+    push[lower:, 0] = m[lower:] * g * np.sin(theta)
+    scene = af.Scene(mesh, material, gravity=(0, 0, -g * np.cos(theta)), fixed=held,
+                     nodal_force=push, contact=af.Contact(self_contact=True, friction=mu))
+    tilted = scene.following([Timed(af.LoadCurve([0, 0.1, 10], [0, 1, 1]), force=push)])
+    roll = af.simulate(tilted, 40, dt=dt, warn=False)
+    assert roll.converged
+    w = m[lower:]
+    slide = np.array([w @ s.x[lower:, 0] for s in roll.steps]) / w.sum()
+    t = dt * np.arange(1, len(slide) + 1)
+    late = t > 0.15
+    a = 2 * np.polyfit(t[late], slide[late], 2)[0]
+    assert a == pytest.approx(g * (np.sin(theta) - mu * np.cos(theta)), rel=0.05)
+    assert roll.steps[-1].x[lower:, 2].min() > 0.01     # on the slab all along
+
+
+def test_self_contact_refuses_what_it_cannot_take():
+    pytest.importorskip("ipctk")
+    mesh, material, held, _ = two_blocks(gap=-2e-3)
+    for gap, shift in ((-2e-3, (0.003, 0.002)), (0.0, (0.0, 0.0))):   # overlapping, touching
+        mesh, material, held, _ = two_blocks(gap=gap, shift=shift)
+        with pytest.raises(ValueError, match="contact: self_contact: the body's surface "
+                                             "intersects or touches itself at rest"):
+            af.Scene(mesh, material, fixed=held, contact=af.Contact(self_contact=True))
+    mesh, material, held, _ = two_blocks()
+    scene = af.Scene(mesh, material, fixed=held, gravity=(0, 0, -9.81),
+                     contact=af.Contact(self_contact=True))
+    with pytest.raises(ValueError, match="method: 'cg' cannot take self-contact"):
+        af.simulate(scene, 1, method="cg")
+    with pytest.raises(ValueError, match="linear_solver: 'banded' cannot hold self-contact"):
+        af.simulate(scene, 1, linear_solver="banded")
+    with pytest.raises(TypeError, match="self_contact: expected True or False"):
+        af.Contact(self_contact="yes")

@@ -157,7 +157,8 @@ def _definite(potential, x, name):
     layout = potential.scene.layout("csr")
     data = potential.hessian_data(x, layout, want_grad=False)[2]
     try:
-        return linsolve.SuperLU().factor(layout, data)
+        return linsolve.SuperLU().factor(layout, data,
+                                         potential.coupled_hessian(x, layout))
     except linsolve.FactorizationError:
         verdict = stability(potential, x)
         raise ValueError(f"{name}: the Hessian there is not positive definite (smallest "

@@ -28,6 +28,7 @@ import numpy as np
 
 from .._validate import as_scalar
 from .obstacles import Obstacle
+from .self_contact import SelfContact
 
 #: The default contact distance dhat over the body's size (its rest bounding box diagonal).
 DISTANCE_SHARE = 1e-3
@@ -40,21 +41,27 @@ KEEP = 0.1
 @dataclass(frozen=True)
 class Contact:
     """Contact of the body with rigid obstacles: obstacles (a sequence of anisofem Plane,
-    Sphere, Box, Capsule); distance dhat, m, at which the barrier starts (default 1e-3 of the
-    body's size); friction mu >= 0 (an obstacle's own coefficient wins); stiffness kappa,
-    N/m^3 (default E / dhat); smoothing, m/s, the velocity below which friction sticks
-    (default 1e-3 of the body's size per second)."""
-    obstacles: tuple
+    Sphere, Box, Capsule; may be empty with self_contact); distance dhat, m, at which the
+    barrier starts (default 1e-3 of the body's size); friction mu >= 0 (an obstacle's own
+    coefficient wins); stiffness kappa, N/m^3 (default E / dhat); smoothing, m/s, the velocity
+    below which friction sticks (default 1e-3 of the body's size per second); self_contact:
+    the surface's contact with itself and between the bodies of one mesh too (by ipctk,
+    anisofem.physics.self_contact)."""
+    obstacles: tuple = ()
     distance: float = None
     friction: float = 0.0
     stiffness: float = None
     smoothing: float = None
+    self_contact: bool = False
 
     def __post_init__(self):
         obstacles = ((self.obstacles,) if isinstance(self.obstacles, Obstacle)
                      else tuple(self.obstacles))
-        if not obstacles:
-            raise ValueError("contact: obstacles: give at least one")
+        if not isinstance(self.self_contact, bool):
+            raise TypeError(f"contact: self_contact: expected True or False, got "
+                            f"{self.self_contact!r}")
+        if not obstacles and not self.self_contact:
+            raise ValueError("contact: obstacles: give at least one, or self_contact=True")
         for o in obstacles:
             if not isinstance(o, Obstacle):
                 raise TypeError(f"contact: obstacles: expected anisofem obstacles (Plane, "
@@ -84,10 +91,13 @@ class ContactTerm:
         size = body_size(mesh)
         self.dhat = contact.distance or DISTANCE_SHARE * size
         self.kappa = contact.stiffness or stiffest_modulus(scene) / self.dhat
-        self.friction = ()
+        self.friction, self.itself, eps = (), None, None
         if dt is not None and x_lag is not None:
-            smoothing = contact.smoothing or SMOOTHING_SHARE * size
-            self.friction = self._lagged(x_lag[self.nodes], contact, smoothing * dt)
+            eps = (contact.smoothing or SMOOTHING_SHARE * size) * dt
+            self.friction = self._lagged(x_lag[self.nodes], contact, eps)
+        if contact.self_contact:
+            self.itself = SelfContact(mesh, self.dhat, self.kappa, x_lag=x_lag,
+                                      mu=contact.friction if eps else 0.0, eps=eps)
         self._positions = {}
 
     def _lagged(self, x, contact, eps):
@@ -128,6 +138,8 @@ class ContactTerm:
             g[rows] += (weight * slope_over(y, eps))[:, None] * u
         if grad is not None:
             np.add.at(grad, self.nodes, g)
+        if self.itself is not None:
+            total += self.itself.energy(x, grad)
         return total
 
     def node_hessians(self, x, project=False):
@@ -176,12 +188,24 @@ class ContactTerm:
             d, _ = o.distance(xs[moving])
             share = min(share, float(o.first_touch(xs[moving], ds[moving], KEEP * d).min(
                 initial=1.0)))
+        if self.itself is not None:
+            share = min(share, self.itself.max_step(x, dx))
         return share
+
+    def coupled_hessian(self, x, dofs, project=False):
+        """The self-contact's Hessian at x (n, 3) over the flat degrees of freedom `dofs`, a
+        scipy CSC matrix (its pairs couple nodes no element joins), or None without
+        self-contact."""
+        if self.itself is None:
+            return None
+        H = self.itself.hessian(x, project).tocsr()[dofs]
+        return H.tocsc()[:, dofs]
 
     def distances(self, x):
         """(k, obstacles) every surface node's distance to every obstacle at x (n, 3), m."""
         xs = x[self.nodes]
-        return np.column_stack([o.distance(xs)[0] for o in self.obstacles])
+        return np.column_stack([o.distance(xs)[0] for o in self.obstacles]
+                               or [np.full(len(xs), np.inf)])
 
 
 def barrier(d, dhat):

@@ -13,8 +13,8 @@ import numpy as np
 
 from . import kernels
 from .contact import ContactTerm
+from .scene import ROUNDOFF_FACTOR, Scene
 from .._validate import as_float_array, as_scalar
-from .scene import Scene
 
 
 _NO_MASS = np.empty(0)
@@ -48,6 +48,8 @@ class Potential:
         self.x_start = check_positions(scene, x_start, "x_start")
         self.contact = (ContactTerm(scene, self.x_start, dt if self.dynamic else None)
                         if scene.contact is not None else None)
+        #: whether the Hessian couples nodes no element joins (self-contact)
+        self.coupled = scene.contact is not None and scene.contact.self_contact
 
     def loaded(self, share):
         """The same problem under `share` (0 to 1) of its load (load continuation,
@@ -163,6 +165,28 @@ class Potential:
         to grad (n, 3) when given."""
         return 0.0 if self.contact is None else self.contact.energy(x, grad)
 
+    def coupled_hessian(self, x, layout, project=False):
+        """The part of d2G/dx2 at x that couples nodes no element joins (self-contact's pairs),
+        a scipy CSC matrix over layout's unknowns, or None where there is none."""
+        if self.contact is None:
+            return None
+        return self.contact.coupled_hessian(x, layout.dofs, project)
+
+    def contact_roundoff(self, x):
+        """The free-gradient norm, N, below which float64 cannot resolve the contact's forces
+        at x (n, 3): ROUNDOFF_FACTOR eps R |H_c|, R the largest coordinate and |H_c| the
+        Frobenius norm of the contact's Hessian (a barrier's stiffness grows without bound as
+        a gap closes, and its force's round-off with it); 0 without contact."""
+        if self.contact is None:
+            return 0.0
+        blocks = self.contact.node_hessians(x)
+        size = float(np.einsum("kij,kij->", blocks, blocks))
+        coupled = self.contact.coupled_hessian(x, self.scene.free_dofs)
+        if coupled is not None:
+            size += float((coupled.multiply(coupled)).sum())
+        return (ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(x).max())
+                * math.sqrt(size))
+
     def step_limit(self, x, p):
         """The largest share in (0, 1] of the move p (over the free unknowns) from x (n, 3)
         that keeps every surface node clear of the obstacles (1 without contact)."""
@@ -208,9 +232,10 @@ def hessian(scene, x, x_hat=None, dt=None, project=False):
     project=True returns the PSD-projected Hessian Newton uses away from equilibrium.
     """
     layout = scene.full_layout
-    _, _, data = Potential(scene, x_hat, dt).hessian_data(
-        check_positions(scene, x), layout, project=project, want_grad=False)
-    return layout.matrix(data)
+    potential, x = Potential(scene, x_hat, dt), check_positions(scene, x)
+    _, _, data = potential.hessian_data(x, layout, project=project, want_grad=False)
+    coupled = potential.coupled_hessian(x, layout, project)
+    return layout.matrix(data) if coupled is None else (layout.matrix(data) + coupled).tocsr()
 
 
 def element_energy(scene, x):

@@ -14,7 +14,9 @@ from .densities import STVK
 from .material import Material
 from .mesh import TetMesh, block_coloring
 from .cables import Cable, CableLoad
-from .contact import Contact, surface_nodes
+from .contact import DISTANCE_SHARE, Contact, body_size, surface_nodes
+from .obstacles import Plane
+from .self_contact import SelfContact, check_rest
 from .controls import Activation, control_mapping, control_number
 from .curves import Timed
 from .pressure import CavityLoad, Pressure
@@ -298,13 +300,17 @@ class Scene:
         return np.concatenate([c.groups for c in self.cables])
 
     def check_static(self):
-        """Raise ValueError unless fixed components remove the rigid translations."""
+        """Raise ValueError unless fixed components (or a plane obstacle across the axis) remove
+        the rigid translations."""
         held = self.fixed_mask.copy()
         held[self.mesh.unreferenced] = False
         if not held.any():
             raise ValueError("fixed: a static scene needs fixed vertices (with none, the "
                              "equilibrium is not unique: the body can translate and rotate)")
         missing = [c for c in range(3) if not held[:, c].any()]
+        if self.contact is not None:   # an obstacle holds the body along its normal
+            missing = [c for c in missing if not any(
+                isinstance(o, Plane) and abs(o.normal[c]) > 0.5 for o in self.contact.obstacles)]
         if missing:
             raise ValueError(f"fixed: no vertex is held along axis {missing}: the static "
                              f"equilibrium is not unique (free rigid translation)")
@@ -550,6 +556,8 @@ def _contact(contact, mesh, x):
     if not isinstance(contact, Contact):
         raise TypeError(f"contact: expected an anisofem.Contact, got {type(contact).__name__}")
     nodes, _ = surface_nodes(mesh)
+    if contact.self_contact:
+        check_rest(SelfContact(mesh, DISTANCE_SHARE * body_size(mesh), 1.0), x)
     for o in contact.obstacles:
         d, _ = o.distance(x[nodes])
         if (d <= 0).any():

@@ -86,8 +86,10 @@ class DenseCholesky(_SolverBase):
     def threads(self):
         return one_blas_thread()
 
-    def factor(self, layout, data):
-        """Factors in place: data is overwritten."""
+    def factor(self, layout, data, coupled=None):
+        """Factors in place: data is overwritten. coupled: a sparse matrix added first."""
+        if coupled is not None:
+            layout.matrix(data)[...] += coupled.toarray()
         # the matrix is symmetric, so the transposed view is its Fortran-ordered self
         c, info = _POTRF(layout.matrix(data).T, lower=True, overwrite_a=True, clean=False)
         if info != 0:
@@ -98,8 +100,10 @@ class DenseCholesky(_SolverBase):
 class BandedCholesky(_SolverBase):
     layout = "banded"
 
-    def factor(self, layout, data):
-        """Factors in place: data is overwritten."""
+    def factor(self, layout, data, coupled=None):
+        """Factors in place: data is overwritten. coupled: must be None (no band holds it)."""
+        if coupled is not None:
+            raise FactorizationError("banded Cholesky: couplings outside the band")
         c, info = _PBTRF(layout.band(data), lower=1, overwrite_ab=1)
         if info != 0:
             raise _not_definite("banded Cholesky", info)
@@ -112,9 +116,10 @@ class BandedCholesky(_SolverBase):
         return solve
 
 
-def _csc(layout, data):
+def _csc(layout, data, coupled=None):
     # H is symmetric, so its CSR arrays read as CSC describe the same matrix
-    return sp.csc_matrix((data, layout.indices, layout.indptr), shape=layout.shape)
+    H = sp.csc_matrix((data, layout.indices, layout.indptr), shape=layout.shape)
+    return H if coupled is None else (H + coupled).tocsc()
 
 
 class SuperLU(_SolverBase):
@@ -124,12 +129,12 @@ class SuperLU(_SolverBase):
         self.ordering = ordering
         self.symmetric = symmetric
 
-    def factor(self, layout, data):
+    def factor(self, layout, data, coupled=None):
         kwargs = {"permc_spec": self.ordering}
         if self.symmetric:
             kwargs.update(diag_pivot_thresh=0.0, options={"SymmetricMode": True})
         try:
-            lu = spla.splu(_csc(layout, data), **kwargs)
+            lu = spla.splu(_csc(layout, data, coupled), **kwargs)
         except RuntimeError as err:
             raise FactorizationError(str(err)) from None
         if self.symmetric:
@@ -147,11 +152,11 @@ class Cholmod(_SolverBase):
         from sksparse.cholmod import cholesky  # optional dependency
         self._cholesky = cholesky
 
-    def factor(self, layout, data):
+    def factor(self, layout, data, coupled=None):
         try:
             # supernodal is LL^T and refuses an indefinite matrix; "auto" may pick the
             # simplicial LDL^T, which factors indefinite matrices without complaint
-            return self._cholesky(_csc(layout, data), mode="supernodal")
+            return self._cholesky(_csc(layout, data, coupled), mode="supernodal")
         except Exception as err:  # CholmodNotPositiveDefiniteError and friends
             raise FactorizationError(str(err)) from None
 
@@ -167,10 +172,14 @@ def cholmod_available():
 NAMES = ("auto", "banded", "dense", "superlu", "superlu-colamd", "cholmod")
 
 
-def make(name, n_unknowns):
-    """The solver called `name` (see NAMES) for a system of n_unknowns."""
+def make(name, n_unknowns, coupled=False):
+    """The solver called `name` (see NAMES) for a system of n_unknowns; coupled: the system
+    couples nodes no element joins (self-contact), which no band holds."""
+    if name == "banded" and coupled:
+        raise ValueError("linear_solver: 'banded' cannot hold self-contact's couplings; use "
+                         "'superlu', 'cholmod' or 'dense'")
     if name == "auto":
-        if n_unknowns <= BANDED_MAX:
+        if n_unknowns <= BANDED_MAX and not coupled:
             name = "banded"
         else:
             name = "cholmod" if cholmod_available() else "superlu"

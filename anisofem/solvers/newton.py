@@ -131,6 +131,9 @@ def minimize(potential, x0, method="auto", *, warn=True, accept=None, deadline=N
     deadline: a time.perf_counter() time after which it stops, not converged (TIME_SPENT).
     """
     method = methods.make(method, potential.scene.n_free, **options)
+    if potential.coupled and method.name != "newton":
+        raise ValueError(f"method: {method.name!r} cannot take self-contact, whose pairs "
+                         f"couple nodes no element joins; use 'newton'")
     if potential.contact is not None and method.name not in CONTACT_METHODS:
         raise ValueError(f"method: {method.name!r} keeps factors of earlier Hessians, which "
                          f"know nothing of a contact that has begun; with contact use "
@@ -200,6 +203,8 @@ def _iterate(potential, x0, method, accept, deadline=None):
                 if step is not None:
                     break
             if step is None:
+                if gnorm <= potential.contact_roundoff(x):   # the barrier's stiffness floor
+                    return x, True, it - 1, res, energy, "converged"
                 return x, False, it, res, energy, "no descent direction: the line search stalled"
         x, energy, grad, s = step
         g_new = grad.ravel()[free]

@@ -139,7 +139,8 @@ class Newton(Method):
 
     def start(self, potential):
         super().start(potential)
-        self.solver = linsolve.make(self.linear_solver, potential.scene.n_free)
+        self.solver = linsolve.make(self.linear_solver, potential.scene.n_free,
+                                    coupled=potential.coupled)
         self.layout = potential.scene.layout(self.solver.layout)
         self.stalling = False    # the last iteration left more than STALLING of the gradient
         self.run = 0             # whole projected steps in a row since the last escape tried
@@ -170,8 +171,9 @@ class Newton(Method):
             data = self.potential.hessian_data(x, self.layout, project=projected,
                                                want_grad=False)[2]
         self.counts["factorizations"] += 1
+        coupled = self.potential.coupled_hessian(x, self.layout, projected)
         try:
-            return self.solver.factor(self.layout, data)
+            return self.solver.factor(self.layout, data, coupled)
         except linsolve.FactorizationError:
             return None
 
