@@ -372,7 +372,8 @@ def test_self_contact_derivatives_match_central_differences(friction):
         assert abs(slope - float((g * p).sum())) <= 1e-6 * np.abs(g).sum()
         Hp = (H @ p.ravel()).reshape(-1, 3)
         assert np.abs(change - Hp).max() <= 1e-6 * np.abs(Hp).max()
-    assert np.abs((af.hessian(scene, x, x_hat=x_start, dt=0.01) - H).toarray()).max() == 0.0
+    public = af.hessian(scene, x, x_hat=x_start, dt=0.01)   # ipctk sums pairs on threads
+    assert np.abs((public - H).toarray()).max() <= 1e-12 * np.abs(H).max()
 
 
 def test_a_block_slides_on_a_slab_by_coulomb():
