@@ -21,6 +21,7 @@ f0 Coulomb's |u| smoothed below eps_u = smoothing velocity times dt (f0(y) = -y^
 faster it feels mu lambda against its motion. Statics has no friction (it has no motion to
 resist).
 """
+import copy
 import math
 from dataclasses import dataclass
 
@@ -86,26 +87,40 @@ class ContactTerm:
 
     def __init__(self, scene, x_lag=None, dt=None):
         contact, mesh = scene.contact, scene.mesh
-        self.obstacles = contact.obstacles
+        self.contact, self.obstacles = contact, contact.obstacles
         self.nodes, self.area = surface_nodes(mesh)
-        size = body_size(mesh)
-        self.dhat = contact.distance or DISTANCE_SHARE * size
+        self.size = body_size(mesh)
+        self.dhat = contact.distance or DISTANCE_SHARE * self.size
         self.kappa = contact.stiffness or stiffest_modulus(scene) / self.dhat
-        self.friction, self.itself, eps = (), None, None
-        if dt is not None and x_lag is not None:
-            eps = (contact.smoothing or SMOOTHING_SHARE * size) * dt
-            self.friction = self._lagged(x_lag[self.nodes], contact, eps)
+        self.friction, self.itself = (), None
+        lagged = dt is not None and x_lag is not None
+        if lagged:
+            self.friction = self.friction_at(x_lag[self.nodes], dt)
         if contact.self_contact:
             self.itself = SelfContact(mesh, self.dhat, self.kappa, x_lag=x_lag,
-                                      mu=contact.friction if eps else 0.0, eps=eps)
+                                      mu=contact.friction if lagged else 0.0,
+                                      eps=self.smoothing(dt) if lagged else None)
         self._positions = {}
 
-    def _lagged(self, x, contact, eps):
-        """Per obstacle with friction, (mu lambda (c,), rows (c,), T (c, 3, 3), x_lag (c, 3),
-        eps) of the nodes within dhat of it at x (k, 3)."""
-        out = []
+    def lagged(self, x, dt):
+        """A copy of this term whose friction is that of a step of dt s lagged at the surface
+        nodes' positions x (k, 3)."""
+        moved = copy.copy(self)
+        moved.friction = self.friction_at(x, dt)
+        return moved
+
+    def smoothing(self, dt):
+        """eps_u, m: the tangential displacement over a step of dt s below which friction
+        sticks."""
+        return (self.contact.smoothing or SMOOTHING_SHARE * self.size) * dt
+
+    def friction_at(self, x, dt):
+        """The friction of a step of dt s lagged at the surface nodes' positions x (k, 3): per
+        obstacle with friction, (mu lambda (c,), rows (c,), T (c, 3, 3), x_lag (c, 3), eps) of
+        the nodes within dhat of it there."""
+        out, eps = [], self.smoothing(dt)
         for o in self.obstacles:
-            mu = contact.friction if o.friction is None else o.friction
+            mu = self.contact.friction if o.friction is None else o.friction
             if mu <= 0:
                 continue
             d, n = o.distance(x)
@@ -120,12 +135,22 @@ class ContactTerm:
     def energy(self, x, grad=None):
         """The barrier's and friction's energy at positions x (n, 3), J (inf where a node
         reached an obstacle); adds their gradient to grad (n, 3) when given."""
-        xs = x[self.nodes]
+        total, g = self.surface_energy(x[self.nodes])
+        if grad is not None:
+            np.add.at(grad, self.nodes, g)
+        if self.itself is not None and math.isfinite(total):
+            total += self.itself.energy(x, grad)
+        return total
+
+    def surface_energy(self, xs):
+        """(energy J, gradient (k, 3) N) of the obstacles' barrier and friction at the
+        surface nodes' positions xs (k, 3); inf (and a zero gradient) where a node reached an
+        obstacle."""
         total, g = 0.0, np.zeros_like(xs)
         for o in self.obstacles:
             d, n = o.distance(xs)
             if (d <= 0).any():
-                return math.inf
+                return math.inf, np.zeros_like(xs)
             near = d < self.dhat
             if near.any():
                 a, dn = self.area[near], d[near]
@@ -136,34 +161,50 @@ class ContactTerm:
             y = np.sqrt(np.einsum("ij,ij->i", u, u))
             total += float(weight @ smoothed(y, eps))
             g[rows] += (weight * slope_over(y, eps))[:, None] * u
-        if grad is not None:
-            np.add.at(grad, self.nodes, g)
-        if self.itself is not None:
-            total += self.itself.energy(x, grad)
-        return total
+        return total, g
 
     def node_hessians(self, x, project=False):
         """(k, 3, 3) each surface node's Hessian block of the barrier and friction at x (n, 3);
         project: each block clamped to positive semi-definite."""
-        xs = x[self.nodes]
+        return self.surface_hessians(x[self.nodes], project=project)
+
+    def in_reach(self, xs):
+        """(k,) bool: the surface nodes at xs (k, 3) within dhat of an obstacle, or with
+        friction (the others' Hessian blocks are 0)."""
+        near = np.zeros(len(xs), bool)
+        for o in self.obstacles:
+            near |= o.distance(xs)[0] < self.dhat
+        for _, rows, _, _, _ in self.friction:
+            near[rows] = True
+        return near
+
+    def surface_hessians(self, xs, rows=None, project=False):
+        """node_hessians at the surface nodes' positions xs (k, 3), or at those of the nodes
+        `rows` (c,) only (indices among the surface nodes), xs then (c, 3)."""
+        rows = np.arange(len(xs)) if rows is None else rows
         H = np.zeros((len(xs), 3, 3))
         for o in self.obstacles:
             d, n, curvature = o.geometry(xs)
             near = (d > 0) & (d < self.dhat)
             if near.any():
-                a, dn, nn = self.area[near], d[near], n[near]
+                a, dn, nn = self.area[rows][near], d[near], n[near]
                 H[near] += self.kappa * a[:, None, None] * (
                     barrier_curvature(dn, self.dhat)[:, None, None] * nn[:, :, None]
                     * nn[:, None, :] + barrier_slope(dn, self.dhat)[:, None, None]
                     * curvature[near])
-        for weight, rows, T, start, eps in self.friction:
-            u = np.einsum("kij,kj->ki", T, xs[rows] - start)
+        local = np.full(len(self.nodes), -1)
+        local[rows] = np.arange(len(rows))
+        for weight, lagged, T, start, eps in self.friction:
+            at = local[lagged]
+            kept = at >= 0
+            at, weight, T, start = at[kept], weight[kept], T[kept], start[kept]
+            u = np.einsum("kij,kj->ki", T, xs[at] - start)
             y = np.sqrt(np.einsum("ij,ij->i", u, u))
             unit = u / np.maximum(y, 1e-300)[:, None]     # (f0'' - f0' / y) along u
             along = np.where(y < eps, -y / (eps * eps), -1.0 / np.maximum(y, 1e-300))
-            H[rows] += weight[:, None, None] * (slope_over(y, eps)[:, None, None] * T
-                                                + along[:, None, None] * unit[:, :, None]
-                                                * unit[:, None, :])
+            H[at] += weight[:, None, None] * (slope_over(y, eps)[:, None, None] * T
+                                              + along[:, None, None] * unit[:, :, None]
+                                              * unit[:, None, :])
         if project:
             lam, V = np.linalg.eigh(H)
             H = np.einsum("kij,kj,klj->kil", V, np.maximum(lam, 0.0), V)
@@ -181,15 +222,19 @@ class ContactTerm:
     def max_step(self, x, dx):
         """The largest share in (0, 1] of the move dx (n, 3) from x (n, 3) along which no
         surface node comes closer to an obstacle than KEEP of its distance now."""
-        xs, ds = x[self.nodes], dx[self.nodes]
+        share = self.surface_max_step(x[self.nodes], dx[self.nodes])
+        if self.itself is not None:
+            share = min(share, self.itself.max_step(x, dx))
+        return share
+
+    def surface_max_step(self, xs, ds):
+        """max_step's obstacle part for surface nodes at xs (k, 3) moving by ds (k, 3)."""
         moving = np.einsum("ij,ij->i", ds, ds) > 0
         share = 1.0
         for o in self.obstacles:
             d, _ = o.distance(xs[moving])
             share = min(share, float(o.first_touch(xs[moving], ds[moving], KEEP * d).min(
                 initial=1.0)))
-        if self.itself is not None:
-            share = min(share, self.itself.max_step(x, dx))
         return share
 
     def coupled_hessian(self, x, dofs, project=False):

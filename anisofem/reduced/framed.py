@@ -544,7 +544,8 @@ def refusal(scene):
         return (f"scene: the framed model does not take "
                 f"{'pressures; use ReducedModel' if scene.pressures else 'cables'}")
     if scene.contact is not None:
-        return "scene: the framed model does not take contact (step it with the FEM)"
+        return ("scene: the framed model does not take contact (ReducedModel takes obstacles; "
+                "the FEM takes them all)")
     if scene.activations or (scene.elements.rest2 != 1.0).any():
         return ("scene: the framed model takes passive fibers (no activation, no activation "
                 "control); use ReducedModel")

@@ -35,6 +35,7 @@ from .loads import Loads, default_loads, unseen_cases
 from .snapshots import static_states, principal_directions
 from .polynomial import build_bytes, polynomial, with_pressure
 from .reach import reach
+from .contact import ReducedContact
 from .controls import (control_parts, control_responses, control_values, controlled,
                        passive)
 
@@ -179,6 +180,8 @@ class ReducedModel:
             f"{need / 2 ** 30:.2g} GiB at its peak; its quartic grows as r^4)")
         self._energy_polynomial(scene)
         self.external = self.project(scene.external_force)
+        self.contact = (ReducedContact(scene, self.x0, self.basis) if scene.contact is not None
+                        else None)
         self.build_seconds = time.perf_counter() - t0 + credit
         if validate:
             say("its validation against the full FEM")
@@ -340,21 +343,33 @@ class ReducedModel:
         q_hat = q + dt * v
         load = self._load(force)
         q_next, report = self._newton(controls, load, q_hat.copy(), q_hat, 1.0 / dt ** 2,
-                                      rtol * (_norm(load) + _norm(v) / dt), rtol, max_iter)
+                                      rtol * (_norm(load) + _norm(v) / dt), rtol, max_iter,
+                                      q_start=q)
         return q_next, (q_next - q) / dt, report
 
     def _load(self, force):
         return self.external if force is None else self.external + self.project(force)
 
-    def _newton(self, controls, load, q, q_hat, inertia, tolerance, rtol, max_iter):
+    def _newton(self, controls, load, q, q_hat, inertia, tolerance, rtol, max_iter,
+                q_start=None):
         """Minimize V(q) - load . q + inertia |q - q_hat|^2 / 2, V the energy under controls,
         from q (inertia 1/dt^2, or 0 for statics) to a gradient norm of tolerance + rtol
         |dV/dq(q)| (N: rtol times the problem's force size) or the round-off floor
-        (anisofem.reduced.kernels.newton; with a cable pulled, pulled_newton)."""
+        (anisofem.reduced.kernels.newton; with cables pulled or contact, extra_newton). A step
+        starts at q_start (its friction lagged there; q moved back toward it as far as the
+        obstacles ask)."""
         P, pulled = self.energy_at(controls)
+        extras = [Pulled(part, T) for part, T in pulled]
+        if self.contact is not None:
+            if q_start is None:
+                extras.append(self.contact.touching())
+            else:
+                touching = self.contact.touching(q_start, 1.0 / math.sqrt(inertia))
+                q = q_start + touching.limit(q_start, q - q_start) * (q - q_start)
+                extras.append(touching)
         q_hat = q if q_hat is None else q_hat
-        if pulled:
-            return pulled_newton(P, pulled, load, q, q_hat, inertia, tolerance, rtol, max_iter)
+        if extras:
+            return extra_newton(P, extras, load, q, q_hat, inertia, tolerance, rtol, max_iter)
         q, iterations, residual, status = kernels.newton(
             P.c1, P.C2, P.S3.reshape(self.r ** 2, self.r), P.W4, load, q,
             q_hat, inertia, tolerance, rtol, ROUNDOFF_FACTOR, max_iter)
@@ -362,12 +377,31 @@ class ReducedModel:
                                _MESSAGES[status].format(max_iter))
 
 
-def pulled_newton(P, pulled, load, q, q_hat, inertia, tolerance, rtol, max_iter):
-    """ReducedModel._newton with cables pulled, [(CablePart, T)]: Newton with the Hessian's
-    negative eigenvalues clamped and a backtracking Armijo search on the energy along the
-    step, its polynomial part the exact quartic in the step length (as kernels.newton) and
-    the cables' T (L(q + t p) - L(q)) on their segments (CablePart.change, free of the
-    difference's cancellation)."""
+class Pulled:
+    """A pulled cable as an extra term of a reduced solve: T L(q) on its CablePart."""
+
+    def __init__(self, part, tension):
+        self.part, self.tension = part, tension
+
+    def derivatives(self, q):
+        """(T dL/dq (r,), T d2L/dq2 (r, r), 0: no round-off floor of its own)."""
+        return self.tension * self.part.slope(q), self.tension * self.part.hessian(q), 0.0
+
+    def change(self, q, step):
+        """T (L(q + step) - L(q)), free of the difference's cancellation."""
+        return self.tension * self.part.change(q, step)
+
+    def limit(self, q, p):
+        return 1.0
+
+
+def extra_newton(P, extras, load, q, q_hat, inertia, tolerance, rtol, max_iter):
+    """ReducedModel._newton with terms beside the polynomial (pulled cables, Pulled; contact,
+    anisofem.reduced.contact.Touching: each with derivatives, change and limit):
+    Newton with the Hessian's negative eigenvalues clamped and a backtracking Armijo search
+    on the energy along the step, its polynomial part the exact quartic in the step length
+    (as kernels.newton) and each term's change, from the share of the step the terms allow
+    (contact: no surface node reaches an obstacle on the way)."""
     r = q.size
     S3 = P.S3.reshape(r * r, r)
     A = kernels.matvec(P.W4, q)
@@ -375,24 +409,28 @@ def pulled_newton(P, pulled, load, q, q_hat, inertia, tolerance, rtol, max_iter)
     residual, status = math.inf, kernels.SPENT
     for it in range(max_iter + 1):
         g, H = kernels.derivatives(P.c1, P.C2, S3, A, q, inertia)
-        cable_g, cable_H = np.zeros(r), np.zeros((r, r))
-        for part, T in pulled:
-            cable_g += T * part.slope(q)
-            cable_H += T * part.hessian(q)
+        extra_g, extra_H = np.zeros(r), np.zeros((r, r))
+        floor = 0.0
+        for term in extras:
+            term_g, term_H, term_floor = term.derivatives(q)
+            extra_g += term_g
+            extra_H += term_H
+            floor = max(floor, term_floor)
         if it == 0:
-            tolerance += rtol * _norm(g + cable_g)
-        g = g + cable_g - load + inertia * (q - q_hat)
+            tolerance += rtol * _norm(g + extra_g)
+        g = g + extra_g - load + inertia * (q - q_hat)
         residual = _norm(g)
         if not math.isfinite(residual):
             status = kernels.NOT_FINITE
             break
-        terms = np.abs(H + cable_H) @ np.abs(q) + np.abs(load) + np.abs(P.c1)
-        if residual <= max(tolerance, ROUNDOFF_FACTOR * eps * r * _norm(terms)):
+        terms = np.abs(H + extra_H) @ np.abs(q) + np.abs(load) + np.abs(P.c1)
+        floor = max(floor, ROUNDOFF_FACTOR * eps * r * _norm(terms))
+        if residual <= max(tolerance, floor):
             status = kernels.CONVERGED
             break
         if it == max_iter:
             break
-        p = -kernels.positive_solve(H + cable_H, g)
+        p = -kernels.positive_solve(H + extra_H, g)
         a1 = float(g @ p)
         if not a1 < 0:
             status = kernels.NO_DESCENT
@@ -401,11 +439,11 @@ def pulled_newton(P, pulled, load, q, q_hat, inertia, tolerance, rtol, max_iter)
         Ap = kernels.matvec(P.W4, p)
         mixed, a4 = kernels.cubic_forms(A, Ap, p)
         a3 = float(p @ (S3 @ p).reshape(r, r) @ p) + 4.0 * mixed
-        pull = float(cable_g @ p)
-        t = 1.0
+        pull = float(extra_g @ p)
+        t = min([1.0] + [term.limit(q, p) for term in extras])
         while t >= kernels.MIN_STEP:
-            cables = sum(T * part.change(q, t * p) for part, T in pulled)
-            if (t * (a2 + t * (a3 + t * a4)) + (cables / t - pull)
+            change = sum(term.change(q, t * p) for term in extras)
+            if (t * (a2 + t * (a3 + t * a4)) + (change / t - pull)
                     <= -(1.0 - kernels.ARMIJO) * a1):
                 break
             t *= 0.5
@@ -505,8 +543,6 @@ def check_polynomial_scene(scene, model):
     whose energy is a polynomial in a reduced model's coordinates (`model` names the
     model)."""
     check_scene(scene)
-    if scene.contact is not None:
-        raise ValueError(f"scene: the {model} does not take contact; step it with the FEM")
     if (scene.elements.model != STVK).any():
         raise ValueError(f"scene: the {model} needs the StVK base material (its energy is a "
                          f"polynomial in the reduced coordinates); this scene has Neo-Hookean "
