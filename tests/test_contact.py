@@ -425,3 +425,70 @@ def test_self_contact_refuses_what_it_cannot_take():
         af.simulate(scene, 1, linear_solver="banded")
     with pytest.raises(TypeError, match="self_contact: expected True or False"):
         af.Contact(self_contact="yes")
+
+
+@pytest.fixture(scope="module")
+def sagging():
+    """The 0.2 m StVK beam clamped at one end 1 cm above the ground, which its tip reaches
+    under gravity (friction 0.3), and its reduced model (6 modes + 10 fitted)."""
+    from anisofem.reduced import ReducedModel
+    beam = af.box_beam(size=(0.2, 0.02, 0.02), cells=(20, 2, 2))
+    mesh = af.TetMesh(beam.vertices - [0, 0, beam.vertices[:, 2].min() - 0.01], beam.tets)
+    material = af.Material(1e5, 0.45, 1000.0, np.array([1.0, 0, 0]), 1e5)
+    scene = af.Scene(mesh, material, gravity=(0, 0, -9.81), fixed=beam.vertices[:, 0] <= 1e-9,
+                     contact=af.Contact([af.Plane(name="ground")], friction=0.3))
+    return scene, ReducedModel(scene, modes=6, snapshots=10)
+
+
+def fem_gap(scene, x):
+    """The nearest any surface node is to an obstacle at x, m."""
+    return float(ContactTerm(scene).distances(x).min())
+
+
+def test_the_reduced_contact_is_the_fems_at_its_positions(sagging):
+    """The reduced barrier and friction at q equal the FEM's at x0 + U q (1e-12), and their
+    reduced gradient and Hessian (a plane: no curvature to clamp) match central differences
+    of the reduced energy within 1e-6."""
+    scene, model = sagging
+    rng = np.random.default_rng(5)
+    q_lag = model.solve()[0]
+    touching = model.contact.touching(q_lag, 0.01)
+    q = q_lag + rng.normal(scale=1e-8, size=model.r)
+    x = model.positions(q)
+    assert 0 < fem_gap(scene, x) < ContactTerm(scene).dhat
+    fem = ContactTerm(scene, model.positions(q_lag), 0.01)
+    assert touching.energy(q) == pytest.approx(fem.energy(x), rel=1e-12)
+    assert fem.friction, "the tip touches the ground: friction is lagged there"
+    g, H, _ = touching.derivatives(q)
+    for _ in range(3):
+        p = rng.normal(size=model.r)
+        p /= np.linalg.norm(p)
+        def richardson(f, h=1e-9):   # fourth-order central differences of f along p
+            return (8 * (f(q + h * p) - f(q - h * p)) - (f(q + 2 * h * p) - f(q - 2 * h * p))
+                    ) / (12 * h)
+        slope = richardson(touching.energy)
+        assert slope == pytest.approx(float(g @ p), rel=1e-6, abs=1e-9 * np.abs(g).sum())
+        change = richardson(lambda at: touching.derivatives(at)[0])
+        assert np.abs(change - H @ p).max() <= 1e-6 * np.abs(H @ p).max()
+
+
+def test_the_reduced_model_rests_on_the_ground_like_the_fem(sagging):
+    """Statics: the reduced tip on the ground within 1e-3 of the FEM's height; a rollout of
+    0.6 s: the tip within 3% of its largest motion, no surface node ever at the ground."""
+    scene, model = sagging
+    tip = af.metrics.end_vertices(scene.mesh, 0, "max")
+    q, report = model.solve()
+    assert report.converged
+    full = af.solve(scene, warn=False).x
+    assert model.positions(q)[tip, 2].mean() == pytest.approx(full[tip, 2].mean(), rel=1e-3)
+    roll = af.simulate(scene, 60, dt=0.01, warn=False)
+    q, w = np.zeros(model.r), np.zeros(model.r)
+    gap, worst = np.inf, 0.0
+    for s in roll.steps:
+        q, w, report = model.step(q, w, 0.01)
+        assert report.converged
+        gap = min(gap, fem_gap(scene, model.positions(q)))
+        worst = max(worst, abs(model.positions(q)[tip, 2].mean() - s.x[tip, 2].mean()))
+    sag = max(abs(s.x[tip, 2].mean() - scene.mesh.vertices[tip, 2].mean()) for s in roll.steps)
+    assert worst <= 0.03 * sag
+    assert gap > 0
