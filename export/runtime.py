@@ -424,6 +424,10 @@ REDUCED_FORMAT = "anisofem-reduced-1"
 #: float64 over 200 steps of the 200-tet cantilever at 1; 2.2% at 16, which stopped at the
 #: first iterate; 0.04% at 0.1, which failed at 0.01).
 FLOOR = 1.0
+#: The contact's round-off floor: CONTACT_FLOOR eps R |H_contact| (R the largest coordinate),
+#: and the share of its energy below which two values of it are round-off (anisofem.reduced.
+#: contact).
+CONTACT_FLOOR, CONTACT_NOISE = 2.0, 1e-12
 
 
 class ReducedSimulator:
@@ -487,6 +491,24 @@ class ReducedSimulator:
         self.W4 = np.array(arrays["W4" + tag], dtype=dtype)
         self.triples = _triple_rows(r)
         self._read_controls(path, header, arrays, r)
+        self.contact = (Contact(path, header, arrays, r, dtype) if header.get("contact")
+                        else None)
+
+    @property
+    def obstacles(self):
+        """The names of the model's obstacles (none without contact)."""
+        return self.contact.names() if self.contact is not None else ()
+
+    def move_obstacle(self, which, position):
+        """Move obstacle `which` (a name or an index) to `position` (3,), m (a plane's
+        point, a sphere's or box's center, a capsule's end a): reached at the next step as far
+        as the body lets it, the rest at later steps."""
+        names = self.obstacles
+        i = names.index(which) if which in names else which
+        if not isinstance(i, (int, np.integer)) or not 0 <= i < len(names):
+            raise ValueError(f"obstacle: no obstacle {which!r}; the model has: "
+                             f"{', '.join(names) or 'none'}")
+        self.contact.move(int(i), position)
 
     def _read_controls(self, path, header, arrays, r):
         """The control arrays (export.writers.reduced), checked; none where the header lists
@@ -600,6 +622,12 @@ class ReducedSimulator:
         tolerance = rtol * (_norm(load) + _norm(w) / dt)
         eps = np.finfo(self.dtype).eps
         x = q_hat.copy()
+        contact = self.contact
+        if contact is not None:     # friction lagged at the step's start, clear of the obstacles
+            start = contact.positions(q)
+            contact.advance(start)
+            friction, smooth = contact.lagged(start, dt), contact.smoothing * dt
+            x = q + contact.limit(start, contact.U @ (q_hat - q)) * (q_hat - q)
         A = self.W4 @ x
         pulled = self._pulled()
         for it in range(max_iter + 1):
@@ -607,9 +635,17 @@ class ReducedSimulator:
             X = (gathered @ x).reshape(self.r, self.r)
             Y = (S3 @ x).reshape(self.r, self.r)
             g = c1 + (C2 + 3.0 * Y + 4.0 * X) @ x
-            cable_g, cable_H = _cable_terms(pulled, x, self.r)
-            if pulled:
-                g = g + cable_g
+            extra_g, extra_H = _cable_terms(pulled, x, self.r)
+            floor = 0.0
+            if contact is not None:
+                xs = contact.positions(x)
+                touch, gs = contact.energy(xs, friction, smooth)
+                contact_g = np.einsum("kir,ki->r", contact.U, gs)
+                contact_H = contact.hessian(xs, friction, smooth)
+                extra_g, extra_H = extra_g + contact_g, extra_H + contact_H
+                floor = CONTACT_FLOOR * eps * float(np.abs(xs).max()) * _norm(contact_H.ravel())
+            if pulled or contact is not None:
+                g = g + extra_g
             if it == 0:
                 tolerance += rtol * _norm(g)
             g += inertia * (x - q_hat) - load
@@ -617,25 +653,36 @@ class ReducedSimulator:
             residual = _norm(g)
             if not np.isfinite(residual):
                 raise FloatingPointError("step: the reduced force is not finite")
-            terms = np.abs(H + cable_H) @ np.abs(x) + np.abs(load) + np.abs(c1)
-            if residual <= max(tolerance, FLOOR * eps * self.r * _norm(terms)):
+            terms = np.abs(H + extra_H) @ np.abs(x) + np.abs(load) + np.abs(c1)
+            if residual <= max(tolerance, floor, FLOOR * eps * self.r * _norm(terms)):
                 self.iterations = it
                 return x, (x - q) / dt
             if it == max_iter:
                 break
-            p = -_positive_solve(H + cable_H, g)
+            p = -_positive_solve(H + extra_H, g)
             a1 = float(g @ p)
             if not a1 < 0:
                 break
             a2 = 0.5 * float(p @ H @ p)              # the quartic's part (with inertia)
-            pull = float(cable_g @ p)
+            pull = float(extra_g @ p)
             Ap = self.W4 @ p
             mixed = float(((gathered @ p).reshape(self.r, self.r) @ p) @ p)
             pure = float(((Ap[self.triples].reshape(self.r * self.r, self.r) @ p)
                           .reshape(self.r, self.r) @ p) @ p)
             a3 = float(p @ (S3 @ p).reshape(self.r, self.r) @ p) + 4.0 * mixed
             t = 1.0
-            while (t * (a2 + t * (a3 + t * pure)) + (_cable_change(pulled, x, t * p) / t - pull)
+
+            def change(t):       # the terms beside the quartic, from t p
+                total = _cable_change(pulled, x, t * p)
+                if contact is not None:
+                    after = contact.energy(contact.positions(x + t * p), friction, smooth)[0]
+                    linear = t * float(contact_g @ p)
+                    total += (linear if abs(after - touch - linear) <= CONTACT_NOISE * max(
+                        abs(after), abs(touch)) else after - touch)
+                return total
+            if contact is not None:
+                t = min(1.0, contact.limit(xs, contact.U @ p))
+            while (t * (a2 + t * (a3 + t * pure)) + (change(t) / t - pull)
                    > -(1.0 - 1e-4) * a1 and t >= 1e-12):
                 t *= 0.5
             if t < 1e-12:
@@ -644,6 +691,238 @@ class ReducedSimulator:
             A = A + t * Ap
         raise FloatingPointError(f"step: Newton stopped at a reduced gradient of {residual:.3g} "
                                  f"after {it} iterations (tolerance {tolerance:.3g})")
+
+
+class Contact:
+    """A reduced model's contact with rigid obstacles (the file's contact entry and arrays;
+    anisofem.physics.contact's method, written again with numpy alone): the IPC barrier
+    kappa A b(d), b(d) = -(d - dhat)^2 ln(d / dhat), at the surface nodes x_s = rest + U q,
+    friction lagged at a step's start (mu lambda f0(|T (x - x_n)|), f0 smoothed below eps =
+    smoothing dt), and the largest share of a step that keeps every node at KEEP of its
+    distance from every obstacle (Newton on the convex distance along the move).
+
+    obstacles: [{kind, name, friction, and its geometry as numpy arrays}], their positions
+    now; move(i, position) sets where obstacle i is to be (a plane's point, a sphere's or a
+    box's center, a capsule's end a: translations), reached at the next step as far as the
+    body lets it (advance)."""
+
+    KEEP = 0.1
+
+    def __init__(self, path, header, arrays, r, dtype):
+        names = header.get("obstacles")
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+            raise ValueError(f"path: {path}.json: obstacles: expected a list of names")
+        checked(path, header, arrays, {"contact_rest": ("float64", ("k", 3)),
+                                       "contact_basis": ("float64", ("k", 3, "r")),
+                                       "contact_area": ("float64", ("k",)),
+                                       "contact_constants": ("float64", (4,)),
+                                       "obstacle_kinds": ("uint8", (len(names),)),
+                                       "obstacle_geometry": ("float64", (len(names), 15)),
+                                       "obstacle_friction": ("float64", (len(names),))})
+        self.x0 = np.array(arrays["contact_rest"])
+        self.U = np.array(arrays["contact_basis"], dtype=dtype)
+        self.area = np.array(arrays["contact_area"])
+        self.dhat, self.kappa, self.mu, self.smoothing = (float(v) for v in
+                                                          arrays["contact_constants"])
+        kinds = tuple(OBSTACLE_KINDS)
+        self.obstacles = []
+        for name, code, row, mu in zip(names, arrays["obstacle_kinds"],
+                                       arrays["obstacle_geometry"], arrays["obstacle_friction"]):
+            if code >= len(kinds):
+                raise ValueError(f"path: {path}.json: array obstacle_kinds: obstacle {name!r} "
+                                 f"has kind {code}, expected 0 to {len(kinds) - 1}")
+            entry = {"kind": kinds[code], "name": name, "friction": None if mu < 0 else mu}
+            at = 0
+            for key, size in OBSTACLE_KINDS[kinds[code]]:
+                entry[key] = np.array(row[at:at + size]) if size > 1 else float(row[at])
+                at += size
+            if entry["kind"] == "box":
+                entry["rotation"] = entry["rotation"].reshape(3, 3)
+            self.obstacles.append(entry)
+        self.targets = [None] * len(self.obstacles)
+
+    def names(self):
+        return tuple(o["name"] for o in self.obstacles)
+
+    def move(self, i, position):
+        """Obstacle i to be at `position` (3,), m, from the next step on."""
+        self.targets[i] = _real(position, f"obstacle {self.obstacles[i]['name']!r} position",
+                                (3,))
+
+    def positions(self, q):
+        return self.x0 + self.U @ q
+
+    def advance(self, xs):
+        """Move each obstacle toward its target as far as the nodes at xs (k, 3) let it: the
+        share of the move that keeps every node at KEEP of its distance (the body held)."""
+        for i, (o, target) in enumerate(zip(self.obstacles, self.targets)):
+            if target is None:
+                continue
+            key = OBSTACLE_KINDS[o["kind"]][0][0]
+            delta = target - o[key]
+            d, _, _ = obstacle_geometry(o, xs, False)
+            share = float(first_touch(o, xs, np.broadcast_to(-delta, xs.shape),
+                                      self.KEEP * d).min(initial=1.0))
+            o[key] = o[key] + share * delta
+            if o["kind"] == "capsule":
+                o["b"] = o["b"] + share * delta
+            self.targets[i] = None if share >= 1.0 else target
+
+    def lagged(self, xs, dt):
+        """The friction of a step of dt s lagged at xs (k, 3): [(mu lambda, rows, T, x_lag)]."""
+        out = []
+        for o in self.obstacles:
+            mu = self.mu if o["friction"] is None else float(o["friction"])
+            if mu <= 0:
+                continue
+            d, n, _ = obstacle_geometry(o, xs, False)
+            rows = np.flatnonzero((d > 0) & (d < self.dhat))
+            if rows.size:
+                force = -self.kappa * self.area[rows] * _barrier_slope(d[rows], self.dhat)
+                T = np.eye(3) - n[rows, :, None] * n[rows, None, :]
+                out.append((mu * force, rows, T, xs[rows].copy()))
+        return out
+
+    def energy(self, xs, friction, eps):
+        """(energy J, gradient (k, 3) N) at the nodes xs (k, 3); inf where one reached an
+        obstacle."""
+        total, g = 0.0, np.zeros_like(xs)
+        for o in self.obstacles:
+            d, n, _ = obstacle_geometry(o, xs, False)
+            if (d <= 0).any():
+                return np.inf, g
+            near = d < self.dhat
+            a, dn = self.area[near], d[near]
+            total += self.kappa * float(a @ (-(dn - self.dhat) ** 2 * np.log(dn / self.dhat)))
+            g[near] += (self.kappa * a * _barrier_slope(dn, self.dhat))[:, None] * n[near]
+        for weight, rows, T, start in friction:
+            u = np.einsum("kij,kj->ki", T, xs[rows] - start)
+            y = np.sqrt(np.einsum("ij,ij->i", u, u))
+            total += float(weight @ np.where(y < eps, -y ** 3 / (3 * eps * eps) + y * y / eps
+                                             + eps / 3.0, y))
+            g[rows] += (weight * _friction_slope(y, eps))[:, None] * u
+        return total, g
+
+    def hessian(self, xs, friction, eps):
+        """(r, r) the reduced Hessian of the barrier and friction at xs: each node's 3 x 3
+        block clamped to positive semi-definite, projected on its basis rows."""
+        H = np.zeros((len(xs), 3, 3))
+        for o in self.obstacles:
+            d, n, curvature = obstacle_geometry(o, xs, True)
+            near = (d > 0) & (d < self.dhat)
+            a, dn, nn = self.area[near], d[near], n[near]
+            b1 = _barrier_slope(dn, self.dhat)
+            b2 = (-2.0 * np.log(dn / self.dhat) - 4.0 * (dn - self.dhat) / dn
+                  + (dn - self.dhat) ** 2 / (dn * dn))
+            H[near] += self.kappa * a[:, None, None] * (
+                b2[:, None, None] * nn[:, :, None] * nn[:, None, :]
+                + b1[:, None, None] * curvature[near])
+        for weight, rows, T, start in friction:
+            u = np.einsum("kij,kj->ki", T, xs[rows] - start)
+            y = np.sqrt(np.einsum("ij,ij->i", u, u))
+            unit = u / np.maximum(y, 1e-300)[:, None]
+            along = np.where(y < eps, -y / (eps * eps), -1.0 / np.maximum(y, 1e-300))
+            H[rows] += weight[:, None, None] * (_friction_slope(y, eps)[:, None, None] * T
+                                                + along[:, None, None] * unit[:, :, None]
+                                                * unit[:, None, :])
+        live = np.flatnonzero(np.abs(H).reshape(len(H), -1).max(axis=1) > 0)
+        lam, V = np.linalg.eigh(H[live])
+        blocks = np.einsum("kij,kj,klj->kil", V, np.maximum(lam, 0.0), V)
+        return np.einsum("kir,kij,kjs->rs", self.U[live], blocks, self.U[live])
+
+    def limit(self, xs, ds):
+        """The largest share in (0, 1] of the move ds (k, 3) from xs keeping every node at
+        KEEP of its distance from every obstacle."""
+        moving = np.einsum("ij,ij->i", ds, ds) > 0
+        share = 1.0
+        for o in self.obstacles:
+            d, _, _ = obstacle_geometry(o, xs[moving], False)
+            share = min(share, float(first_touch(o, xs[moving], ds[moving],
+                                                 self.KEEP * d).min(initial=1.0)))
+        return share
+
+
+#: Each obstacle kind (in the order of obstacle_kinds' codes) and its geometry's entries in a
+#: row of obstacle_geometry, with their sizes; the first is where it is.
+OBSTACLE_KINDS = {"plane": (("point", 3), ("normal", 3)),
+                  "sphere": (("center", 3), ("radius", 1)),
+                  "box": (("center", 3), ("half", 3), ("rotation", 9)),
+                  "capsule": (("a", 3), ("b", 3), ("radius", 1))}
+
+
+def obstacle_geometry(o, x, curvature):
+    """(d (k,), normal (k, 3), Hessian of d (k, 3, 3) or None) of points x (k, 3) from the
+    obstacle o: a plane's signed distance; a sphere, capsule or box as a convex core (point,
+    segment, box) grown by a radius, from the core's closest point."""
+    k = len(x)
+    if o["kind"] == "plane":
+        return ((x - o["point"]) @ o["normal"], np.broadcast_to(o["normal"], x.shape),
+                np.zeros((k, 3, 3)) if curvature else None)
+    J = np.zeros((k, 3, 3))
+    inside = np.zeros(k, bool)
+    radius = 0.0
+    if o["kind"] == "sphere":
+        c, radius = np.broadcast_to(o["center"], x.shape), float(o["radius"])
+    elif o["kind"] == "capsule":
+        axis = o["b"] - o["a"]
+        length = float(np.linalg.norm(axis))
+        axis = axis / length
+        t = (x - o["a"]) @ axis
+        c = o["a"] + np.clip(t, 0.0, length)[:, None] * axis
+        J[(t > 0) & (t < length)] = np.outer(axis, axis)
+        radius = float(o["radius"])
+    else:
+        R = o["rotation"]
+        local = (x - o["center"]) @ R
+        within = np.abs(local) < o["half"]
+        c = o["center"] + np.clip(local, -o["half"], o["half"]) @ R.T
+        J = np.einsum("ia,ka,ja->kij", R, within.astype(float), R)
+        inside = within.all(axis=1)
+    r = x - c
+    delta = np.sqrt(np.einsum("ij,ij->i", r, r))
+    safe = np.where(delta > 0, delta, 1.0)
+    n = r / safe[:, None]
+    d = delta - radius
+    if inside.any():       # within a box: minus the depth to its nearest face
+        local = (x[inside] - o["center"]) @ o["rotation"]
+        depth = o["half"] - np.abs(local)
+        axis = np.argmin(depth, axis=1)
+        rows = np.arange(len(axis))
+        d[inside] = -depth[rows, axis]
+        n[inside] = o["rotation"][:, axis].T * np.sign(local[rows, axis])[:, None]
+    if not curvature:
+        return d, n, None
+    H = (np.eye(3) - J - n[:, :, None] * n[:, None, :]) / safe[:, None, None]
+    H[inside | (delta == 0)] = 0.0
+    return d, n, H
+
+
+def first_touch(o, x, dx, floor):
+    """(k,) the largest s in [0, 1] for each point x (k, 3) moving by s dx that keeps its
+    distance from obstacle o above floor (k,) all the way: Newton on the convex distance from
+    s = 0, which never passes its first root."""
+    s = np.zeros(len(x))
+    live = np.arange(len(x))
+    for _ in range(60):
+        if not live.size:
+            break
+        d, n, _ = obstacle_geometry(o, x[live] + s[live, None] * dx[live], False)
+        phi = d - floor[live]
+        slope = np.einsum("ij,ij->i", n, dx[live])
+        clear = slope >= 0.0
+        target = np.where(clear, 1.0, s[live] - phi / np.where(clear, -1.0, slope))
+        s[live] = np.minimum(target, 1.0)
+        live = live[~(clear | (target >= 1.0) | (phi <= 1e-3 * floor[live]))]
+    return s
+
+
+def _barrier_slope(d, dhat):
+    return -2.0 * (d - dhat) * np.log(d / dhat) - (d - dhat) ** 2 / d
+
+
+def _friction_slope(y, eps):
+    """f0'(y) / y of the smoothed friction."""
+    return np.where(y < eps, -y / (eps * eps) + 2.0 / eps, 1.0 / np.maximum(y, 1e-300))
 
 
 def control_vector(values, names, now):

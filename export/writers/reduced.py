@@ -73,8 +73,11 @@ def write(model, path, title="", gravity=None, display=None):
               "tets": mesh.tets.astype(np.int32),
               "surface": runtime.surface_triangles(mesh.vertices, mesh.tets).astype(np.int32)}
     arrays.update(control_arrays(model.parts, r))
+    contact, touching = contact_arrays(model)
+    arrays.update(touching)
     header = {"model_format": runtime.REDUCED_FORMAT, "title": title, "n": mesh.n_vertices,
-              "controls": [p.name for p in model.parts],
+              "controls": [p.name for p in model.parts], "contact": contact,
+              "obstacles": [o["name"] for o in contact["obstacles"]] if contact else [],
               "m": mesh.n_tets, "physics_tets": scene.mesh.n_tets, "r": r,
               "modes": len(model.frequencies), "snapshots": model.fitted,
               "frequencies": [float(f) for f in model.frequencies], "c0": float(P.c0),
@@ -115,6 +118,47 @@ def control_arrays(parts, r):
                        "cable_a": np.concatenate([c.a for c in cables]),
                        "cable_D": np.concatenate([c.D for c in cables])})
     return arrays
+
+
+def contact_arrays(model):
+    """(the header's contact entry or None, the contact arrays) of a model with obstacles:
+    contact_rest (k, 3) m and contact_basis (k, 3, r) the surface nodes of the physics mesh,
+    contact_area (k,) m^2 their shares of its surface, contact_constants (4,): the distance
+    dhat (m), stiffness kappa (N/m^3), friction and smoothing velocity (m/s); obstacle_kinds
+    (o,) uint8 (OBSTACLE_CODES), obstacle_geometry (o, 15) m (OBSTACLE_GEOMETRY's entries in
+    order, zero-padded; a box's rotation row-major), obstacle_friction (o,) (-1: the
+    contact's). The header's contact entry names the obstacles and repeats their geometry."""
+    if model.contact is None:
+        return None, {}
+    term, contact = model.contact.term, model.scene.contact
+    rows, entries = [], []
+    for o in term.obstacles:
+        values = [np.asarray(getattr(o, key), dtype=float).ravel()
+                  for key in OBSTACLE_GEOMETRY[o.kind]]
+        row = np.concatenate(values)
+        rows.append(np.concatenate([row, np.zeros(15 - row.size)]))
+        entries.append({"kind": o.kind, "name": o.name, "friction": o.friction,
+                        **{key: v.tolist() for key, v in zip(OBSTACLE_GEOMETRY[o.kind],
+                                                              values)}})
+    header = {"distance": term.dhat, "stiffness": term.kappa, "friction": contact.friction,
+              "smoothing": term.smoothing(1.0), "obstacles": entries}
+    arrays = {"contact_rest": model.contact.x0, "contact_basis": model.contact.U,
+              "contact_area": term.area,
+              "contact_constants": np.array([term.dhat, term.kappa, contact.friction,
+                                             term.smoothing(1.0)]),
+              "obstacle_kinds": np.array([OBSTACLE_CODES[o.kind] for o in term.obstacles],
+                                         np.uint8),
+              "obstacle_geometry": np.array(rows),
+              "obstacle_friction": np.array([-1.0 if o.friction is None else o.friction
+                                             for o in term.obstacles])}
+    return header, arrays
+
+
+#: Each obstacle kind's geometry in a model file, in the order the runtimes read it, and its
+#: code in obstacle_kinds.
+OBSTACLE_GEOMETRY = {"plane": ("point", "normal"), "sphere": ("center", "radius"),
+                     "box": ("center", "half", "rotation"), "capsule": ("a", "b", "radius")}
+OBSTACLE_CODES = {"plane": 0, "sphere": 1, "box": 2, "capsule": 3}
 
 
 #: control_kinds' code of each kind of control (pressures, activations, cables: in that order).
