@@ -109,7 +109,7 @@ web/scenes/tentacle-reduced.json: examples/scenes/tentacle.toml examples/scenes/
 # the C runtime (export/c, less its file loader) built to WebAssembly by zig's C compiler (the
 # ziglang wheel from PyPI): the page's reduced and framed models step with it
 ZIG_SPEC ?= ziglang==0.17.1
-WASM_SOURCES := $(addprefix export/c/,arrays.c linalg.c reduced.c reach.c framed.c model.c)
+WASM_SOURCES := $(addprefix export/c/,arrays.c linalg.c reduced.c reach.c contact.c framed.c model.c)
 
 $(VENV)/.zig: $(VENV)/.fem
 	$(PY) -m pip install --quiet "$(ZIG_SPEC)"

@@ -25,7 +25,8 @@ from .runtime import control_vector
 FOLDER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "c")
 #: The runtime's sources, in build order, and its headers.
 SOURCES = tuple(os.path.join(FOLDER, f"{name}.c") for name in
-                ("arrays", "linalg", "reduced", "reach", "framed", "model", "files"))
+                ("arrays", "linalg", "reduced", "reach", "contact", "framed", "model",
+                 "files"))
 HEADERS = (os.path.join(FOLDER, "anisofem.h"), os.path.join(FOLDER, "af_internal.h"))
 #: The kinds af_kind returns (anisofem.h).
 REDUCED, FRAMED = 1, 2
@@ -121,6 +122,10 @@ def library(lib=None):
             "af_control_name": (char_p, [handle, ctypes.c_int]),
             "af_control_value": (ctypes.c_double, [handle, ctypes.c_int]),
             "af_set_controls": (ctypes.c_int, [handle, _DOUBLE_P]),
+            "af_obstacles": (ctypes.c_int, [handle]),
+            "af_obstacle_name": (char_p, [handle, ctypes.c_int]),
+            "af_obstacle_position": (ctypes.c_int, [handle, ctypes.c_int, _DOUBLE_P]),
+            "af_move_obstacle": (ctypes.c_int, [handle, ctypes.c_int, _DOUBLE_P]),
             "af_reach": (ctypes.c_int, [handle, ctypes.POINTER(ctypes.c_int), _DOUBLE_P,
                                         ctypes.c_int, _DOUBLE_P, _DOUBLE_P, _DOUBLE_P,
                                         ctypes.c_double, _DOUBLE_P, _DOUBLE_P]),
@@ -264,6 +269,35 @@ class CReducedSimulator(CModel):
     def positions(self, q):
         """Positions (n, 3), m, of coordinates q (r,)."""
         return self._positions(q)  # af_positions reads a state's first half: q
+
+    @property
+    def obstacles(self):
+        """The names of the model's obstacles (none without contact)."""
+        c, h = self._c, self._handle
+        return tuple(c.af_obstacle_name(h, i).decode() for i in range(c.af_obstacles(h)))
+
+    def obstacle_position(self, which):
+        """(3,) where obstacle `which` (a name or an index) is now, m."""
+        out = np.zeros(3)
+        self._check(self._c.af_obstacle_position(self._handle, self._obstacle(which),
+                                                 _pointer(out)), "af_obstacle_position")
+        return out
+
+    def move_obstacle(self, which, position):
+        """af_move_obstacle: obstacle `which` (a name or an index) to be at position (3,),
+        m, as runtime.ReducedSimulator.move_obstacle."""
+        at = np.ascontiguousarray(position, dtype=np.float64)
+        self._check(self._c.af_move_obstacle(self._handle, self._obstacle(which), _pointer(at)),
+                    "af_move_obstacle")
+
+    def _obstacle(self, which):
+        names = self.obstacles
+        if which in names:
+            return names.index(which)
+        if isinstance(which, (int, np.integer)):
+            return int(which)
+        raise ValueError(f"obstacle: no obstacle {which!r}; the model has: "
+                         f"{', '.join(names) or 'none'}")
 
     def reach(self, nodes, weights, target, low, high, tolerance=0.0):
         """af_reach: the controls within [low, high] (k,) that bring the effector sum_i

@@ -93,6 +93,33 @@ int af_reduced_check_controls(const af_reduced *m, const double *values, const c
 int af_reduced_set_controls(af_reduced *m, const double *values, const char *names, char *error,
                             size_t error_size);
 
+/* A reduced model's contact with rigid obstacles (contact.c): NULL where the file has none
+ * (failed 0), or NULL with a message where its arrays are wrong (failed 1). */
+typedef struct af_contact af_contact;
+af_contact *af_contact_open(const af_file *f, int r, int *failed);
+void af_contact_close(af_contact *c);
+int af_contact_count(const af_contact *c);
+const char *af_contact_name(const af_contact *c, int i);
+void af_contact_position(const af_contact *c, int i, double *position);
+/* Obstacle i to be at position (3) from the next step on, as far as the body lets it. */
+void af_contact_move(af_contact *c, int i, const double *position);
+/* A solve from q: the obstacles moved toward their targets, and with dt > 0 friction lagged
+ * at q for a step of dt s. */
+void af_contact_start(af_contact *c, const double *q, double dt);
+/* The barrier's and friction's energy at q (inf where a node reached an obstacle), their
+ * reduced gradient (*g, r) and PSD-clamped Hessian (*H, r x r) in the contact's scratch, and
+ * the floor R |H| (R the largest coordinate) of their round-off over eps. */
+double af_contact_terms(af_contact *c, const double *q, const double **g, const double **H,
+                        double *floor);
+double af_contact_energy(af_contact *c, const double *q);
+/* E(q + step) - E(q) (energy: E(q), after af_contact_terms at q), its first-order part
+ * where the two differ by round-off. */
+double af_contact_change(af_contact *c, const double *q, const double *step, double energy);
+/* The largest share in (0, 1] of the step p (r) from q keeping every node clear. */
+double af_contact_limit(af_contact *c, const double *q, const double *p);
+
+af_contact *af_reduced_contact(const af_reduced *m);
+
 typedef struct af_framed af_framed;
 af_framed *af_framed_open(const af_file *f, int n, const double *rest, const double *masses);
 void af_framed_close(af_framed *m);

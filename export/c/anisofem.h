@@ -111,6 +111,17 @@ AF_API int af_set_controls(af_model *model, const double *values);
 AF_API int af_reach(af_model *model, const int *nodes, const double *weights, int count,
                     const double *target, const double *low, const double *high,
                     double tolerance, double *controls, double *position);
+/* Rigid obstacles a reduced model's surface cannot pass (a plane, sphere, box or capsule, as
+ * the file was written; barrier and friction in every step): their number (0 without
+ * contact, and for a framed model), the name of obstacle i (NULL out of range), where it is
+ * (3 doubles: a plane's point, a sphere's or box's center, a capsule's end a). af_move_obstacle
+ * sets where obstacle i is to be (a translation): the next step moves it there as far as the
+ * body lets it (every node kept at a tenth of its gap), the rest of the way at later steps.
+ * AF_BAD_INPUT for an index out of range or a position that is not finite. */
+AF_API int af_obstacles(const af_model *model);
+AF_API const char *af_obstacle_name(const af_model *model, int i);
+AF_API int af_obstacle_position(const af_model *model, int i, double *position);
+AF_API int af_move_obstacle(af_model *model, int i, const double *position);
 AF_API int af_iterations(const af_model *model);
 /* Why the last af_step or af_set_* failed, "" if it did not. */
 AF_API const char *af_error(const af_model *model);

@@ -372,6 +372,39 @@ int af_set_controls(af_model *m, const double *values) {
     return af_reduced_set_controls(m->reduced, values, m->control_names, m->error, ERROR_SIZE);
 }
 
+int af_obstacles(const af_model *m) {
+    return m->kind == AF_REDUCED ? af_contact_count(af_reduced_contact(m->reduced)) : 0;
+}
+
+const char *af_obstacle_name(const af_model *m, int i) {
+    if (i < 0 || i >= af_obstacles(m)) return NULL;
+    return af_contact_name(af_reduced_contact(m->reduced), i);
+}
+
+int af_obstacle_position(const af_model *m, int i, double *position) {
+    if (i < 0 || i >= af_obstacles(m) || !position) return AF_BAD_INPUT;
+    af_contact_position(af_reduced_contact(m->reduced), i, position);
+    return AF_OK;
+}
+
+int af_move_obstacle(af_model *m, int i, const double *position) {
+    int a;
+    m->error[0] = '\0';
+    if (i < 0 || i >= af_obstacles(m)) {
+        af_say(m->error, ERROR_SIZE, "obstacle: %d is not one of the model's %d", i,
+               af_obstacles(m));
+        return AF_BAD_INPUT;
+    }
+    for (a = 0; a < 3; a++)
+        if (!position || !isfinite(position[a])) {
+            af_say(m->error, ERROR_SIZE, "obstacle '%s': its position must be 3 finite numbers",
+                   af_obstacle_name(m, i));
+            return AF_BAD_INPUT;
+        }
+    af_contact_move(af_reduced_contact(m->reduced), i, position);
+    return AF_OK;
+}
+
 /* The default reach tolerance: this share of the rest shape's largest extent. */
 #define REACH_TOLERANCE 1e-4
 #define REACH_ITERATIONS 50

@@ -18,6 +18,7 @@
 #include "af_internal.h"
 
 #define FLOOR 1.0
+#define CONTACT_FLOOR 2.0
 #define SMALLEST_STEP 1e-12
 #define CLAMP 1e-8
 
@@ -36,6 +37,7 @@ struct af_reduced {
     double *values;              /* (k,) the controls' values now */
     double *part1, *part2, *part3;  /* (k, r), (k, r, r), (pressures, r, r, r) */
     double *base1, *base2, *base3;  /* the file's c1, C2, S3 (c1, C2, S3: with the controls) */
+    af_contact *contact;         /* obstacles, or NULL */
 };
 
 void af_reduced_close(af_reduced *m) {
@@ -44,6 +46,7 @@ void af_reduced_close(af_reduced *m) {
     free(m->constant); free(m->kinds); free(m->values); free(m->part1); free(m->part2);
     free(m->part3); free(m->base1); free(m->base2); free(m->base3); free(m->segments);
     free(m->cable_a); free(m->cable_D);
+    af_contact_close(m->contact);
     free(m);
 }
 
@@ -203,6 +206,11 @@ af_reduced *af_reduced_open(const af_file *f, int n, const double *rest) {
         goto fail;
     }
     if (!open_controls(m, f)) goto fail;
+    {
+        int failed;
+        m->contact = af_contact_open(f, (int)r, &failed);
+        if (failed) goto fail;
+    }
     return m;
 shape:
     af_say(f->error, f->error_size, "%s: the arrays c1, C2, S3 and W4%s do not fit a basis of "
@@ -214,6 +222,8 @@ fail:
 }
 
 int af_reduced_size(const af_reduced *m) { return m->r; }
+
+af_contact *af_reduced_contact(const af_reduced *m) { return m->contact; }
 
 void af_reduced_basis_rows(const af_reduced *m, const int *nodes, const double *weights,
                            int count, double *e0, double *E) {
@@ -395,15 +405,27 @@ static int minimize(af_reduced *m, double *x, const double *q_hat, double inerti
     double residual = 0.0, eps = 2.220446049250313e-16;
     w4_times(m, x, A);
     for (it = 0; it <= max_iter; it++) {
-        double a1, a2, a3, pure, mixed, step = 1.0, floor_, pull = 0.0;
-        int pulled = m->cables && cable_terms(m, x, cg, cH);
+        double a1, a2, a3, pure, mixed, step = 1.0, floor_, pull = 0.0, touch = 0.0,
+               reach = 0.0;
+        int pulled = m->cables && cable_terms(m, x, cg, cH), extra = pulled || m->contact;
+        if (m->contact) {    /* the contact's gradient and Hessian join the cables' */
+            const double *tg, *tH;
+            if (!pulled) {
+                for (i = 0; i < r; i++) cg[i] = 0.0;
+                for (i = 0; i < rr; i++) cH[i] = 0.0;
+            }
+            touch = af_contact_terms(m->contact, x, &tg, &tH, &reach);
+            for (i = 0; i < r; i++) cg[i] += tg[i];
+            for (i = 0; i < rr; i++) cH[i] += tH[i];
+            reach *= CONTACT_FLOOR * eps;
+        }
         af_contract(A, x, X, r);
         s3_times(m, x, Y);
         for (i = 0; i < r; i++) {
             double s = m->c1[i];
             for (k = 0; k < r; k++)
                 s += (m->C2[i * r + k] + 3.0 * Y[i * r + k] + 4.0 * X[i * r + k]) * x[k];
-            g[i] = pulled ? s + cg[i] : s;
+            g[i] = extra ? s + cg[i] : s;
         }
         if (it == 0) tolerance += rtol * sqrt(af_dot(g, g, r));
         for (i = 0; i < r; i++) {
@@ -412,7 +434,7 @@ static int minimize(af_reduced *m, double *x, const double *q_hat, double inerti
                 H[i * r + k] = m->C2[i * r + k] + 6.0 * Y[i * r + k] + 12.0 * X[i * r + k]
                                + (i == k ? inertia : 0.0);
         }
-        if (pulled)      /* cH: the whole Hessian; H keeps the quartic's part for the search */
+        if (extra)       /* cH: the whole Hessian; H keeps the quartic's part for the search */
             for (i = 0; i < rr; i++) cH[i] += H[i];
         residual = sqrt(af_dot(g, g, r));
         if (!isfinite(residual)) {
@@ -421,30 +443,37 @@ static int minimize(af_reduced *m, double *x, const double *q_hat, double inerti
             return AF_NOT_CONVERGED;
         }
         for (i = 0; i < r; i++) {
-            const double *row = pulled ? cH + i * r : H + i * r;
+            const double *row = extra ? cH + i * r : H + i * r;
             double s = 0.0;
             for (k = 0; k < r; k++) s += fabs(row[k]) * fabs(x[k]);
             terms[i] = s + fabs(load[i]) + fabs(m->c1[i]);
         }
         floor_ = FLOOR * eps * (double)r * sqrt(af_dot(terms, terms, r));
+        if (reach > floor_) floor_ = reach;
         if (residual <= (tolerance > floor_ ? tolerance : floor_)) return (int)it;
         if (it == max_iter) break;
-        af_newton_direction(pulled ? cH : H, g, p, L, V, lam, J, t1, r, CLAMP, 0);
+        af_newton_direction(extra ? cH : H, g, p, L, V, lam, J, t1, r, CLAMP, 0);
         a1 = af_dot(g, p, r);
         if (!(a1 < 0.0)) break;
         a2 = 0.5 * form(H, p, r);
-        if (pulled) pull = af_dot(cg, p, r);
+        if (extra) pull = af_dot(cg, p, r);
         w4_times(m, p, Ap);
         cubic_forms(A, Ap, p, r, &mixed, &pure);
         s3_times(m, p, Y);
         a3 = form(Y, p, r) + 4.0 * mixed;
+        if (m->contact) {
+            double share = af_contact_limit(m->contact, x, p);
+            if (share < step) step = share;
+        }
         while (step >= SMALLEST_STEP) {
-            double cables = 0.0;
-            if (pulled) {
+            double beside = 0.0;    /* the cables' and the contact's change, less its slope */
+            if (extra) {
                 for (k = 0; k < r; k++) ts[k] = step * p[k];
-                cables = cable_change(m, x, ts) / step - pull;
+                if (pulled) beside += cable_change(m, x, ts);
+                if (m->contact) beside += af_contact_change(m->contact, x, ts, touch);
+                beside = beside / step - pull;
             }
-            if (!(step * (a2 + step * (a3 + step * pure)) + cables > -(1.0 - AF_ARMIJO) * a1))
+            if (!(step * (a2 + step * (a3 + step * pure)) + beside > -(1.0 - AF_ARMIJO) * a1))
                 break;
             step *= 0.5;
         }
@@ -466,6 +495,13 @@ int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force,
     for (k = 0; k < r; k++) load[k] = m->constant[k];
     if (force) project(m, force, load);
     for (k = 0; k < r; k++) x[k] = q_hat[k] = q[k] + dt * w[k];
+    if (m->contact) {      /* friction lagged at q; the start clear of the obstacles */
+        double share;
+        af_contact_start(m->contact, q, dt);
+        for (k = 0; k < r; k++) x[k] = q_hat[k] - q[k];
+        share = af_contact_limit(m->contact, q, x);
+        for (k = 0; k < r; k++) x[k] = q[k] + share * x[k];
+    }
     result = minimize(m, x, q_hat, 1.0 / (dt * dt),
                       load, rtol * (sqrt(af_dot(load, load, r)) + sqrt(af_dot(w, w, r)) / dt),
                       rtol, max_iter, error, error_size);
@@ -480,6 +516,7 @@ int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force,
 int af_reduced_static(af_reduced *m, double *q, double rtol, int max_iter, char *error,
                       size_t error_size) {
     long r = m->r;
+    if (m->contact) af_contact_start(m->contact, q, 0.0);
     return minimize(m, q, NULL, 0.0, m->constant,
                     rtol * sqrt(af_dot(m->constant, m->constant, r)), rtol, max_iter, error,
                     error_size);

@@ -1,0 +1,500 @@
+/* A reduced model's contact with rigid obstacles, as export/runtime.py's Contact steps it
+ * (anisofem.physics.contact's method): the IPC barrier kappa A b(d), b(d) = -(d - dhat)^2
+ * ln(d / dhat), at the surface nodes x_s = rest + U q; friction lagged at a step's start, mu
+ * lambda f0(|T (x - x_n)|) with f0 smoothed below eps = smoothing dt; the largest share of a
+ * step that keeps every node at KEEP of its distance from every obstacle (Newton on the convex
+ * distance along the move, which never passes its first root). Obstacles: a plane, and a
+ * sphere, box or capsule as a convex core grown by a radius; af_contact_move sets where one
+ * is to be, reached as far as the body lets it at the next step's start. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "af_internal.h"
+
+#define KEEP 0.1
+#define TOUCH_ITERATIONS 60
+#define TOUCH_TOLERANCE 1e-3
+#define GEOMETRY 15
+#define NOISE 1e-12      /* the share of the energy below which two values are round-off */
+
+enum { PLANE, SPHERE, BOX, CAPSULE };
+
+typedef struct {
+    int node;                    /* the surface node (row of contact_rest) */
+    double weight, T[9], start[3];
+} lag_t;
+
+struct af_contact {
+    long k, r;
+    int count;                   /* obstacles */
+    double *rest, *U, *area;     /* (k, 3), (k, 3, r), (k,) */
+    double dhat, kappa, mu, smoothing, eps;
+    unsigned char *kinds;
+    double *geometry, *friction; /* (count, 15), (count,) */
+    double *target;              /* (count, 3) where each is to be */
+    unsigned char *moving;       /* (count,) whether it has a target */
+    lag_t *lags;
+    long lagged;
+    char *names;                 /* the obstacles' names, each ended by a NUL */
+    double *xs, *gs, *ds;        /* scratch (k, 3) each */
+    double *g, *H, *qt;          /* the terms' gradient (r), Hessian (r, r); a point (r) */
+};
+
+void af_contact_close(af_contact *c) {
+    if (!c) return;
+    free(c->rest); free(c->U); free(c->area); free(c->kinds); free(c->geometry);
+    free(c->friction); free(c->target); free(c->moving); free(c->lags); free(c->xs);
+    free(c->gs); free(c->ds); free(c->names); free(c->g); free(c->H); free(c->qt);
+    free(c);
+}
+
+af_contact *af_contact_open(const af_file *f, int r, int *failed) {
+    long shape[4], k;
+    double *constants = NULL;
+    int i, count = 0;
+    const char *v;
+    af_contact *c;
+    *failed = 0;
+    if (!af_has_array(f, "contact_rest", 0)) return NULL;
+    *failed = 1;
+    if (!(c = (af_contact *)calloc(1, sizeof *c))) {
+        af_say(f->error, f->error_size, "no memory for a model's contact");
+        return NULL;
+    }
+    if (!(v = af_top_value(f->json, "obstacles")) || !(c->names = af_string_list(v, &count))) {
+        af_say(f->error, f->error_size, "%s: obstacles: expected a list of names", f->name);
+        goto fail;
+    }
+    c->r = r;
+    c->count = count;
+    if (!(c->rest = (double *)af_array(f, "contact_rest", 0, "float64", 2, shape))) goto fail;
+    k = c->k = shape[0];
+    if (shape[1] != 3) goto shape;
+    if (!(c->U = (double *)af_array(f, "contact_basis", 0, "float64", 3, shape))) goto fail;
+    if (shape[0] != k || shape[1] != 3 || shape[2] != r) goto shape;
+    if (!(c->area = (double *)af_array(f, "contact_area", 0, "float64", 1, shape))) goto fail;
+    if (shape[0] != k) goto shape;
+    if (!(constants = (double *)af_array(f, "contact_constants", 0, "float64", 1, shape)))
+        goto fail;
+    if (shape[0] != 4) goto shape;
+    c->dhat = constants[0];
+    c->kappa = constants[1];
+    c->mu = constants[2];
+    c->smoothing = constants[3];
+    free(constants);
+    constants = NULL;
+    if (!(c->kinds = (unsigned char *)af_array(f, "obstacle_kinds", 0, "uint8", 1, shape)))
+        goto fail;
+    if (shape[0] != count) goto shape;
+    for (i = 0; i < count; i++)
+        if (c->kinds[i] > CAPSULE) {
+            af_say(f->error, f->error_size, "%s: array obstacle_kinds: obstacle %d has kind %d, "
+                   "expected 0 to 3", f->name, i, c->kinds[i]);
+            goto fail;
+        }
+    if (!(c->geometry = (double *)af_array(f, "obstacle_geometry", 0, "float64", 2, shape)))
+        goto fail;
+    if (shape[0] != count || shape[1] != GEOMETRY) goto shape;
+    if (!(c->friction = (double *)af_array(f, "obstacle_friction", 0, "float64", 1, shape)))
+        goto fail;
+    if (shape[0] != count) goto shape;
+    c->target = (double *)calloc((size_t)count * 3 + 1, sizeof(double));
+    c->moving = (unsigned char *)calloc((size_t)count + 1, 1);
+    c->lags = (lag_t *)malloc(((size_t)k * (size_t)count + 1) * sizeof(lag_t));
+    c->xs = (double *)malloc((size_t)k * 3 * sizeof(double) + 1);
+    c->gs = (double *)malloc((size_t)k * 3 * sizeof(double) + 1);
+    c->ds = (double *)malloc((size_t)k * 3 * sizeof(double) + 1);
+    c->g = (double *)malloc(((size_t)r + 1) * sizeof(double));
+    c->H = (double *)malloc(((size_t)r * (size_t)r + 1) * sizeof(double));
+    c->qt = (double *)malloc(((size_t)r + 1) * sizeof(double));
+    if (!c->target || !c->moving || !c->lags || !c->xs || !c->gs || !c->ds || !c->g || !c->H ||
+        !c->qt) {
+        af_say(f->error, f->error_size, "no memory for a model's contact");
+        goto fail;
+    }
+    *failed = 0;
+    return c;
+shape:
+    af_say(f->error, f->error_size, "%s: the contact arrays do not fit: contact_rest (k, 3), "
+           "contact_basis (k, 3, r = %d), contact_area (k,), contact_constants (4,), and "
+           "obstacle_kinds (o,), obstacle_geometry (o, 15), obstacle_friction (o,) for the "
+           "header's %d obstacles", f->name, r, count);
+fail:
+    free(constants);
+    af_contact_close(c);
+    return NULL;
+}
+
+int af_contact_count(const af_contact *c) { return c ? c->count : 0; }
+
+const char *af_contact_name(const af_contact *c, int i) {
+    const char *p = c->names;
+    while (i-- > 0) p += strlen(p) + 1;
+    return p;
+}
+
+/* The reference point of obstacle i: a plane's point, a sphere's or box's center, a capsule's
+ * end a (the first three numbers of its geometry). */
+void af_contact_position(const af_contact *c, int i, double *position) {
+    memcpy(position, c->geometry + i * GEOMETRY, 3 * sizeof(double));
+}
+
+void af_contact_move(af_contact *c, int i, const double *position) {
+    memcpy(c->target + 3 * i, position, 3 * sizeof(double));
+    c->moving[i] = 1;
+}
+
+/* d, normal n (3) and, where H is not NULL, the Hessian of d (9) at x from obstacle o. */
+static double distance(const af_contact *c, int o, const double *x, double *n, double *H) {
+    const double *G = c->geometry + o * GEOMETRY;
+    double p[3], r[3], J[9] = {0}, delta, d, radius = 0.0;
+    int a, b, inside = 0;
+    if (c->kinds[o] == PLANE) {
+        d = 0.0;
+        for (a = 0; a < 3; a++) {
+            d += (x[a] - G[a]) * G[3 + a];
+            n[a] = G[3 + a];
+        }
+        if (H) memset(H, 0, 9 * sizeof(double));
+        return d;
+    }
+    if (c->kinds[o] == SPHERE) {
+        memcpy(p, G, sizeof p);
+        radius = G[3];
+    } else if (c->kinds[o] == CAPSULE) {
+        double axis[3], length = 0.0, t = 0.0, s;
+        for (a = 0; a < 3; a++) {
+            axis[a] = G[3 + a] - G[a];
+            length += axis[a] * axis[a];
+        }
+        length = sqrt(length);
+        for (a = 0; a < 3; a++) {
+            axis[a] /= length;
+            t += (x[a] - G[a]) * axis[a];
+        }
+        s = t < 0.0 ? 0.0 : t > length ? length : t;
+        for (a = 0; a < 3; a++) p[a] = G[a] + s * axis[a];
+        if (t > 0.0 && t < length)
+            for (a = 0; a < 3; a++)
+                for (b = 0; b < 3; b++) J[3 * a + b] = axis[a] * axis[b];
+        radius = G[6];
+    } else {                          /* a box: center G[0:3], half G[3:6], rotation G[6:15] */
+        const double *R = G + 6;
+        double local[3], clipped[3];
+        int within[3];
+        for (b = 0; b < 3; b++) {
+            local[b] = 0.0;
+            for (a = 0; a < 3; a++) local[b] += (x[a] - G[a]) * R[3 * a + b];
+            within[b] = fabs(local[b]) < G[3 + b];
+            clipped[b] = local[b] < -G[3 + b] ? -G[3 + b] : local[b] > G[3 + b] ? G[3 + b]
+                                                                                  : local[b];
+        }
+        for (a = 0; a < 3; a++) {
+            p[a] = G[a];
+            for (b = 0; b < 3; b++) p[a] += clipped[b] * R[3 * a + b];
+        }
+        for (a = 0; a < 3; a++)
+            for (b = 0; b < 3; b++) {
+                int e;
+                for (e = 0; e < 3; e++) J[3 * a + b] += R[3 * a + e] * within[e] * R[3 * b + e];
+            }
+        if (within[0] && within[1] && within[2]) {   /* inside: minus the depth to a face */
+            int best = 0;
+            double depth[3];
+            for (b = 0; b < 3; b++) {
+                depth[b] = G[3 + b] - fabs(local[b]);
+                if (depth[b] < depth[best]) best = b;
+            }
+            for (a = 0; a < 3; a++) n[a] = R[3 * a + best] * (local[best] > 0 ? 1.0 : -1.0);
+            if (H) memset(H, 0, 9 * sizeof(double));
+            inside = 1;
+            return -depth[best];
+        }
+    }
+    delta = 0.0;
+    for (a = 0; a < 3; a++) {
+        r[a] = x[a] - p[a];
+        delta += r[a] * r[a];
+    }
+    delta = sqrt(delta);
+    for (a = 0; a < 3; a++) n[a] = r[a] / (delta > 0.0 ? delta : 1.0);
+    d = delta - radius;
+    if (H) {
+        for (a = 0; a < 3; a++)
+            for (b = 0; b < 3; b++)
+                H[3 * a + b] = delta > 0.0 && !inside
+                    ? ((a == b) - J[3 * a + b] - n[a] * n[b]) / delta : 0.0;
+    }
+    return d;
+}
+
+static double barrier(double d, double dhat) { return -(d - dhat) * (d - dhat) * log(d / dhat); }
+
+static double barrier_slope(double d, double dhat) {
+    return -2.0 * (d - dhat) * log(d / dhat) - (d - dhat) * (d - dhat) / d;
+}
+
+static double barrier_curvature(double d, double dhat) {
+    return -2.0 * log(d / dhat) - 4.0 * (d - dhat) / d + (d - dhat) * (d - dhat) / (d * d);
+}
+
+/* f0'(y) / y of the smoothed friction. */
+static double friction_slope(double y, double eps) {
+    return y < eps ? -y / (eps * eps) + 2.0 / eps : 1.0 / (y > 1e-300 ? y : 1e-300);
+}
+
+/* The surface nodes at q into c->xs. */
+static void place(af_contact *c, const double *q) {
+    long i, a, r = c->r;
+    for (i = 0; i < c->k; i++)
+        for (a = 0; a < 3; a++)
+            c->xs[3 * i + a] = c->rest[3 * i + a] + af_dot(c->U + (3 * i + a) * r, q, r);
+}
+
+/* The largest s in [0, 1] keeping x + s dx above floor from obstacle o (x starts above). */
+static double first_touch(const af_contact *c, int o, const double *x, const double *dx,
+                          double floor) {
+    double s = 0.0, y[3], n[3];
+    int it, a;
+    for (it = 0; it < TOUCH_ITERATIONS; it++) {
+        double phi, slope = 0.0, target;
+        for (a = 0; a < 3; a++) y[a] = x[a] + s * dx[a];
+        phi = distance(c, o, y, n, NULL) - floor;
+        for (a = 0; a < 3; a++) slope += n[a] * dx[a];
+        if (slope >= 0.0) return 1.0;           /* convex: never closer from here on */
+        target = s - phi / slope;
+        s = target < 1.0 ? target : 1.0;
+        if (target >= 1.0 || phi <= TOUCH_TOLERANCE * floor) break;
+    }
+    return s;
+}
+
+/* The share of the moves ds (k, 3) from xs keeping every node at KEEP of its distance. */
+static double share_of(const af_contact *c, const double *xs, const double *ds) {
+    double share = 1.0, n[3];
+    long i;
+    int o;
+    for (o = 0; o < c->count; o++)
+        for (i = 0; i < c->k; i++) {
+            const double *d3 = ds + 3 * i;
+            double s;
+            if (d3[0] * d3[0] + d3[1] * d3[1] + d3[2] * d3[2] <= 0.0) continue;
+            s = first_touch(c, o, xs + 3 * i, d3, KEEP * distance(c, o, xs + 3 * i, n, NULL));
+            if (s < share) share = s;
+        }
+    return share;
+}
+
+void af_contact_start(af_contact *c, const double *q, double dt) {
+    long i;
+    int o, a;
+    double n[3];
+    place(c, q);
+    for (o = 0; o < c->count; o++) {   /* obstacles toward their targets, the body held */
+        double *G = c->geometry + o * GEOMETRY, delta[3], share;
+        if (!c->moving[o]) continue;
+        for (a = 0; a < 3; a++) delta[a] = c->target[3 * o + a] - G[a];
+        for (i = 0; i < c->k; i++)
+            for (a = 0; a < 3; a++) c->ds[3 * i + a] = -delta[a];
+        share = 1.0;
+        for (i = 0; i < c->k; i++) {
+            double s = first_touch(c, o, c->xs + 3 * i, c->ds + 3 * i,
+                                   KEEP * distance(c, o, c->xs + 3 * i, n, NULL));
+            if (s < share) share = s;
+        }
+        for (a = 0; a < 3; a++) {
+            G[a] += share * delta[a];
+            if (c->kinds[o] == CAPSULE) G[3 + a] += share * delta[a];
+        }
+        c->moving[o] = share < 1.0;
+    }
+    c->lagged = 0;
+    c->eps = c->smoothing * dt;
+    if (!(dt > 0.0)) return;
+    for (o = 0; o < c->count; o++) {
+        double mu = c->friction[o] < 0.0 ? c->mu : c->friction[o];
+        if (mu <= 0.0) continue;
+        for (i = 0; i < c->k; i++) {
+            double d = distance(c, o, c->xs + 3 * i, n, NULL);
+            lag_t *l = c->lags + c->lagged;
+            int b;
+            if (!(d > 0.0 && d < c->dhat)) continue;
+            l->node = (int)i;
+            l->weight = mu * -c->kappa * c->area[i] * barrier_slope(d, c->dhat);
+            for (a = 0; a < 3; a++) {
+                l->start[a] = c->xs[3 * i + a];
+                for (b = 0; b < 3; b++) l->T[3 * a + b] = (a == b) - n[a] * n[b];
+            }
+            c->lagged++;
+        }
+    }
+}
+
+/* The energy at the nodes c->xs, their gradient into c->gs where grad; inf where one reached
+ * an obstacle. */
+static double surface_energy(af_contact *c, int grad) {
+    double total = 0.0, n[3];
+    long i, j;
+    int o, a, b;
+    if (grad) memset(c->gs, 0, (size_t)c->k * 3 * sizeof(double));
+    for (o = 0; o < c->count; o++)
+        for (i = 0; i < c->k; i++) {
+            double d = distance(c, o, c->xs + 3 * i, n, NULL), s;
+            if (d <= 0.0) return INFINITY;
+            if (d >= c->dhat) continue;
+            total += c->kappa * c->area[i] * barrier(d, c->dhat);
+            s = c->kappa * c->area[i] * barrier_slope(d, c->dhat);
+            if (grad)
+                for (a = 0; a < 3; a++) c->gs[3 * i + a] += s * n[a];
+        }
+    for (j = 0; j < c->lagged; j++) {
+        const lag_t *l = c->lags + j;
+        double u[3], y = 0.0, e = c->eps;
+        for (a = 0; a < 3; a++) {
+            u[a] = 0.0;
+            for (b = 0; b < 3; b++) u[a] += l->T[3 * a + b] * (c->xs[3 * l->node + b] - l->start[b]);
+            y += u[a] * u[a];
+        }
+        y = sqrt(y);
+        total += l->weight * (y < e ? -y * y * y / (3 * e * e) + y * y / e + e / 3.0 : y);
+        if (grad)
+            for (a = 0; a < 3; a++) c->gs[3 * l->node + a] += l->weight * friction_slope(y, e) * u[a];
+    }
+    return total;
+}
+
+double af_contact_energy(af_contact *c, const double *q) {
+    place(c, q);
+    return surface_energy(c, 0);
+}
+
+/* B (9, symmetric) with its negative eigenvalues set to 0 (cyclic Jacobi on 3 x 3). */
+static void clamp_block(double *B) {
+    double A[9], V[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, lam[3];
+    int sweep, p, q, k, a, b;
+    memcpy(A, B, sizeof A);
+    for (sweep = 0; sweep < 50; sweep++) {
+        double off = A[1] * A[1] + A[2] * A[2] + A[5] * A[5];
+        double total = off * 2 + A[0] * A[0] + A[4] * A[4] + A[8] * A[8];
+        if (off <= 1e-30 * total) break;
+        for (p = 0; p < 2; p++)
+            for (q = p + 1; q < 3; q++) {
+                double apq = A[3 * p + q], theta, t, cs, sn;
+                if (apq == 0.0) continue;
+                theta = (A[3 * q + q] - A[3 * p + p]) / (2.0 * apq);
+                t = (theta >= 0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
+                cs = 1.0 / sqrt(t * t + 1.0);
+                sn = t * cs;
+                for (k = 0; k < 3; k++) {
+                    double ap = A[3 * k + p], aq = A[3 * k + q];
+                    A[3 * k + p] = cs * ap - sn * aq;
+                    A[3 * k + q] = sn * ap + cs * aq;
+                }
+                for (k = 0; k < 3; k++) {
+                    double ap = A[3 * p + k], aq = A[3 * q + k];
+                    A[3 * p + k] = cs * ap - sn * aq;
+                    A[3 * q + k] = sn * ap + cs * aq;
+                }
+                for (k = 0; k < 3; k++) {
+                    double vp = V[3 * k + p], vq = V[3 * k + q];
+                    V[3 * k + p] = cs * vp - sn * vq;
+                    V[3 * k + q] = sn * vp + cs * vq;
+                }
+            }
+    }
+    for (k = 0; k < 3; k++) lam[k] = A[4 * k] > 0.0 ? A[4 * k] : 0.0;
+    for (a = 0; a < 3; a++)
+        for (b = 0; b < 3; b++)
+            B[3 * a + b] = V[3 * a] * lam[0] * V[3 * b] + V[3 * a + 1] * lam[1] * V[3 * b + 1]
+                           + V[3 * a + 2] * lam[2] * V[3 * b + 2];
+}
+
+double af_contact_terms(af_contact *c, const double *q, const double **g, const double **H,
+                        double *floor) {
+    long i, j, r = c->r, s, t;
+    int o, a, b;
+    double energy, n[3], curvature[9], largest = 0.0, size = 0.0, *cg = c->g, *cH = c->H;
+    place(c, q);
+    energy = surface_energy(c, 1);
+    memset(cg, 0, (size_t)r * sizeof(double));
+    memset(cH, 0, (size_t)(r * r) * sizeof(double));
+    for (i = 0; i < c->k; i++)
+        for (a = 0; a < 3; a++) {
+            const double *row = c->U + (3 * i + a) * r;
+            double v = c->gs[3 * i + a];
+            if (fabs(c->xs[3 * i + a]) > largest) largest = fabs(c->xs[3 * i + a]);
+            if (v != 0.0)
+                for (s = 0; s < r; s++) cg[s] += v * row[s];
+        }
+    for (i = 0; i < c->k; i++) {
+        double B[9] = {0}, W[3 * 64], *w;
+        const double *U = c->U + 3 * i * r;
+        int live = 0;
+        for (o = 0; o < c->count; o++) {
+            double d = distance(c, o, c->xs + 3 * i, n, curvature), b1, b2, ka;
+            if (!(d > 0.0 && d < c->dhat)) continue;
+            b1 = barrier_slope(d, c->dhat);
+            b2 = barrier_curvature(d, c->dhat);
+            ka = c->kappa * c->area[i];
+            for (a = 0; a < 3; a++)
+                for (b = 0; b < 3; b++)
+                    B[3 * a + b] += ka * (b2 * n[a] * n[b] + b1 * curvature[3 * a + b]);
+            live = 1;
+        }
+        for (j = 0; j < c->lagged; j++) {
+            const lag_t *l = c->lags + j;
+            double u[3], unit[3], y = 0.0, e = c->eps, along, f1;
+            if (l->node != i) continue;
+            for (a = 0; a < 3; a++) {
+                u[a] = 0.0;
+                for (b = 0; b < 3; b++)
+                    u[a] += l->T[3 * a + b] * (c->xs[3 * i + b] - l->start[b]);
+                y += u[a] * u[a];
+            }
+            y = sqrt(y);
+            for (a = 0; a < 3; a++) unit[a] = u[a] / (y > 1e-300 ? y : 1e-300);
+            along = y < e ? -y / (e * e) : -1.0 / (y > 1e-300 ? y : 1e-300);
+            f1 = friction_slope(y, e);
+            for (a = 0; a < 3; a++)
+                for (b = 0; b < 3; b++)
+                    B[3 * a + b] += l->weight * (f1 * l->T[3 * a + b]
+                                                 + along * unit[a] * unit[b]);
+            live = 1;
+        }
+        if (!live) continue;
+        clamp_block(B);
+        w = r <= 64 ? W : (double *)malloc((size_t)(3 * r) * sizeof(double));
+        if (!w) continue;
+        for (a = 0; a < 3; a++)                   /* w = B U_i (3 x r) */
+            for (s = 0; s < r; s++)
+                w[a * r + s] = B[3 * a] * U[s] + B[3 * a + 1] * U[r + s]
+                               + B[3 * a + 2] * U[2 * r + s];
+        for (s = 0; s < r; s++)                   /* H += U_i^T w */
+            for (t = 0; t < r; t++)
+                cH[s * r + t] += U[s] * w[t] + U[r + s] * w[r + t] + U[2 * r + s] * w[2 * r + t];
+        if (w != W) free(w);
+    }
+    for (s = 0; s < r * r; s++) size += cH[s] * cH[s];
+    *floor = largest * sqrt(size);
+    *g = cg;
+    *H = cH;
+    return energy;
+}
+
+double af_contact_change(af_contact *c, const double *q, const double *step, double energy) {
+    long i, r = c->r;
+    double after, linear = af_dot(c->g, step, r), big;
+    for (i = 0; i < r; i++) c->qt[i] = q[i] + step[i];
+    after = af_contact_energy(c, c->qt);
+    big = fabs(after) > fabs(energy) ? fabs(after) : fabs(energy);
+    return fabs(after - energy - linear) <= NOISE * big ? linear : after - energy;
+}
+
+double af_contact_limit(af_contact *c, const double *q, const double *p) {
+    long i, a, r = c->r;
+    place(c, q);
+    for (i = 0; i < c->k; i++)
+        for (a = 0; a < 3; a++) c->ds[3 * i + a] = af_dot(c->U + (3 * i + a) * r, p, r);
+    return share_of(c, c->xs, c->ds);
+}
