@@ -492,3 +492,84 @@ def test_the_reduced_model_rests_on_the_ground_like_the_fem(sagging):
     sag = max(abs(s.x[tip, 2].mean() - scene.mesh.vertices[tip, 2].mean()) for s in roll.steps)
     assert worst <= 0.03 * sag
     assert gap > 0
+
+
+@pytest.fixture(scope="module")
+def contact_file(tmp_path_factory):
+    """The sagging beam with the ground and a ball under its tip, its reduced model written."""
+    from anisofem.reduced import ReducedModel
+    from export.writers.reduced import write
+    beam = af.box_beam(size=(0.2, 0.02, 0.02), cells=(20, 2, 2))
+    mesh = af.TetMesh(beam.vertices - [0, 0, beam.vertices[:, 2].min() - 0.01], beam.tets)
+    material = af.Material(1e5, 0.45, 1000.0, np.array([1.0, 0, 0]), 1e5)
+    ball = af.Sphere((0.15, 0.0, -0.002), 0.008, name="ball", friction=0.6)
+    box = af.Box((0.05, 0.0, -0.01), (0.01, 0.03, 0.005), name="block",
+                 rotation=[[0.8, -0.6, 0.0], [0.6, 0.8, 0.0], [0.0, 0.0, 1.0]])
+    rod = af.Capsule((0.1, -0.05, -0.02), (0.1, 0.05, -0.02), 0.01, name="rod")
+    scene = af.Scene(mesh, material, gravity=(0, 0, -9.81), fixed=beam.vertices[:, 0] <= 1e-9,
+                     contact=af.Contact([af.Plane(name="ground"), ball, box, rod],
+                                        friction=0.3))
+    model = ReducedModel(scene, modes=6, snapshots=10)
+    path = str(tmp_path_factory.mktemp("contact_file") / "beam")
+    write(model, path, title="beam")
+    return model, path
+
+
+def test_the_runtimes_step_contact_like_the_library(contact_file):
+    """The numpy runtime steps the written model with its four obstacles like the library
+    (1e-10 m), and the C runtime like numpy (1e-9 m), also while the ball is moved into the
+    body (both move it as far as the body lets it, to the same place)."""
+    from export import native
+    from export.runtime import ReducedSimulator
+    model, path = contact_file
+    sim = ReducedSimulator(path)
+    assert sim.obstacles == ("ground", "ball", "block", "rod")
+    force = model.scene.external_force
+    q, w = np.zeros(model.r), np.zeros(model.r)
+    qn, wn = sim.rest_state()
+    for _ in range(40):
+        q, w, report = model.step(q, w, 0.01)
+        qn, wn = sim.step(qn, wn, force, 0.01)
+        assert np.abs(model.positions(q) - sim.positions(qn)).max() <= 1e-10
+    if native.compiler() is None:
+        pytest.skip("no C compiler")
+    c = native.CReducedSimulator(path)
+    c.set_constant_force(force)
+    assert c.obstacles == sim.obstacles
+    sim = ReducedSimulator(path)
+    qn, wn = sim.rest_state()
+    qc, wc = c.rest_state()
+    for k in range(60):
+        if k in (20, 40):
+            target = (0.15, 0.0, 0.004) if k == 20 else (0.15, 0.0, 0.03)
+            sim.move_obstacle("ball", target)
+            c.move_obstacle("ball", target)
+        qn, wn = sim.step(qn, wn, force, 0.01)
+        c.step(qc, wc, None, 0.01)
+        assert np.abs(sim.positions(qn) - c.positions(qc)).max() <= 1e-9
+    assert np.allclose(c.obstacle_position("ball"), sim.contact.obstacles[1]["center"],
+                       atol=1e-12)
+    assert 0.004 < c.obstacle_position("ball")[2] < 0.03    # it pushed the beam, not through
+    x = c.positions(qc)
+    term = ContactTerm(model.scene)
+    assert term.distances(x)[:, 0].min() > 0
+    with pytest.raises(RuntimeError, match="obstacle 'ball': its position must be 3 finite"):
+        c.move_obstacle("ball", (0.0, np.nan, 0.0))
+    with pytest.raises(ValueError, match="obstacle: no obstacle 'wall'"):
+        c.move_obstacle("wall", (0.0, 0.0, 0.0))
+
+
+def test_under_the_sanitizers_a_file_with_obstacles_steps(contact_file, tmp_path):
+    """The C runtime steps the file with its four obstacles, each moved every 10 steps, under
+    AddressSanitizer and UndefinedBehaviorSanitizer."""
+    import re
+    import subprocess
+    from export import native
+    if native.compiler() is None:
+        pytest.skip("no C compiler")
+    from test_c_runtime import _sanitized
+    _, path = contact_file
+    done = subprocess.run([_sanitized(tmp_path), path], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0 and "runtime error" not in done.stderr, done.stderr
+    assert re.match(r"ok 1 \d+ 50 \S+ obstacles 4 \S+$", done.stdout.strip()), done.stdout

@@ -1,8 +1,10 @@
 /* For tests/test_c_checks.py: load each file named on the command line with af_load and print
  * one line per file, "ok KIND N STEPS LOWEST" after 50 steps under the file's gravity (and
  * for a file with controls, set anew every step, " controls K reach CODE" after one af_reach
- * of vertex 0), or "error MESSAGE" where it cannot be loaded or stepped. Built with the sanitizers, it shows
- * that no file, good or corrupt, reads memory it should not. */
+ * of vertex 0; for a file with obstacles, each moved up by 2 mm every 10 steps, " obstacles O
+ * HEIGHT", HEIGHT where the first is then), or "error MESSAGE" where it cannot be loaded or
+ * stepped. Built with the sanitizers, it shows that no file, good or corrupt, reads memory it
+ * should not. */
 #include <stdio.h>
 #include <stdlib.h>
 
@@ -31,6 +33,12 @@ int main(int argc, char **argv) {
             double values[64];
             for (i = 0; i < af_controls(m) && i < 64; i++) values[i] = 0.05 * ((k + i) % 2);
             if (af_controls(m)) code = af_set_controls(m, values);
+            for (i = 0; i < af_obstacles(m) && k % 10 == 9 && code == AF_OK; i++) {
+                double at[3];
+                af_obstacle_position(m, i, at);
+                at[2] += 2e-3;
+                code = af_move_obstacle(m, i, at);
+            }
             if (code == AF_OK) code = af_step(m, state, force, NULL, 0.02);
         }
         if (code == AF_OK) {
@@ -49,6 +57,11 @@ int main(int argc, char **argv) {
                 af_set_constant_force(m, force);
                 code = af_reach(m, &node, &one, 1, target, low, high, 0.0, found, at);
                 printf(" controls %d reach %d", af_controls(m), code);
+            }
+            if (af_obstacles(m)) {
+                double at[3];
+                af_obstacle_position(m, 0, at);
+                printf(" obstacles %d %.17g", af_obstacles(m), at[2]);
             }
             printf("\n");
         } else {
