@@ -26,6 +26,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ("tentacle.py", "tentacle.png", "drew out/tentacle.png"),
     ("actuator_control.py", "actuator_control.png", "drew out/actuator_control.png"),
     ("cable_finger.py", "cable_finger.png", "drew out/cable_finger.png"),
+    ("tentacle_drop.py", "tentacle_drop.png", "drew out/tentacle_drop.png"),
     ("identify.py", None, "stopped after")])
 def test_example_runs_and_draws(tmp_path, script, picture, says):
     script, *args = script.split()
@@ -47,6 +48,12 @@ def test_example_runs_and_draws(tmp_path, script, picture, says):
         assert len(rows) == 5 and "out of reach" in r.stdout.splitlines()[-2]
         for row in rows[:4]:
             assert float(row[2]) < 0.02 and float(row[3]) < 2.0, row
+    if script == "tentacle_drop.py":  # never through the ground, nothing inverted, at rest
+        line = next(x for x in r.stdout.splitlines() if x.startswith("smallest gap"))
+        gap = float(line.split("every step: ")[1].split()[0])
+        speed = float(line.split("at rest: ")[1].split()[0])
+        assert gap > 0 and "inverted elements: 0;" in line and "converged: True" in line, line
+        assert speed < 1e-3, line
     if script == "actuator_control.py":  # the tip follows the 10 mm path within 0.5 mm in
         # closed loop, and the full FEM under the same pressures within 0.1 mm of the runtime
         line = next(x for x in r.stdout.splitlines() if x.startswith("tip: largest error"))
