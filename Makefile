@@ -99,11 +99,13 @@ web/scenes/%-reduced.json: export/writers/reduced.py export/runtime.py export/fr
 	$(PY) -m export bake-reduced $* -o web/scenes/$*-reduced \
 	  $(if $(filter $*,$(WEB_FRAMED)),--framed,--modes 4 --snapshots 16)
 
-# the tentacle has a reduced model only, with its four bands of fibers as controls (sliders)
-web/scenes/tentacle-reduced.json: examples/scenes/tentacle.toml examples/scenes/tentacle.msh \
-                                  export/writers/reduced.py anisofem/reduced/*.py $(VENV)/.installed
+# the tentacle has a reduced model only, with its four bands of fibers as controls (sliders),
+# over a floor with a ball to push it with
+web/scenes/tentacle-reduced.json: examples/scenes/tentacle_floor.toml examples/scenes/tentacle.msh \
+                                  export/writers/reduced.py anisofem/reduced/*.py \
+                                  anisofem/physics/contact.py $(VENV)/.installed
 	mkdir -p web/scenes
-	$(PY) -m export reduced examples/scenes/tentacle.toml --modes 4 --snapshots 14 \
+	$(PY) -m export reduced examples/scenes/tentacle_floor.toml --modes 4 --snapshots 14 \
 	  -o web/scenes/tentacle-reduced
 
 # the C runtime (export/c, less its file loader) built to WebAssembly by zig's C compiler (the

@@ -1,6 +1,7 @@
 // The page: a baked scene stepped in real time by model.onnx or by the scene's reduced model,
 // drawn with three.js, with a force applied by dragging and, for a model with controls (the
-// tentacle's four bands of fibers), a slider per control. URL parameters: scene (cantilever,
+// tentacle's four bands of fibers), a slider per control; a model's obstacles (the tentacle's
+// floor and ball) are drawn, and a ball, box or capsule is dragged to push the body. URL parameters: scene (cantilever,
 // cylinder, t, y, tentacle), stepper (network or reduced), model (the .onnx file, default
 // models/directional.onnx), angle (fiber angle, degrees), paused (1: start paused; the
 // end-to-end test steps it through window.anisognn).
@@ -37,6 +38,7 @@ sun.position.set(0.3, -0.5, 0.8);
 world.add(sun);
 
 const state = { sim: null, session: null, sceneData: null, body: null, ghost: null,
+                obstacles: [], held: null,
                 paused: params.get("paused") === "1", drag: null, times: [], busy: false,
                 lastFrame: null, owed: 0, carry: false, name: null };
 
@@ -82,6 +84,7 @@ async function openScene(name, angle) {
   ui.carry.disabled = !state.sim.framed;
   buildControls();
   buildMeshes();
+  buildObstacles();
   say("");
 }
 
@@ -156,6 +159,53 @@ function buildMeshes() {
   updateBody();
 }
 
+// a mesh for each of the model's obstacles (none for the network's scenes): a plane as a
+// square 1 m across, a sphere, a box, a capsule
+function buildObstacles() {
+  for (const mesh of state.obstacles) world.remove(mesh);
+  state.obstacles = [];
+  const listed = state.sim.obstacles || [];
+  listed.forEach((o, i) => {
+    const material = new THREE.MeshStandardMaterial(
+      { color: o.kind === "plane" ? 0xd8d4cc : 0xc8643c, roughness: 0.8,
+        side: THREE.DoubleSide, transparent: o.kind === "plane", opacity: 0.85 });
+    let geometry;
+    if (o.kind === "plane") geometry = new THREE.PlaneGeometry(1, 1);
+    else if (o.kind === "sphere") geometry = new THREE.SphereGeometry(o.radius, 32, 16);
+    else if (o.kind === "box") geometry = new THREE.BoxGeometry(...o.half.map((h) => 2 * h));
+    else {
+      const axis = new THREE.Vector3(...o.b).sub(new THREE.Vector3(...o.a));
+      geometry = new THREE.CapsuleGeometry(o.radius, axis.length(), 8, 16);
+    }
+    const mesh = new THREE.Mesh(geometry, material);
+    if (o.kind === "plane") {
+      mesh.quaternion.setFromUnitVectors(new THREE.Vector3(0, 0, 1),
+                                         new THREE.Vector3(...o.normal));
+    } else if (o.kind === "box") {
+      const R = o.rotation;
+      mesh.quaternion.setFromRotationMatrix(new THREE.Matrix4().set(
+        R[0], R[1], R[2], 0, R[3], R[4], R[5], 0, R[6], R[7], R[8], 0, 0, 0, 0, 1));
+    } else if (o.kind === "capsule") {
+      const axis = new THREE.Vector3(...o.b).sub(new THREE.Vector3(...o.a)).normalize();
+      mesh.quaternion.setFromUnitVectors(new THREE.Vector3(0, 1, 0), axis);
+    }
+    mesh.userData = { index: i, kind: o.kind, half: o.kind === "capsule" ?
+      new THREE.Vector3(...o.b).sub(new THREE.Vector3(...o.a)).multiplyScalar(0.5) : null };
+    state.obstacles.push(mesh);
+    world.add(mesh);
+  });
+  updateObstacles();
+}
+
+// the obstacles' meshes where the model has them now
+function updateObstacles() {
+  for (const mesh of state.obstacles) {
+    const at = new THREE.Vector3(...state.sim.obstaclePosition(mesh.userData.index));
+    if (mesh.userData.half) at.add(mesh.userData.half);     // a capsule: from end a to its middle
+    mesh.position.copy(at);
+  }
+}
+
 // positions and displacement colors of the drawn body from the simulation's state
 function updateBody() {
   const { x } = state.sim;
@@ -175,6 +225,7 @@ function updateBody() {
     color.setXYZ(i, 0.15 + 0.8 * d, 0.35 + 0.3 * (1 - Math.abs(2 * d - 1)), 0.85 - 0.7 * d);
   }
   ui.scaleHigh.textContent = (1e3 * largest).toPrecision(2);
+  if (state.obstacles.length) updateObstacles();
   position.needsUpdate = true;
   color.needsUpdate = true;
   state.body.geometry.computeVertexNormals();
@@ -268,6 +319,17 @@ function pointer(event) {
 renderer.domElement.addEventListener("pointerdown", (event) => {
   if (!state.sim) return;
   raycaster.setFromCamera(pointer(event), camera);
+  const movable = state.obstacles.filter((mesh) => mesh.userData.kind !== "plane");
+  const grabbed = raycaster.intersectObjects(movable)[0];
+  if (grabbed) {   // an obstacle: it follows the pointer on the plane through it facing the camera
+    const i = grabbed.object.userData.index;
+    const normal = camera.getWorldDirection(new THREE.Vector3());
+    state.held = { index: i, plane: new THREE.Plane().setFromNormalAndCoplanarPoint(
+                     normal, grabbed.point),
+                   offset: new THREE.Vector3(...state.sim.obstaclePosition(i)).sub(grabbed.point) };
+    controls.enabled = false;
+    return;
+  }
   const hit = raycaster.intersectObject(state.body)[0];
   if (!hit) return;
   const face = [hit.face.a, hit.face.b, hit.face.c];
@@ -289,12 +351,24 @@ renderer.domElement.addEventListener("pointerdown", (event) => {
   controls.enabled = false;
 });
 renderer.domElement.addEventListener("pointermove", (event) => {
+  if (state.held) {
+    raycaster.setFromCamera(pointer(event), camera);
+    const target = new THREE.Vector3();
+    if (raycaster.ray.intersectPlane(state.held.plane, target)) {
+      state.sim.moveObstacle(state.held.index, target.add(state.held.offset).toArray());
+    }
+    return;
+  }
   if (!state.drag) return;
   raycaster.setFromCamera(pointer(event), camera);
   const target = new THREE.Vector3();
   if (raycaster.ray.intersectPlane(state.drag.plane, target)) state.drag.target = target;
 });
-window.addEventListener("pointerup", () => { state.drag = null; controls.enabled = true; });
+window.addEventListener("pointerup", () => {
+  state.drag = null;
+  state.held = null;
+  controls.enabled = true;
+});
 
 ui.pause.addEventListener("click", () => {
   state.paused = !state.paused;
@@ -424,20 +498,23 @@ window.anisognn = {
   },
   scene() { return state.sceneData ? state.sceneData.header.scene || state.name : null; },
   // a reduced model's rollout from rest under gravity with its controls set before each step
-  // to schedule[k] (one value per control); the positions after every step (flat)
-  async controlled(schedule) {
+  // to schedule[k] (one value per control) and, where moves[k] is [i, x, y, z], obstacle i
+  // moved there; the positions after every step (flat) and the obstacles' at the end
+  async controlled(schedule, moves = []) {
     state.paused = true;
     while (state.busy) await new Promise((resolve) => setTimeout(resolve, 5));
     state.sim.reset();
     state.times = [];
     const positions = [];
-    for (const values of schedule) {
+    for (const [k, values] of schedule.entries()) {
+      if (moves[k]) state.sim.moveObstacle(moves[k][0], moves[k].slice(1));
       state.sim.setControls(values);
       state.times.push(await state.sim.step(null, null));
       positions.push(Array.from(state.sim.x));
     }
     updateBody();
-    return { positions, controls: state.sim.controls, n: state.sim.n };
+    return { positions, controls: state.sim.controls, n: state.sim.n,
+             obstacles: (state.sim.obstacles || []).map((_, i) => state.sim.obstaclePosition(i)) };
   },
   // move control i's slider to value as a user would (its input event); the controls' values
   // the model then holds

@@ -147,20 +147,25 @@ def drag_gaps(drags):
 
 def controlled_gap(run):
     """(the largest gap over every step of the page's controlled rollout of the tentacle
-    against runtime.ReducedSimulator's under the same controls, over the largest displacement;
-    the largest displacement, m)."""
+    against runtime.ReducedSimulator's under the same controls and the same moves of its ball,
+    over the largest displacement; the largest displacement, m; the gap between the two balls'
+    centers at the end, m; the ball's y there, m)."""
     path = os.path.join(HERE, "scenes", "tentacle-reduced")
     sim = runtime.ReducedSimulator(path)
     gravity = sim.masses[:, None] * np.asarray(sim.header["gravity"])
     q, w = sim.rest_state()
     expected = []
-    for values in run["schedule"]:
+    for values, move in zip(run["schedule"], run["moves"]):
+        if move:
+            sim.move_obstacle(int(move[0]), move[1:])
         q, w = sim.step(q, w, gravity, sim.header["dt"], controls=values)
         expected.append(sim.positions(q))
     expected = np.asarray(expected)
     got = np.asarray(run["positions"]).reshape(expected.shape)
     largest = float(np.abs(expected - sim.rest_positions).max())
-    return float(np.abs(got - expected).max()) / largest, largest
+    ball = sim.contact.obstacles[1]["center"]
+    return (float(np.abs(got - expected).max()) / largest, largest,
+            float(np.abs(np.asarray(run["obstacles"][1]) - ball).max()), float(ball[1]))
 
 
 def framed_reference(bases):
@@ -254,11 +259,14 @@ def main():
                             f"runtime: {gap:.2e} of the largest displacement, more than "
                             f"{DRAG_BOUND}")
     tentacle = page["tentacle"]
-    controlled, largest_c = controlled_gap(tentacle)
+    controlled, largest_c, ball_gap, ball_y = controlled_gap(tentacle)
     if not controlled <= DRAG_BOUND:
         failures.append(f"the tentacle's controlled rollout in the page against the numpy "
                         f"runtime: {controlled:.2e} of the largest displacement, more than "
                         f"{DRAG_BOUND}")
+    if not (ball_gap <= 1e-12 and ball_y < 0.045):
+        failures.append(f"the tentacle's ball: {ball_gap:.2e} m from the numpy runtime's, at "
+                        f"y = {ball_y:.4f} m (pushed from 0.05 m)")
     if (tentacle["message"] or tentacle["sliders"] != 4
             or abs(tentacle["slid"][1] - 0.07) > 1e-12):
         failures.append(f"the tentacle's sliders: {tentacle['sliders']} of 4, a slide to 0.07 "
@@ -296,7 +304,8 @@ def main():
               f"{np.median(times):.3f} ms, mean {times.mean():.3f} ms over {len(times)} steps")
     print(f"the tentacle's controls ({', '.join(tentacle['controls'])}) set every step: the page "
           f"against the numpy runtime {controlled:.1e} of the largest displacement "
-          f"({largest_c * 1e3:.1f} mm) over {len(tentacle['schedule'])} steps; "
+          f"({largest_c * 1e3:.1f} mm) over {len(tentacle['schedule'])} steps, its ball pushed "
+          f"into it to y = {ball_y * 1e3:.1f} mm ({ball_gap:.1e} m from numpy's); "
           f"{tentacle['sliders']} sliders")
     print(f"bad model: {page['bad_model_message']}")
     print(f"cut scene: {page['cut_scene_message']}")

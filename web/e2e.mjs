@@ -118,8 +118,13 @@ try {
                              { timeout: 60000 });
   const schedule = Array.from({ length: CONTROL_STEPS }, (_, k) =>
     [0.05 * (1 - Math.cos(k / 8)), 0, 0.05 * (1 - Math.cos(k / 6)), 0.02 * (1 - Math.cos(k / 10))]);
-  result.tentacle = await page.evaluate((s) => window.anisognn.controlled(s), schedule);
+  // the ball (obstacle 1) pushed 2 mm a step toward the tentacle from step 20 to step 40
+  const moves = Array.from({ length: CONTROL_STEPS }, (_, k) =>
+    (k >= 20 && k < 40 ? [1, 0.13, 0.05 - 0.002 * (k - 19), -0.01] : null));
+  result.tentacle = await page.evaluate(([s, m]) => window.anisognn.controlled(s, m),
+                                        [schedule, moves]);
   result.tentacle.schedule = schedule;
+  result.tentacle.moves = moves;
   result.tentacle.message = await page.textContent("#message");
   result.tentacle.sliders = await page.locator("#controls input").count();
   result.tentacle.slid = await page.evaluate(() => window.anisognn.slide(1, 0.07));

@@ -83,9 +83,13 @@ export class ModelSimulation {
     const count = runtime.af_controls(this.model);
     this.controls = Array.from({ length: count }, (_, i) =>
       cString(runtime.af_control_name(this.model, i)));
+    // the obstacles: the header's entries (kind, name, geometry), in the model's order
+    this.obstacles = (this.header.contact || { obstacles: [] }).obstacles;
+    this.moved = false;
     this.buffers = { state: runtime.malloc(8 * this.size), force: runtime.malloc(24 * this.n),
                      base: runtime.malloc(96), x: runtime.malloc(24 * this.n),
-                     controls: runtime.malloc(8 * Math.max(count, 1)) };
+                     controls: runtime.malloc(8 * Math.max(count, 1)),
+                     point: runtime.malloc(24) };
     const masses = doubles(runtime.af_masses(this.model), this.n);
     const gravity = doubles(this.buffers.force, 3 * this.n);
     for (let i = 0; i < 3 * this.n; i++) {
@@ -107,6 +111,21 @@ export class ModelSimulation {
     this.check(runtime.af_set_controls(this.model, this.buffers.controls), "controls");
   }
 
+  // where obstacle i is now: [x, y, z] (a plane's point, a sphere's or box's center, a
+  // capsule's end a), m
+  obstaclePosition(i) {
+    this.check(runtime.af_obstacle_position(this.model, i, this.buffers.point), "obstacle");
+    return Array.from(doubles(this.buffers.point, 3));
+  }
+
+  // obstacle i to be at position [x, y, z]: the next step moves it there as far as the body
+  // lets it
+  moveObstacle(i, position) {
+    doubles(this.buffers.point, 3).set(position);
+    this.check(runtime.af_move_obstacle(this.model, i, this.buffers.point), "obstacle");
+    this.moved = true;
+  }
+
   check(code, what) {
     if (code !== 0) throw new Error(`${what}: ${cString(runtime.af_error(this.model))}`);
   }
@@ -118,7 +137,12 @@ export class ModelSimulation {
     this.model = 0;
   }
 
+  // the rest state, and the obstacles where the file has them (the model loaded again)
   reset() {
+    if (this.moved) {
+      this.setFiberAngle(this.fiberAngle);
+      return;
+    }
     runtime.af_rest_state(this.model, this.buffers.state);
     this.x.set(doubles(runtime.af_rest_positions(this.model), 3 * this.n));
     this.steps = 0;
