@@ -304,6 +304,8 @@ def test_a_scene_file_declares_obstacles(beam_file):
     ("", "cube = {center = [0, 0, 0]}", r"contact.obstacles.ball.cube: unknown key"),
     ("", "sphere = {center = [0.05, 0, 0], radius = 0.02}",
      r"contact: the body starts inside obstacle 'ball' \(sphere\)"),
+    ("", BALL + "\nmove = [0, 0, 0.01]",
+     r"contact.obstacles.ball: give move \(how far, m\) and curve \(when\) together"),
 ])
 def test_a_scene_file_with_bad_contact_fails_in_one_line(beam_file, extra, ball, message):
     from anisofem.io.scenefile import SceneFileError
@@ -573,3 +575,25 @@ def test_under_the_sanitizers_a_file_with_obstacles_steps(contact_file, tmp_path
                           timeout=300)
     assert done.returncode == 0 and "runtime error" not in done.stderr, done.stderr
     assert re.match(r"ok 1 \d+ 50 \S+ obstacles 4 \S+$", done.stdout.strip()), done.stdout
+
+
+def test_an_obstacle_moved_along_a_curve_pushes_the_body(beam_file):
+    """A scene file's ball lifted 4 cm over 1 s along a curve under the hanging beam: every
+    step the ball reaches where its curve puts it (its pushes move it as far as the beam lets
+    it, then again), never a node inside it; the beam is pushed up."""
+    text = SCENE.format(extra="", ball=BALL + "\nmove = [0, 0, 0.04]\ncurve = \"lift\"")
+    text = text.replace("[contact]\n", "[curves.lift]\ntimes = [0, 1]\nvalues = [0, 1]\n\n"
+                                       "[contact]\n")
+    text = text.replace("[material]", "[[boundary]]\nwhere = \"x-min\"\nheld = true\n\n"
+                                      "[material]")
+    (beam_file / "lift.toml").write_text(text)
+    scene = af.load_scene(str(beam_file / "lift.toml"))
+    roll = af.simulate(scene, 40, dt=0.02, warn=False)
+    assert roll.converged
+    for k, s in enumerate(roll.steps, 1):
+        wanted = scene.at(k * 0.02).contact.obstacles[1].position
+        assert np.allclose(roll.obstacles[k, 1], wanted, atol=1e-12), k
+        placed = af.physics.obstacles.Sphere(roll.obstacles[k, 1], 0.03)
+        nodes = ContactTerm(scene).nodes
+        assert placed.distance(s.x[nodes])[0].min() > 0
+    assert roll.positions[-1][:, 2].max() > roll.positions[0][:, 2].max() + 0.005

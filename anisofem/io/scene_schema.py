@@ -88,6 +88,9 @@ SCHEMA = {
         "capsule": "{a = [x, y, z], b = [x, y, z], radius = r}: the points within r of the "
                    "segment ab",
         "friction": "this obstacle's coefficient, >= 0 (default: [contact]'s)",
+        "move": "[dx, dy, dz] m: where it goes, times its curve's factor (with curve)",
+        "curve": "the name of the load curve it moves along (with move); a step moves it as "
+                 "far as the body lets it, solves, and again, up to 20 times",
     },
     "rotation": {
         "axis": "[ax, ay, az]",

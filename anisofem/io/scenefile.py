@@ -136,7 +136,9 @@ class _Reader:
         parts += timed
         gravity = _vector(self, table["gravity"], "gravity") if "gravity" in table else None
         body = _vector(self, table["body_force"], "body_force") if "body_force" in table else None
-        contact = self.contact(table["contact"]) if "contact" in table else None
+        contact, moving = (self.contact(table["contact"], curves) if "contact" in table
+                           else (None, []))
+        parts += moving
         try:
             scene = Scene(self.mesh, material, fixed=held, fixed_positions=positions,
                           gravity=gravity, body_force=body,
@@ -431,8 +433,9 @@ class _Reader:
         origin = _vector(self, spec.get("origin", [0.0, 0.0, 0.0]), f"{key}.origin")
         return axis / np.linalg.norm(axis), origin, _number(self, spec["angle"], f"{key}.angle")
 
-    def contact(self, table):
-        """The [contact] table -> an anisofem.Contact."""
+    def contact(self, table, curves):
+        """The [contact] table -> (an anisofem.Contact, the Timed parts of the obstacles that
+        move along a curve)."""
         _keys(self, table, "contact", "contact")
         obstacles = table.get("obstacles")
         if not isinstance(obstacles, dict) or not obstacles:
@@ -440,9 +443,17 @@ class _Reader:
                                                   "at least one")
         given = {k: _number(self, table[k], f"contact.{k}")
                  for k in ("distance", "friction", "stiffness", "smoothing") if k in table}
+        parts = []
+        for name, spec in obstacles.items():
+            key = f"contact.obstacles.{name}"
+            if ("move" in spec) != ("curve" in spec):
+                raise self.error(key, "give move (how far, m) and curve (when) together")
+            if "move" in spec:
+                parts.append(Timed(self.curve_named(spec["curve"], curves, f"{key}.curve"),
+                                   obstacle=(name, _vector(self, spec["move"], f"{key}.move"))))
         try:
             return Contact([self.obstacle(name, spec) for name, spec in obstacles.items()],
-                           **given)
+                           **given), parts
         except ValueError as err:
             raise self.error("contact", str(err).removeprefix("contact: ")) from None
 

@@ -23,7 +23,7 @@ resist).
 """
 import copy
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -129,7 +129,7 @@ class ContactTerm:
                 continue
             force = -self.kappa * self.area[rows] * barrier_slope(d[rows], self.dhat)
             T = np.eye(3) - n[rows, :, None] * n[rows, None, :]
-            out.append((mu * force, rows, T, x[rows].copy(), eps))
+            out.append((mu * force, rows, T, x[rows] + o.shift, eps))
         return tuple(out)
 
     def energy(self, x, grad=None):
@@ -246,11 +246,39 @@ class ContactTerm:
         H = self.itself.hessian(x, project).tocsr()[dofs]
         return H.tocsc()[:, dofs]
 
+    def clear(self, x):
+        """Whether every surface node at x (n, 3) is off every obstacle, and the surface off
+        itself."""
+        return bool((self.distances(x) > 0).all()) and (
+            self.itself is None or self.itself.nearest(x) > 0)
+
     def distances(self, x):
         """(k, obstacles) every surface node's distance to every obstacle at x (n, 3), m."""
         xs = x[self.nodes]
         return np.column_stack([o.distance(xs)[0] for o in self.obstacles]
                                or [np.full(len(xs), np.inf)])
+
+
+def advance(target, placed, xs, origin):
+    """(the Contact `target` with each obstacle moved from where the Contact `placed` (the same
+    obstacles) has it toward where target has it, as far as the surface nodes at xs (k, 3)
+    let it with the body held, whether every one got there): each node kept at KEEP of its gap
+    (the share of the way first_touch allows), so a moving obstacle pushes the body and never
+    jumps into it. Each obstacle's shift is its move since `origin` (where its step began),
+    which friction's anchor follows."""
+    obstacles, arrived = [], True
+    for aim, now, before in zip(target.obstacles, placed.obstacles, origin.obstacles):
+        delta = aim.position - now.position
+        share = 1.0
+        if np.any(delta):
+            d, _ = now.distance(xs)
+            share = float(now.first_touch(xs, np.broadcast_to(-delta, xs.shape),
+                                          KEEP * d).min(initial=1.0))
+        there = now.moved(share * delta) if share < 1.0 else copy.copy(aim)
+        there.shift = there.position - before.position
+        obstacles.append(there)
+        arrived &= share >= 1.0
+    return replace(target, obstacles=tuple(obstacles)), arrived
 
 
 def barrier(d, dhat):

@@ -45,10 +45,12 @@ class LoadCurve:
 class Timed:
     """A load that follows `curve`: force (n, 3) N, pressure (an index into Scene.pressures),
     motion, a function of the factor c giving the displacement (n, 3) m of the held
-    components (c times a displacement; a rotation by c times an angle), or control (a name in
-    Scene.controls: its value as the scene has it, times c)."""
+    components (c times a displacement; a rotation by c times an angle), control (a name in
+    Scene.controls: its value as the scene has it, times c), or obstacle, (name, move (3,) m):
+    that contact obstacle where the scene has it plus c times move."""
     curve: LoadCurve
     force: object = None
     pressure: object = None
     motion: object = None
     control: object = None
+    obstacle: object = None

@@ -13,6 +13,8 @@ x + s dx, phi(s) = d - floor is convex, so Newton's iteration from s = 0 climbs 
 root from below and never passes it: any iterate is a step that keeps every point at least
 `floor` from the obstacle (a continuous collision test, conservative and exact in the limit).
 """
+import copy
+
 import numpy as np
 
 from .._validate import as_float_array, as_scalar
@@ -36,6 +38,23 @@ class Obstacle:
 
     def __repr__(self):
         return f"{type(self).__name__}(name={self.name!r})"
+
+    #: the attributes that say where it is (moved by `moved`); the first is its position
+    placed = ()
+    #: (3,) m, how far it has moved since its step began: friction's anchor follows it
+    shift = np.zeros(3)
+
+    @property
+    def position(self):
+        """(3,) where it is: a plane's point, a sphere's or box's center, a capsule's end a."""
+        return getattr(self, self.placed[0])
+
+    def moved(self, delta):
+        """A copy translated by delta (3,), m."""
+        out = copy.copy(self)
+        for key in self.placed:
+            setattr(out, key, getattr(self, key) + np.asarray(delta, dtype=float))
+        return out
 
     def distance(self, x):
         """(d (k,), normal (k, 3)) of points x (k, 3), m."""
@@ -69,6 +88,7 @@ class Plane(Obstacle):
     """The half-space on the side of `normal` of the plane through `point` (3,), m: the
     ground, a wall, a slope."""
     kind = "plane"
+    placed = ("point",)
 
     def __init__(self, point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0), *, name=None,
                  friction=None):
@@ -119,6 +139,7 @@ class _Grown(Obstacle):
 class Sphere(_Grown):
     """A ball of `radius` m about `center` (3,)."""
     kind = "sphere"
+    placed = ("center",)
 
     def __init__(self, center, radius, *, name=None, friction=None):
         super().__init__(radius, name, friction)
@@ -134,6 +155,7 @@ class Capsule(_Grown):
     """The points within `radius` m of the segment from a (3,) to b (3,): a finger, a rod, a
     gripper's jaw."""
     kind = "capsule"
+    placed = ("a", "b")
 
     def __init__(self, a, b, radius, *, name=None, friction=None):
         super().__init__(radius, name, friction)
@@ -160,6 +182,7 @@ class Box(_Grown):
     """A box of half extents `half` (3,) m about `center` (3,), its axes the columns of
     `rotation` (3, 3; default the world's)."""
     kind = "box"
+    placed = ("center",)
 
     def __init__(self, center, half, rotation=None, *, name=None, friction=None):
         super().__init__(0.0, name, friction)

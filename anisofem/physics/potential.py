@@ -197,9 +197,10 @@ class Potential:
         return self.contact.max_step(x, dx)
 
     def feasible(self, x0):
-        """x0 (n, 3), or with contact the point of the way from x_start to it where it would
-        first come too close to an obstacle (a solve's start must be clear of them)."""
-        if self.contact is None:
+        """A solve's start: x0 (n, 3), or with contact the point of the way from x_start to it
+        where it would first come too close to an obstacle; where x_start is not clear of them
+        (an obstacle moved into where the step began), x0 as it is, which must be."""
+        if self.contact is None or not self.contact.clear(self.x_start):
             return x0
         share = self.contact.max_step(self.x_start, x0 - self.x_start)
         return x0 if share >= 1.0 else self.x_start + share * (x0 - self.x_start)

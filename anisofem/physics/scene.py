@@ -405,6 +405,12 @@ class Scene:
                 as_float_array(part.force, f"timed[{k}].force", shape=(n, 3))
             if part.control is not None:
                 self._check_timed_control(part, f"timed[{k}].control")
+            if part.obstacle is not None:
+                names = [o.name for o in self.contact.obstacles] if self.contact else []
+                if part.obstacle[0] not in names:
+                    raise ValueError(f"timed[{k}].obstacle: no obstacle {part.obstacle[0]!r}; "
+                                     f"the scene has: {', '.join(names) or 'none'}")
+                as_float_array(part.obstacle[1], f"timed[{k}].obstacle move", shape=(3,))
         moved = self.held_at(self.fixed_positions)
         moved.timed = timed
         return moved
@@ -432,7 +438,7 @@ class Scene:
         held = self.fixed_positions.copy()
         pressures = list(self.pressures)
         written = dict(zip(self.controls, self.control_values))
-        controls = {}
+        controls, moves = {}, {}
         for part in self.timed:
             c = part.curve(t) - 1.0
             if part.force is not None:
@@ -443,7 +449,13 @@ class Scene:
                 pressures[part.pressure] = pressures[part.pressure].scaled(c + 1.0)
             if part.control is not None:
                 controls[part.control] = (c + 1.0) * written[part.control]
+            if part.obstacle is not None:
+                name, move = part.obstacle
+                moves[name] = moves.get(name, 0.0) + (c + 1.0) * np.asarray(move, dtype=float)
         moved = self.held_at(held)
+        if moves:
+            moved.contact = replace(self.contact, obstacles=tuple(
+                o.moved(moves[o.name]) if o.name in moves else o for o in self.contact.obstacles))
         force.setflags(write=False)
         moved.external_force, moved.pressures, moved.timed = force, tuple(pressures), ()
         return moved.with_controls(controls) if controls else moved

@@ -1,4 +1,5 @@
 """Static equilibrium, one backward-Euler step, and rollouts."""
+import copy
 import time
 from dataclasses import dataclass
 
@@ -8,6 +9,7 @@ from . import methods
 from .._validate import as_count, as_scalar
 from .continuation import ramp, worth_ramping
 from .newton import TIME_SPENT, NewtonResult, minimize, report
+from ..physics.contact import advance, surface_nodes
 from ..physics.curves import LoadCurve
 from ..physics.potential import Potential, check_positions
 from ..physics.scene import check_scene
@@ -91,7 +93,7 @@ class StepResult:
         return self.newton.converged
 
 
-def step(scene, x, v, dt, a_guess=None, method="auto", warn=True, **options):
+def step(scene, x, v, dt, a_guess=None, method="auto", warn=True, start=None, **options):
     """One backward-Euler step of length dt (s) from positions x and velocities v (n, 3).
 
     Minimizes G(y) = 1/(2 dt^2) |y - x - dt v|_M^2 + elastic(y) - f_ext . y, starting from
@@ -102,8 +104,9 @@ def step(scene, x, v, dt, a_guess=None, method="auto", warn=True, **options):
     end with more mechanical energy than it started with iterates on until it does not (or
     converges). Where the step's solve fails short of round-off, its external force is ramped
     up in increments, each solved from the last (anisofem.solvers.continuation): the step is the
-    same, only the path to it changes. Returns StepResult with v_new = (x_new - x) / dt. Fixed
-    components end at their prescribed positions.
+    same, only the path to it changes. start (n, 3): the first iterate instead, clear of the
+    obstacles (Stepper's pushes start each from the last). Returns StepResult with v_new =
+    (x_new - x) / dt. Fixed components end at their prescribed positions.
     """
     check_scene(scene)
     x = check_positions(scene, x, "x")
@@ -112,8 +115,11 @@ def step(scene, x, v, dt, a_guess=None, method="auto", warn=True, **options):
     if dt <= 0:
         raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
     x_hat = x + dt * v
-    start = x_hat if a_guess is None else x_hat + dt ** 2 * check_positions(scene, a_guess,
-                                                                           "a_guess")
+    if start is None:
+        start = x_hat if a_guess is None else x_hat + dt ** 2 * check_positions(
+            scene, a_guess, "a_guess")
+    else:
+        start = check_positions(scene, start, "start")
     potential = Potential(scene, x_hat, dt, x_start=x)
     method = methods.make(method, scene.n_free, **options)
     accept = _no_energy_gain(potential) if method.budget else None
@@ -162,17 +168,24 @@ def _no_energy_gain(potential):
     return accept
 
 
+#: The most solves of one step whose obstacles move into the body, each from the last: each
+#: moves them as far as the body, where the last solve left it, lets them.
+PUSHES = 20
+
+
 @dataclass
 class Rollout:
     """positions, velocities: (k + 1, n, 3) states from the start through the last step that
     did not fail; steps: the StepResults. completed: all requested steps were taken, none
     failed. converged: completed, and every step met its tolerance (False for a method with
     a fixed iteration budget that stopped short of it). physical: no step ended with an
-    element turned inside out; inverted: the most inverted elements of any step."""
+    element turned inside out; inverted: the most inverted elements of any step. obstacles:
+    with contact, (k + 1, o, 3) where each obstacle was (Obstacle.position), m."""
     positions: np.ndarray
     velocities: np.ndarray
     steps: list
     completed: bool
+    obstacles: np.ndarray = None
 
     @property
     def converged(self):
@@ -200,12 +213,40 @@ class Stepper:
         self.scene, self.dt, self.warn = scene, dt, warn
         self.method = methods.make(method, scene.n_free, **options)
         self._a = None
+        #: the Contact whose obstacles the last step had (a moving obstacle starts each step
+        #: there and goes toward where the scene has it as far as the body lets it)
+        self.placed = scene.contact
 
     def __call__(self, x, v, a_guess=None):
-        res = step(self.scene, x, v, self.dt, self._a if a_guess is None else a_guess,
-                   self.method, self.warn)
+        a = self._a if a_guess is None else a_guess
+        if self.scene.contact is None or self.placed is None:
+            res = step(self.scene, x, v, self.dt, a, self.method, self.warn)
+        else:
+            res = self._pushed(x, v, a)
         if self.method.warm_start == "previous" and not res.newton.failed:
             self._a = (res.v - v) / self.dt
+        return res
+
+    def _pushed(self, x, v, a):
+        """A step whose obstacles go from where the last step left them (placed) to where the
+        scene has them: moved as far as the body lets it, the step solved, again from there,
+        up to PUSHES times (an obstacle still short of its place goes on at the next step)."""
+        nodes, _ = surface_nodes(self.scene.mesh)
+        placed, start = self.placed, None
+        for _ in range(PUSHES):
+            now, arrived = advance(self.scene.contact, placed,
+                                   (x if start is None else start)[nodes], self.placed)
+            scene = copy.copy(self.scene)
+            scene.contact = now
+            res = step(scene, x, v, self.dt, a, self.method, False, start=start)
+            if res.newton.failed:
+                break
+            placed, start = now, res.x
+            if arrived:
+                break
+        self.placed = placed
+        if self.warn:
+            report(res.newton, self.scene.mesh.n_tets)
         return res
 
 
@@ -232,7 +273,9 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, method="aut
                          else check_positions(scene, x0, "x0"))
     v = np.zeros_like(x) if v0 is None else check_positions(scene, v0, "v0")
     stepper = Stepper(scene, dt, method, warn, **options)
+    stepper.placed = start.contact
     xs, vs, results = [x], [v], []
+    where = [] if start.contact is None else [_positions(start.contact)]
     for k in range(steps):
         stepper.scene = set_controls(scene.at((k + 1) * dt), (k + 1) * dt)
         res = stepper(x, v)
@@ -242,9 +285,17 @@ def simulate(scene, steps, dt=0.02, x0=None, v0=None, callback=None, method="aut
         x, v = res.x, res.v
         xs.append(x)
         vs.append(v)
+        if where:
+            where.append(_positions(stepper.placed))
         if callback is not None:
             callback(k, res)
-    return Rollout(np.stack(xs), np.stack(vs), results, len(xs) == steps + 1)
+    return Rollout(np.stack(xs), np.stack(vs), results, len(xs) == steps + 1,
+                   np.array(where) if where else None)
+
+
+def _positions(contact):
+    """(o, 3) where a Contact's obstacles are, m."""
+    return np.array([o.position for o in contact.obstacles])
 
 
 def controls_in_time(scene, controls):
