@@ -756,6 +756,7 @@ class Contact:
         """Move each obstacle toward its target as far as the nodes at xs (k, 3) let it: the
         share of the move that keeps every node at KEEP of its distance (the body held)."""
         for i, (o, target) in enumerate(zip(self.obstacles, self.targets)):
+            o["shift"] = np.zeros(3)
             if target is None:
                 continue
             key = OBSTACLE_KINDS[o["kind"]][0][0]
@@ -764,12 +765,14 @@ class Contact:
             share = float(first_touch(o, xs, np.broadcast_to(-delta, xs.shape),
                                       self.KEEP * d).min(initial=1.0))
             o[key] = o[key] + share * delta
+            o["shift"] = share * delta
             if o["kind"] == "capsule":
                 o["b"] = o["b"] + share * delta
             self.targets[i] = None if share >= 1.0 else target
 
     def lagged(self, xs, dt):
-        """The friction of a step of dt s lagged at xs (k, 3): [(mu lambda, rows, T, x_lag)]."""
+        """The friction of a step of dt s lagged at xs (k, 3): [(mu lambda, rows, T, x_lag)],
+        x_lag moved with its obstacle's move at the step's start."""
         out = []
         for o in self.obstacles:
             mu = self.mu if o["friction"] is None else float(o["friction"])
@@ -780,7 +783,7 @@ class Contact:
             if rows.size:
                 force = -self.kappa * self.area[rows] * _barrier_slope(d[rows], self.dhat)
                 T = np.eye(3) - n[rows, :, None] * n[rows, None, :]
-                out.append((mu * force, rows, T, xs[rows].copy()))
+                out.append((mu * force, rows, T, xs[rows] + o.get("shift", 0.0)))
         return out
 
     def energy(self, xs, friction, eps):

@@ -33,6 +33,7 @@ struct af_contact {
     unsigned char *kinds;
     double *geometry, *friction; /* (count, 15), (count,) */
     double *target;              /* (count, 3) where each is to be */
+    double *shift;               /* (count, 3) its move at this step's start */
     unsigned char *moving;       /* (count,) whether it has a target */
     lag_t *lags;
     long lagged;
@@ -44,7 +45,8 @@ struct af_contact {
 void af_contact_close(af_contact *c) {
     if (!c) return;
     free(c->rest); free(c->U); free(c->area); free(c->kinds); free(c->geometry);
-    free(c->friction); free(c->target); free(c->moving); free(c->lags); free(c->xs);
+    free(c->friction); free(c->target); free(c->shift); free(c->moving); free(c->lags);
+    free(c->xs);
     free(c->gs); free(c->ds); free(c->names); free(c->g); free(c->H); free(c->qt);
     free(c);
 }
@@ -100,6 +102,7 @@ af_contact *af_contact_open(const af_file *f, int r, int *failed) {
         goto fail;
     if (shape[0] != count) goto shape;
     c->target = (double *)calloc((size_t)count * 3 + 1, sizeof(double));
+    c->shift = (double *)calloc((size_t)count * 3 + 1, sizeof(double));
     c->moving = (unsigned char *)calloc((size_t)count + 1, 1);
     c->lags = (lag_t *)malloc(((size_t)k * (size_t)count + 1) * sizeof(lag_t));
     c->xs = (double *)malloc((size_t)k * 3 * sizeof(double) + 1);
@@ -108,8 +111,8 @@ af_contact *af_contact_open(const af_file *f, int r, int *failed) {
     c->g = (double *)malloc(((size_t)r + 1) * sizeof(double));
     c->H = (double *)malloc(((size_t)r * (size_t)r + 1) * sizeof(double));
     c->qt = (double *)malloc(((size_t)r + 1) * sizeof(double));
-    if (!c->target || !c->moving || !c->lags || !c->xs || !c->gs || !c->ds || !c->g || !c->H ||
-        !c->qt) {
+    if (!c->target || !c->shift || !c->moving || !c->lags || !c->xs || !c->gs || !c->ds ||
+        !c->g || !c->H || !c->qt) {
         af_say(f->error, f->error_size, "no memory for a model's contact");
         goto fail;
     }
@@ -293,6 +296,7 @@ void af_contact_start(af_contact *c, const double *q, double dt) {
     place(c, q);
     for (o = 0; o < c->count; o++) {   /* obstacles toward their targets, the body held */
         double *G = c->geometry + o * GEOMETRY, delta[3], share;
+        for (a = 0; a < 3; a++) c->shift[3 * o + a] = 0.0;
         if (!c->moving[o]) continue;
         for (a = 0; a < 3; a++) delta[a] = c->target[3 * o + a] - G[a];
         for (i = 0; i < c->k; i++)
@@ -305,6 +309,7 @@ void af_contact_start(af_contact *c, const double *q, double dt) {
         }
         for (a = 0; a < 3; a++) {
             G[a] += share * delta[a];
+            c->shift[3 * o + a] = share * delta[a];
             if (c->kinds[o] == CAPSULE) G[3 + a] += share * delta[a];
         }
         c->moving[o] = share < 1.0;
@@ -323,7 +328,7 @@ void af_contact_start(af_contact *c, const double *q, double dt) {
             l->node = (int)i;
             l->weight = mu * -c->kappa * c->area[i] * barrier_slope(d, c->dhat);
             for (a = 0; a < 3; a++) {
-                l->start[a] = c->xs[3 * i + a];
+                l->start[a] = c->xs[3 * i + a] + c->shift[3 * o + a];
                 for (b = 0; b < 3; b++) l->T[3 * a + b] = (a == b) - n[a] * n[b];
             }
             c->lagged++;
