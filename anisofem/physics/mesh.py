@@ -16,8 +16,9 @@ from .elements.tet10 import EDGES, TET10, quadratic_nodes
 #: spread over the whole mesh) and 57 ms on one thread (docs/experiments.md).
 ASSEMBLY_BLOCK = 512
 
-#: A quadratic tet's midside node may sit this far (over its edge's length) from the edge's
-#: midpoint; farther, the element would be curved, which the element loop does not model.
+#: A quadratic tet's midside node within this share of its edge's length of the edge's
+#: midpoint is at it; a tet with one farther is curved (isoparametric: its Jacobian taken at
+#: each quadrature point).
 MIDSIDE_TOLERANCE = 1e-6
 
 #: Midside nodes of a tet whose vertices 2 and 3 are swapped, by their old places (4 to 9):
@@ -125,8 +126,8 @@ class TetMesh:
             if cells.shape[1] == 10:
                 cells[inverted, 4:] = cells[inverted][:, _SWAPPED_MIDSIDES]
             tets = np.ascontiguousarray(cells[:, :4])
-        if cells.shape[1] == 10:
-            _check_midsides(vertices, cells)
+        #: whether some quadratic tet's midside node is off its edge's middle (isoparametric)
+        self.curved = cells.shape[1] == 10 and _check_midsides(vertices, cells)
         for arr in (vertices, tets, cells):
             arr.setflags(write=False)
         self.vertices = vertices
@@ -134,6 +135,8 @@ class TetMesh:
         self.cells = cells
         self.order = 1 if cells.shape[1] == 4 else 2
         self.element = TET4 if self.order == 1 else TET10
+        if self.curved:
+            _check_jacobians(self)
 
     def __repr__(self):
         kind = "" if self.order == 1 else " quadratic"
@@ -203,8 +206,26 @@ class TetMesh:
 
     @cached_property
     def rest_volumes(self):
-        """(m,) rest volume of each tet, m^3."""
+        """(m,) rest volume of each tet, m^3 (of a curved one, its quadrature's: exact, det J
+        being cubic in the reference coordinates)."""
+        if self.curved:
+            return self.point_weights.sum(axis=1)
         return _six_volumes(self.vertices, self.tets) / 6.0
+
+    @cached_property
+    def point_weights(self):
+        """(m, q) each tet's quadrature weights times its volume element, m^3: the element's
+        weights times the rest volume, or on curved tets times det J / 6 at each point."""
+        if self.curved:
+            return self.element.weights * np.linalg.det(self.point_jacobians) / 6.0
+        return self.rest_volumes[:, None] * self.element.weights
+
+    @cached_property
+    def point_jacobians(self):
+        """(m, q, 3, 3) dX/dxi at each tet's quadrature points (isoparametric: X(xi) =
+        sum_a X_a N_a(xi); constant Dm on a straight-sided tet)."""
+        return np.einsum("eai,pak->epik", self.vertices[self.cells],
+                         self.element.point_gradients)
 
     @cached_property
     def shape_gradients(self):
@@ -217,8 +238,11 @@ class TetMesh:
     @cached_property
     def point_gradients(self):
         """(m, q, k, 3) material gradients of each tet's k shape functions at its element's q
-        quadrature points, 1/m (straight-sided tets: Dm^-1 maps them from the reference
-        tet). F at point p is sum_a x_a grads[p, a]^T."""
+        quadrature points, 1/m (straight-sided tets: Dm^-1 maps them from the reference tet;
+        curved ones: each point's (dX/dxi)^-1). F at point p is sum_a x_a grads[p, a]^T."""
+        if self.curved:
+            return np.einsum("pak,epkj->epaj", self.element.point_gradients,
+                             np.linalg.inv(self.point_jacobians))
         return np.einsum("pak,ekj->epaj", self.element.point_gradients,
                          self.inverse_jacobians)
 
@@ -289,20 +313,15 @@ class TetMesh:
 
 
 def _check_midsides(vertices, cells):
-    """ValueError unless every midside node of the quadratic tets cells (m, 10) sits at its
-    edge's midpoint (within MIDSIDE_TOLERANCE of the edge's length), is no tet's corner, and
-    is the one node of its edge in every tet sharing it."""
+    """Whether some midside node of the quadratic tets cells (m, 10) is off its edge's midpoint
+    (by more than MIDSIDE_TOLERANCE of the edge's length: a curved tet); ValueError unless
+    every midside node is no tet's corner and is the one node of its edge in every tet sharing
+    it."""
     ends = cells[:, EDGES]                                          # (m, 6, 2)
     X = vertices[ends]
     length = np.linalg.norm(X[:, :, 1] - X[:, :, 0], axis=2)
     off = np.linalg.norm(vertices[cells[:, 4:]] - X.mean(axis=2), axis=2) / length
-    bad = np.argwhere(off > MIDSIDE_TOLERANCE)
-    if bad.size:
-        e, k = bad[0]
-        raise ValueError(f"tets: the midside node {cells[e, 4 + k]} of tet {e} is "
-                         f"{off[e, k]:.3g} edge lengths from the middle of its edge "
-                         f"{ends[e, k].tolist()} ({bad.shape[0]} such nodes; curved quadratic "
-                         f"tets are not supported)")
+    curved = bool((off > MIDSIDE_TOLERANCE).any())
     corners = np.isin(cells[:, 4:], cells[:, :4])
     if corners.any():
         e, k = np.argwhere(corners)[0]
@@ -318,6 +337,26 @@ def _check_midsides(vertices, cells):
         i = clash[0]
         raise ValueError(f"tets: the edge {pairs[i].tolist()} has two midside nodes, "
                          f"{mids[i]} and {mids[i + 1]}, in the tets that share it")
+    return curved
+
+
+def _check_jacobians(mesh):
+    """ValueError naming a curved tet whose map from the reference tet folds or flattens:
+    det dX/dxi at a quadrature point or a corner at most MIN_SHAPE_QUALITY times its corners'
+    straight tet's."""
+    corners = mesh.element.shape_gradients(mesh.element.nodes[:4])         # (4, 10, 3)
+    J = np.concatenate([mesh.point_jacobians, np.einsum(
+        "eai,pak->epik", mesh.vertices[mesh.cells], corners)], axis=1)
+    straight = _six_volumes(mesh.vertices, mesh.tets)
+    ratio = np.linalg.det(J) / straight[:, None]
+    bad = np.argwhere(ratio <= MIN_SHAPE_QUALITY)
+    if bad.size:
+        e, p = bad[0]
+        where = (f"quadrature point {p}" if p < mesh.element.weights.size
+                 else f"corner {p - mesh.element.weights.size}")
+        raise ValueError(f"tets: curved tet {e} is {'inverted' if ratio[e, p] < 0 else 'flat'} "
+                         f"at its {where} (det dX/dxi {ratio[e, p]:.3g} of its straight tet's; "
+                         f"{np.unique(bad[:, 0]).size} such tets): its midside nodes fold it")
 
 
 def _six_volumes(vertices, tets):

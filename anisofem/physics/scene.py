@@ -494,7 +494,7 @@ def element_data(mesh, params):
     starts, ptr = mesh.coloring
     return ElementData(
         tets=np.ascontiguousarray(mesh.cells, dtype=np.int64), grads=mesh.point_gradients,
-        weights=mesh.rest_volumes[:, None] * element.weights, model=params["model"],
+        weights=mesh.point_weights, model=params["model"],
         mu=params["mu"], lam=params["lam"], kappa=kappa, rest2=params["rest2"],
         fiber=params["fiber"],
         has_fiber=bool((kappa > 0).any()), block_starts=starts, color_ptr=ptr)
