@@ -574,9 +574,10 @@ def _contact(contact, mesh, x):
         d, _ = o.distance(x[nodes])
         if (d <= 0).any():
             worst = int(np.argmin(d))
+            at = ", ".join(f"{v:.4g}" for v in x[nodes[worst]])
             raise ValueError(f"contact: the body starts inside obstacle {o.name!r} ({o.kind}): "
                              f"{int((d <= 0).sum())} surface nodes, the deepest "
-                             f"{-1e3 * d[worst]:.3g} mm in at ({', '.join(f'{v:.4g}' for v in x[nodes[worst]])})")
+                             f"{-1e3 * d[worst]:.3g} mm in at ({at})")
     return contact
 
 

@@ -358,13 +358,15 @@ static double surface_energy(af_contact *c, int grad) {
         double u[3], y = 0.0, e = c->eps;
         for (a = 0; a < 3; a++) {
             u[a] = 0.0;
-            for (b = 0; b < 3; b++) u[a] += l->T[3 * a + b] * (c->xs[3 * l->node + b] - l->start[b]);
+            for (b = 0; b < 3; b++)
+                u[a] += l->T[3 * a + b] * (c->xs[3 * l->node + b] - l->start[b]);
             y += u[a] * u[a];
         }
         y = sqrt(y);
         total += l->weight * (y < e ? -y * y * y / (3 * e * e) + y * y / e + e / 3.0 : y);
         if (grad)
-            for (a = 0; a < 3; a++) c->gs[3 * l->node + a] += l->weight * friction_slope(y, e) * u[a];
+            for (a = 0; a < 3; a++)
+                c->gs[3 * l->node + a] += l->weight * friction_slope(y, e) * u[a];
     }
     return total;
 }
