@@ -807,8 +807,8 @@ class Contact:
         return total, g
 
     def hessian(self, xs, friction, eps):
-        """(r, r) the reduced Hessian of the barrier and friction at xs: each node's 3 x 3
-        block clamped to positive semi-definite, projected on its basis rows."""
+        """(r, r) the reduced Hessian of the barrier and friction at xs: each node's exact
+        3 x 3 block projected on its basis rows (the step clamps the whole Hessian)."""
         H = np.zeros((len(xs), 3, 3))
         for o in self.obstacles:
             d, n, curvature = obstacle_geometry(o, xs, True)
@@ -829,9 +829,7 @@ class Contact:
                                                 + along[:, None, None] * unit[:, :, None]
                                                 * unit[:, None, :])
         live = np.flatnonzero(np.abs(H).reshape(len(H), -1).max(axis=1) > 0)
-        lam, V = np.linalg.eigh(H[live])
-        blocks = np.einsum("kij,kj,klj->kil", V, np.maximum(lam, 0.0), V)
-        return np.einsum("kir,kij,kjs->rs", self.U[live], blocks, self.U[live])
+        return np.einsum("kir,kij,kjs->rs", self.U[live], H[live], self.U[live])
 
     def limit(self, xs, ds):
         """The largest share in (0, 1] of the move ds (k, 3) from xs keeping every node at

@@ -60,7 +60,9 @@ class Touching:
 
     def derivatives(self, q):
         """(dE/dq (r,) N, d2E/dq2 (r, r) N/m, the gradient's round-off floor N) at q: each
-        node's Hessian block, clamped to positive semi-definite, projected on its basis rows;
+        node's exact Hessian block projected on its basis rows (the step clamps the whole
+        Hessian's negative eigenvalues; clamping each block's, a curved obstacle's tangential
+        curvature, left Newton crawling: 61 iterations for a step of the page's tentacle);
         the floor ROUNDOFF_FACTOR eps R |H| (R the largest coordinate), which float64 cannot
         resolve in a barrier's force."""
         x = self.contact.positions(q)
@@ -69,7 +71,7 @@ class Touching:
         self._at = (q.copy(), energy, slope)
         live = np.flatnonzero(self.term.in_reach(x))
         U = self.contact.U[live]
-        H = np.einsum("kir,kij,kjs->rs", U, self.term.surface_hessians(x[live], live, True),
+        H = np.einsum("kir,kij,kjs->rs", U, self.term.surface_hessians(x[live], live),
                       U)
         floor = (ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(x).max())
                  * math.sqrt(float((H * H).sum())))

@@ -107,7 +107,7 @@ void af_contact_move(af_contact *c, int i, const double *position);
  * at q for a step of dt s. */
 void af_contact_start(af_contact *c, const double *q, double dt);
 /* The barrier's and friction's energy at q (inf where a node reached an obstacle), their
- * reduced gradient (*g, r) and PSD-clamped Hessian (*H, r x r) in the contact's scratch, and
+ * reduced gradient (*g, r) and exact Hessian (*H, r x r) in the contact's scratch, and
  * the floor R |H| (R the largest coordinate) of their round-off over eps. */
 double af_contact_terms(af_contact *c, const double *q, const double **g, const double **H,
                         double *floor);

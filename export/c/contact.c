@@ -376,47 +376,6 @@ double af_contact_energy(af_contact *c, const double *q) {
     return surface_energy(c, 0);
 }
 
-/* B (9, symmetric) with its negative eigenvalues set to 0 (cyclic Jacobi on 3 x 3). */
-static void clamp_block(double *B) {
-    double A[9], V[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, lam[3];
-    int sweep, p, q, k, a, b;
-    memcpy(A, B, sizeof A);
-    for (sweep = 0; sweep < 50; sweep++) {
-        double off = A[1] * A[1] + A[2] * A[2] + A[5] * A[5];
-        double total = off * 2 + A[0] * A[0] + A[4] * A[4] + A[8] * A[8];
-        if (off <= 1e-30 * total) break;
-        for (p = 0; p < 2; p++)
-            for (q = p + 1; q < 3; q++) {
-                double apq = A[3 * p + q], theta, t, cs, sn;
-                if (apq == 0.0) continue;
-                theta = (A[3 * q + q] - A[3 * p + p]) / (2.0 * apq);
-                t = (theta >= 0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
-                cs = 1.0 / sqrt(t * t + 1.0);
-                sn = t * cs;
-                for (k = 0; k < 3; k++) {
-                    double ap = A[3 * k + p], aq = A[3 * k + q];
-                    A[3 * k + p] = cs * ap - sn * aq;
-                    A[3 * k + q] = sn * ap + cs * aq;
-                }
-                for (k = 0; k < 3; k++) {
-                    double ap = A[3 * p + k], aq = A[3 * q + k];
-                    A[3 * p + k] = cs * ap - sn * aq;
-                    A[3 * q + k] = sn * ap + cs * aq;
-                }
-                for (k = 0; k < 3; k++) {
-                    double vp = V[3 * k + p], vq = V[3 * k + q];
-                    V[3 * k + p] = cs * vp - sn * vq;
-                    V[3 * k + q] = sn * vp + cs * vq;
-                }
-            }
-    }
-    for (k = 0; k < 3; k++) lam[k] = A[4 * k] > 0.0 ? A[4 * k] : 0.0;
-    for (a = 0; a < 3; a++)
-        for (b = 0; b < 3; b++)
-            B[3 * a + b] = V[3 * a] * lam[0] * V[3 * b] + V[3 * a + 1] * lam[1] * V[3 * b + 1]
-                           + V[3 * a + 2] * lam[2] * V[3 * b + 2];
-}
-
 double af_contact_terms(af_contact *c, const double *q, const double **g, const double **H,
                         double *floor) {
     long i, j, r = c->r, s, t;
@@ -470,7 +429,6 @@ double af_contact_terms(af_contact *c, const double *q, const double **g, const 
             live = 1;
         }
         if (!live) continue;
-        clamp_block(B);
         w = r <= 64 ? W : (double *)malloc((size_t)(3 * r) * sizeof(double));
         if (!w) continue;
         for (a = 0; a < 3; a++)                   /* w = B U_i (3 x r) */
