@@ -17,7 +17,9 @@ over the ground 7 mm below its lowest point, its "up" band activated to 0.05 ove
 steps of 0.02 s: its static rest shape and the rollout's last state, reduced model (4 modes +
 14 fitted, built with the ground) against the FEM, as the largest node distance over the
 largest displacement; ms per step of the FEM, the library's reduced step and the C runtime's.
-Run alone (about two minutes).
+Hertz: the quarter of a 10 mm ball of tests/data/hemisphere_quarter_2.msh (Gmsh, curved
+quadratic tets) pressed 0.1 mm onto a plane (anisofem.studies.hertz), at contact distances
+1e-5 to 3e-7 m: its force over Hertz's. Run alone (about two minutes).
 """
 import argparse
 import itertools
@@ -182,6 +184,20 @@ def reduced_rows():
             "c_ms": c_ms}
 
 
+def hertz_rows():
+    """The ball pressed onto the plane at each contact distance: force, Hertz's, their ratio."""
+    from anisofem.studies.hertz import pressed
+    here = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "data")
+    mesh = af.read_mesh(os.path.join(here, "hemisphere_quarter_2.msh"))
+    rows = []
+    for distance in (1e-5, 3e-6, 1e-6, 3e-7):
+        force, hertz, result = pressed(mesh, 0.01, 1e-4, distance)
+        rows.append({"distance_m": distance, "force_N": force, "hertz_N": hertz,
+                     "ratio": force / hertz, "newton": result.iterations,
+                     "converged": result.converged, "tets": mesh.n_tets})
+    return rows
+
+
 def _print(report):
     print("slope tilted by atan(0.5):")
     print(f"{'contact':<22} {'mu':>5} {'slide mm':>9} {'a m/s^2':>9} {'Coulomb':>8} {'off':>7}")
@@ -207,6 +223,13 @@ def _print(report):
     r = report["reduced"]
     c = "no C compiler" if r["c_ms"] is None else (f"C runtime {r['c_ms']:.3f} ms "
                                                    f"({r['fem_ms'] / r['c_ms']:.0f}x)")
+    h = report["hertz"]
+    print(f"\nHertz: a 10 mm ball ({h[0]['tets']} curved quadratic tets in its quarter) pressed "
+          f"0.1 mm onto a plane")
+    print(f"{'distance (m)':>12} {'force (N)':>10} {'Hertz (N)':>10} {'ratio':>7} {'Newton':>6}")
+    for row in h:
+        print(f"{row['distance_m']:12.1e} {row['force_N']:10.4e} {row['hertz_N']:10.4e} "
+              f"{row['ratio']:7.4f} {row['newton']:6d}")
     print(f"\nthe tentacle on the ground ({r['tets']} tets), reduced r = {r['r']} against the "
           f"FEM: rest shape {100 * r['static_off']:.2f}% off, rollout's end "
           f"{100 * r['rollout_off']:.2f}% off (of the largest displacement); per step: FEM "
@@ -219,7 +242,7 @@ def main():
     parser.add_argument("--json", default=result_path("contact_checks.json"))
     args = parser.parse_args()
     publish({"slope": slope_rows(), "drops": drop_rows(), "cost": cost_rows(),
-             "reduced": reduced_rows()}, _print, args.json)
+             "reduced": reduced_rows(), "hertz": hertz_rows()}, _print, args.json)
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 derivatives and continuous collision test, the barrier's and friction's derivatives against
 central differences, drop tests that never pass an obstacle, Coulomb's slope, and bad input."""
 import itertools
+import os
 
 import numpy as np
 import pytest
@@ -599,3 +600,20 @@ def test_an_obstacle_moved_along_a_curve_pushes_the_body(beam_file):
         nodes = ContactTerm(scene).nodes
         assert placed.distance(s.x[nodes])[0].min() > 0
     assert roll.positions[-1][:, 2].max() > roll.positions[0][:, 2].max() + 0.005
+
+
+def test_a_soft_ball_pressed_on_a_plane_follows_hertz():
+    """Hertz on curved quadratic tets (tests/data/hemisphere_quarter_2.msh, Gmsh at second
+    order, 0.15 mm at the pole): a 10 mm ball pressed 0.1 mm onto a plane; the force within 5%
+    of Hertz's at a contact distance of 0.3 um, and closer as the distance shrinks (1e-5,
+    1e-6, 3e-7 m)."""
+    from anisofem.studies.hertz import pressed
+    mesh = af.read_mesh(os.path.join(os.path.dirname(__file__), "data",
+                                     "hemisphere_quarter_2.msh"))
+    assert mesh.curved
+    off = []
+    for distance in (1e-5, 1e-6, 3e-7):
+        force, hertz, result = pressed(mesh, 0.01, 1e-4, distance)
+        assert result.converged
+        off.append(abs(force / hertz - 1))
+    assert off[-1] < 0.05 and off[0] > off[1] > off[2], off
