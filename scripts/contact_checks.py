@@ -17,7 +17,10 @@ over the ground 7 mm below its lowest point, its "up" band activated to 0.05 ove
 steps of 0.02 s: its static rest shape and the rollout's last state, reduced model (4 modes +
 14 fitted, built with the ground) against the FEM, as the largest node distance over the
 largest displacement; ms per step of the FEM, the library's reduced step and the C runtime's.
-Hertz: the quarter of a 10 mm ball of tests/data/hemisphere_quarter_2.msh (Gmsh, curved
+Runtime: the T (anisofem.physics.meshgen.t_shape, held at its foot) with four obstacles (a
+wall at one arm's end, a rotated box and a capsule under its arms, a ball over one), its reduced
+model (6 modes + 10 fitted) written and stepped 200 times by the C runtime under gravity with
+the ball moved every step: ms per step. Hertz: the quarter of a 10 mm ball of tests/data/hemisphere_quarter_2.msh (Gmsh, curved
 quadratic tets) pressed 0.1 mm onto a plane (anisofem.studies.hertz), at contact distances
 1e-5 to 3e-7 m: its force over Hertz's. Run alone (about two minutes).
 """
@@ -184,6 +187,42 @@ def reduced_rows():
             "c_ms": c_ms}
 
 
+def runtime_row():
+    """The T with four obstacles in the C runtime: ms per step (None without a compiler)."""
+    from anisofem.reduced import ReducedModel
+    from export import native
+    from export.writers.reduced import write
+    if native.compiler() is None:
+        return None
+    mesh = af.t_shape()
+    X = mesh.vertices
+    top = X[:, 2].max()
+    arms = top - 0.02                   # the arms' underside
+    obstacles = [af.Plane((0.052, 0, 0), (-1, 0, 0), name="wall"),
+                 af.Sphere((-0.035, 0.0, top + 0.012), 0.01, name="ball"),
+                 af.Box((0.035, 0.0, arms - 0.006), (0.004, 0.02, 0.004), name="box",
+                        rotation=[[0.8, -0.6, 0.0], [0.6, 0.8, 0.0], [0.0, 0.0, 1.0]]),
+                 af.Capsule((-0.045, -0.03, arms - 0.005), (-0.045, 0.03, arms - 0.005),
+                            0.003, name="rod")]
+    scene = af.Scene(mesh, af.Material(1e5, 0.48, 1000.0, np.array([1.0, 0, 0]), 1e5),
+                     fixed=X[:, 2] <= 1e-9, gravity=(0, 0, -G),
+                     contact=af.Contact(obstacles, friction=0.3))
+    model = ReducedModel(scene, modes=6, snapshots=10, validate=False)
+    with tempfile.TemporaryDirectory() as folder:
+        path = os.path.join(folder, "t")
+        write(model, path, title="t with obstacles")
+        c = native.CReducedSimulator(path)
+        c.set_constant_force(scene.external_force)
+        q, w = c.rest_state()
+        t0 = time.perf_counter()
+        for k in range(200):
+            c.move_obstacle("ball", (-0.035, 0.0, top + 0.012 - 0.01 * np.sin(np.pi * k / 200)))
+            c.step(q, w, None, 0.01)
+        ms = 1e3 * (time.perf_counter() - t0) / 200
+    return {"tets": mesh.n_tets, "r": model.r, "surface_nodes": len(model.contact.x0),
+            "c_ms": ms}
+
+
 def hertz_rows():
     """The ball pressed onto the plane at each contact distance: force, Hertz's, their ratio."""
     from anisofem.studies.hertz import pressed
@@ -223,6 +262,10 @@ def _print(report):
     r = report["reduced"]
     c = "no C compiler" if r["c_ms"] is None else (f"C runtime {r['c_ms']:.3f} ms "
                                                    f"({r['fem_ms'] / r['c_ms']:.0f}x)")
+    t = report["runtime"]
+    if t is not None:
+        print(f"\nthe T ({t['tets']} tets, r = {t['r']}, {t['surface_nodes']} surface nodes) with "
+              f"four obstacles, its ball moved every step: C runtime {t['c_ms']:.3f} ms per step")
     h = report["hertz"]
     print(f"\nHertz: a 10 mm ball ({h[0]['tets']} curved quadratic tets in its quarter) pressed "
           f"0.1 mm onto a plane")
@@ -242,7 +285,8 @@ def main():
     parser.add_argument("--json", default=result_path("contact_checks.json"))
     args = parser.parse_args()
     publish({"slope": slope_rows(), "drops": drop_rows(), "cost": cost_rows(),
-             "reduced": reduced_rows(), "hertz": hertz_rows()}, _print, args.json)
+             "reduced": reduced_rows(), "runtime": runtime_row(), "hertz": hertz_rows()},
+            _print, args.json)
 
 
 if __name__ == "__main__":
