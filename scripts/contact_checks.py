@@ -18,11 +18,12 @@ steps of 0.02 s: its static rest shape and the rollout's last state, reduced mod
 14 fitted, built with the ground) against the FEM, as the largest node distance over the
 largest displacement; ms per step of the FEM, the library's reduced step and the C runtime's.
 Runtime: the T (anisofem.physics.meshgen.t_shape, held at its foot) with four obstacles (a
-wall at one arm's end, a rotated box and a capsule under its arms, a ball over one), its reduced
-model (6 modes + 10 fitted) written and stepped 200 times by the C runtime under gravity with
-the ball moved every step: ms per step. Hertz: the quarter of a 10 mm ball of tests/data/hemisphere_quarter_2.msh (Gmsh, curved
-quadratic tets) pressed 0.1 mm onto a plane (anisofem.studies.hertz), at contact distances
-1e-5 to 3e-7 m: its force over Hertz's. Run alone (about two minutes).
+wall at one arm's end, a rotated box and a capsule under its arms, a ball over one), its
+reduced model (6 modes + 10 fitted) written and stepped 200 times by the C runtime under
+gravity with the ball moved every step: ms per step. Hertz: the quarter of a 10 mm ball of
+tests/data/hemisphere_quarter_2.msh (Gmsh, curved quadratic tets) pressed 0.1 mm onto a
+plane (anisofem.studies.hertz), at contact distances 1e-5 to 3e-7 m: its force over Hertz's.
+Run alone (about two minutes).
 """
 import argparse
 import itertools
