@@ -142,8 +142,6 @@ def reduced_rows():
     """The tentacle on the ground: reduced model against the FEM, and the steps' cost."""
     from anisofem.io.scenefile import SceneFile
     from anisofem.reduced import Loads, ReducedModel
-    from export import native
-    from export.writers.reduced import write
     here = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "examples", "scenes")
     written = SceneFile(os.path.join(here, "tentacle.toml"))
     base, ranges = written.scene, written.control_ranges
@@ -171,18 +169,7 @@ def reduced_rows():
     library_ms = 1e3 * (time.perf_counter() - t0) / steps
     moved = max(np.linalg.norm(s.x - X, axis=1).max() for s in roll.steps)
     rollout = np.linalg.norm(model.positions(q) - roll.steps[-1].x, axis=1).max() / moved
-    c_ms = None
-    if native.compiler() is not None:
-        with tempfile.TemporaryDirectory() as folder:
-            path = os.path.join(folder, "tentacle")
-            write(model, path, title="tentacle")
-            c = native.CReducedSimulator(path)
-            c.set_constant_force(scene.external_force)
-            qc, wc = c.rest_state()
-            t0 = time.perf_counter()
-            for k in range(steps):
-                c.step(qc, wc, None, dt, controls=up((k + 1) * dt))
-            c_ms = 1e3 * (time.perf_counter() - t0) / steps
+    c_ms = c_rollout_ms(model, steps, dt, lambda c, k: c.set_controls(up((k + 1) * dt)))
     return {"tets": scene.mesh.n_tets, "r": model.r, "static_off": float(static),
             "rollout_off": float(rollout), "fem_ms": fem_ms, "library_ms": library_ms,
             "c_ms": c_ms}
@@ -192,7 +179,6 @@ def runtime_row():
     """The T with four obstacles in the C runtime: ms per step (None without a compiler)."""
     from anisofem.reduced import ReducedModel
     from export import native
-    from export.writers.reduced import write
     if native.compiler() is None:
         return None
     mesh = af.t_shape()
@@ -209,19 +195,32 @@ def runtime_row():
                      fixed=X[:, 2] <= 1e-9, gravity=(0, 0, -G),
                      contact=af.Contact(obstacles, friction=0.3))
     model = ReducedModel(scene, modes=6, snapshots=10, validate=False)
+
+    def push(c, k):
+        c.move_obstacle("ball", (-0.035, 0.0, top + 0.012 - 0.01 * np.sin(np.pi * k / 200)))
+    return {"tets": mesh.n_tets, "r": model.r, "surface_nodes": len(model.contact.x0),
+            "c_ms": c_rollout_ms(model, 200, 0.01, push)}
+
+
+def c_rollout_ms(model, steps, dt, each):
+    """ms per step of the C runtime stepping the ReducedModel `model` (written to a temporary
+    file) `steps` times under its scene's constant force, each(c, k) called before step k;
+    None without a C compiler."""
+    from export import native
+    from export.writers.reduced import write
+    if native.compiler() is None:
+        return None
     with tempfile.TemporaryDirectory() as folder:
-        path = os.path.join(folder, "t")
-        write(model, path, title="t with obstacles")
+        path = os.path.join(folder, "model")
+        write(model, path)
         c = native.CReducedSimulator(path)
-        c.set_constant_force(scene.external_force)
+        c.set_constant_force(model.scene.external_force)
         q, w = c.rest_state()
         t0 = time.perf_counter()
-        for k in range(200):
-            c.move_obstacle("ball", (-0.035, 0.0, top + 0.012 - 0.01 * np.sin(np.pi * k / 200)))
-            c.step(q, w, None, 0.01)
-        ms = 1e3 * (time.perf_counter() - t0) / 200
-    return {"tets": mesh.n_tets, "r": model.r, "surface_nodes": len(model.contact.x0),
-            "c_ms": ms}
+        for k in range(steps):
+            each(c, k)
+            c.step(q, w, None, dt)
+        return 1e3 * (time.perf_counter() - t0) / steps
 
 
 def hertz_rows():
