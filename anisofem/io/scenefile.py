@@ -39,10 +39,6 @@ PLACE_TOLERANCE = 1e-9
 UNIT_TOLERANCE = 1e-6
 
 
-#: Each obstacle shape's geometry keys, in its constructor's order.
-OBSTACLE_KEYS = {"plane": ("point", "normal"), "sphere": ("center", "radius"),
-                 "box": ("center", "half"), "capsule": ("a", "b", "radius")}
-
 
 class SceneFileError(ValueError):
     """A scene file that cannot be read as a scene: the message names the file and the key."""
@@ -461,17 +457,18 @@ class _Reader:
         """A [contact.obstacles.NAME] table -> its anisofem obstacle."""
         key = f"contact.obstacles.{name}"
         _keys(self, spec, "obstacle", key)
-        shapes = [k for k in OBSTACLE_KEYS if k in spec]
+        shapes = [k for k in KINDS if k in spec]
         if len(shapes) != 1:
-            raise self.error(key, f"give one of {', '.join(OBSTACLE_KEYS)}")
+            raise self.error(key, f"give one of {', '.join(KINDS)}")
         shape = shapes[0]
         where = f"{key}.{shape}"
         geometry = spec[shape]
-        if not isinstance(geometry, dict) or set(geometry) != set(OBSTACLE_KEYS[shape]):
-            raise self.error(where, f"expected {{{', '.join(OBSTACLE_KEYS[shape])}}}, got "
-                                    f"{geometry!r}")
+        # a box's axes are the world's in a scene file: its rotation is no key
+        keys = [k for k in KINDS[shape].parameters if k != "rotation"]
+        if not isinstance(geometry, dict) or set(geometry) != set(keys):
+            raise self.error(where, f"expected {{{', '.join(keys)}}}, got {geometry!r}")
         values = [(_number if k == "radius" else _vector)(self, geometry[k], f"{where}.{k}")
-                  for k in OBSTACLE_KEYS[shape]]
+                  for k in keys]
         friction = (_number(self, spec["friction"], f"{key}.friction") if "friction" in spec
                     else None)
         try:

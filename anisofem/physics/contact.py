@@ -23,6 +23,7 @@ resist).
 """
 import copy
 import math
+import weakref
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -307,10 +308,20 @@ def slope_over(y, eps):
 
 
 def surface_nodes(mesh):
-    """(nodes (k,), area (k,) m^2): the nodes of the mesh's boundary faces (corners; midside
-    nodes too on quadratic tets) and each one's share of the rest boundary area, each face's
-    split evenly over its 3 (linear) or 6 (quadratic) nodes: every node of the surface feels
-    the barrier."""
+    """(nodes (k,), area (k,) m^2), read-only: the nodes of the mesh's boundary faces
+    (corners; midside nodes too on quadratic tets) and each one's share of the rest boundary
+    area, each face's split evenly over its 3 (linear) or 6 (quadratic) nodes: every node of
+    the surface feels the barrier. Found once per mesh (every step's contact reads them)."""
+    if mesh not in _SURFACES:
+        _SURFACES[mesh] = _surface(mesh)
+    return _SURFACES[mesh]
+
+
+#: surface_nodes of each mesh alive
+_SURFACES = weakref.WeakKeyDictionary()
+
+
+def _surface(mesh):
     faces = mesh.boundary_faces
     X = mesh.vertices
     area = 0.5 * np.linalg.norm(np.cross(X[faces[:, 1]] - X[faces[:, 0]],
@@ -322,7 +333,10 @@ def surface_nodes(mesh):
     for c in range(faces.shape[1]):
         np.add.at(share, faces[:, c], area / faces.shape[1])
     nodes = np.unique(faces)
-    return nodes, share[nodes]
+    area = share[nodes]
+    for a in (nodes, area):
+        a.setflags(write=False)
+    return nodes, area
 
 
 def body_size(mesh):

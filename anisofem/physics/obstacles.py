@@ -41,6 +41,8 @@ class Obstacle:
 
     #: the attributes that say where it is (moved by `moved`); the first is its position
     placed = ()
+    #: the attributes that give its shape, in its constructor's order (scene files, model files)
+    parameters = ()
     #: (3,) m, how far it has moved since its step began: friction's anchor follows it
     shift = np.zeros(3)
 
@@ -89,6 +91,7 @@ class Plane(Obstacle):
     ground, a wall, a slope."""
     kind = "plane"
     placed = ("point",)
+    parameters = ("point", "normal")
 
     def __init__(self, point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0), *, name=None,
                  friction=None):
@@ -140,6 +143,7 @@ class Sphere(_Grown):
     """A ball of `radius` m about `center` (3,)."""
     kind = "sphere"
     placed = ("center",)
+    parameters = ("center", "radius")
 
     def __init__(self, center, radius, *, name=None, friction=None):
         super().__init__(radius, name, friction)
@@ -156,6 +160,7 @@ class Capsule(_Grown):
     gripper's jaw."""
     kind = "capsule"
     placed = ("a", "b")
+    parameters = ("a", "b", "radius")
 
     def __init__(self, a, b, radius, *, name=None, friction=None):
         super().__init__(radius, name, friction)
@@ -183,6 +188,7 @@ class Box(_Grown):
     `rotation` (3, 3; default the world's)."""
     kind = "box"
     placed = ("center",)
+    parameters = ("center", "half", "rotation")
 
     def __init__(self, center, half, rotation=None, *, name=None, friction=None):
         super().__init__(0.0, name, friction)
@@ -215,4 +221,4 @@ class Box(_Grown):
         return -depth[rows, axis], n
 
 
-KINDS = {cls.kind: cls for cls in (Plane, Sphere, Capsule, Box)}
+KINDS = {cls.kind: cls for cls in (Plane, Sphere, Box, Capsule)}

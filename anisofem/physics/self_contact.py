@@ -10,6 +10,8 @@ Contact's kappa times SCALE / dhat^2, so that between two parallel faces at dhat
 pressure equals the obstacles' barrier's there (anisofem.physics.contact). The surface is the
 mesh's boundary triangles (a quadratic face split into its four corner-midside triangles).
 """
+import weakref
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -19,6 +21,10 @@ import scipy.sparse as sp
 #: 4, 8, 16 cells a side); the obstacles' barrier presses with kappa |b'(d)|. At d = dhat / 2
 #: they are equal where kappa_i = SCALE kappa / dhat^2.
 SCALE = 3.0 * (0.5 + np.log(2.0)) / (8.0 * (1.5 * np.log(4.0) + 2.25))
+
+#: ipctk's CollisionMesh of each mesh alive
+_COLLISION_MESHES = weakref.WeakKeyDictionary()
+
 
 def ipctk_module():
     """The ipctk module, or ImportError saying how to install it."""
@@ -50,9 +56,11 @@ class SelfContact:
 
     def __init__(self, mesh, dhat, kappa, x_lag=None, mu=0.0, eps=None):
         ipctk = self.ipctk = ipctk_module()
-        faces = surface_triangles(mesh)
-        self.mesh = ipctk.CollisionMesh.build_from_full_mesh(
-            np.asfortranarray(mesh.vertices), ipctk.edges(faces), faces)
+        if mesh not in _COLLISION_MESHES:
+            faces = surface_triangles(mesh)
+            _COLLISION_MESHES[mesh] = ipctk.CollisionMesh.build_from_full_mesh(
+                np.asfortranarray(mesh.vertices), ipctk.edges(faces), faces)
+        self.mesh = _COLLISION_MESHES[mesh]     # built once per mesh: every step reads it
         self.dhat = dhat
         self.barrier = ipctk.BarrierPotential(dhat, kappa * SCALE / dhat ** 2)
         self.n = mesh.n_vertices

@@ -125,7 +125,7 @@ def contact_arrays(model):
     contact_rest (k, 3) m and contact_basis (k, 3, r) the surface nodes of the physics mesh,
     contact_area (k,) m^2 their shares of its surface, contact_constants (4,): the distance
     dhat (m), stiffness kappa (N/m^3), friction and smoothing velocity (m/s); obstacle_kinds
-    (o,) uint8 (OBSTACLE_CODES), obstacle_geometry (o, 15) m (OBSTACLE_GEOMETRY's entries in
+    (o,) uint8 (OBSTACLE_CODES), obstacle_geometry (o, 15) m (each kind's Obstacle.parameters in
     order, zero-padded; a box's rotation row-major), obstacle_friction (o,) (-1: the
     contact's). The header's contact entry names the obstacles and repeats their geometry."""
     if model.contact is None:
@@ -134,11 +134,11 @@ def contact_arrays(model):
     rows, entries = [], []
     for o in term.obstacles:
         values = [np.asarray(getattr(o, key), dtype=float).ravel()
-                  for key in OBSTACLE_GEOMETRY[o.kind]]
+                  for key in o.parameters]
         row = np.concatenate(values)
         rows.append(np.concatenate([row, np.zeros(15 - row.size)]))
         entries.append({"kind": o.kind, "name": o.name, "friction": o.friction,
-                        **{key: v.tolist() for key, v in zip(OBSTACLE_GEOMETRY[o.kind],
+                        **{key: v.tolist() for key, v in zip(o.parameters,
                                                               values)}})
     header = {"distance": term.dhat, "stiffness": term.kappa, "friction": contact.friction,
               "smoothing": term.smoothing(1.0), "obstacles": entries}
@@ -154,10 +154,7 @@ def contact_arrays(model):
     return header, arrays
 
 
-#: Each obstacle kind's geometry in a model file, in the order the runtimes read it, and its
-#: code in obstacle_kinds.
-OBSTACLE_GEOMETRY = {"plane": ("point", "normal"), "sphere": ("center", "radius"),
-                     "box": ("center", "half", "rotation"), "capsule": ("a", "b", "radius")}
+#: Each obstacle kind's code in obstacle_kinds.
 OBSTACLE_CODES = {"plane": 0, "sphere": 1, "box": 2, "capsule": 3}
 
 
