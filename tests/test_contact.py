@@ -309,12 +309,29 @@ def test_a_scene_file_declares_obstacles(beam_file):
      r"contact: the body starts inside obstacle 'ball' \(sphere\)"),
     ("", BALL + "\nmove = [0, 0, 0.01]",
      r"contact.obstacles.ball: give move \(how far, m\) and curve \(when\) together"),
+    ("self_contact = 1", BALL, r"contact.self_contact: expected true or false, got 1"),
 ])
 def test_a_scene_file_with_bad_contact_fails_in_one_line(beam_file, extra, ball, message):
     from anisofem.io.scenefile import SceneFileError
     (beam_file / "bad.toml").write_text(SCENE.format(extra=extra, ball=ball))
     with pytest.raises(SceneFileError, match=message):
         af.load_scene(str(beam_file / "bad.toml"))
+
+
+def test_a_scene_file_takes_self_contact_without_obstacles(beam_file):
+    """[contact] with self_contact = true and no obstacles is the surface's contact with
+    itself; without either it is refused."""
+    pytest.importorskip("ipctk")
+    (beam_file / "itself.toml").write_text(
+        'mesh = "beam.msh"\n[contact]\nself_contact = true\nfriction = 0.2\n')
+    contact = af.load_scene(str(beam_file / "itself.toml")).contact
+    assert (contact.self_contact, contact.obstacles, contact.friction) == (True, (), 0.2)
+    (beam_file / "none.toml").write_text('mesh = "beam.msh"\n[contact]\nfriction = 0.2\n')
+    from anisofem.io.scenefile import SceneFileError
+    with pytest.raises(SceneFileError, match=r"contact.obstacles: expected "
+                                             r"\[contact.obstacles.NAME\] tables, at least one "
+                                             r"\(or self_contact = true\)"):
+        af.load_scene(str(beam_file / "none.toml"))
 
 
 def two_blocks(gap=2e-3, shift=(0.003, 0.002), material=None, **contact):

@@ -27,6 +27,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ("actuator_control.py", "actuator_control.png", "drew out/actuator_control.png"),
     ("cable_finger.py", "cable_finger.png", "drew out/cable_finger.png"),
     ("tentacle_drop.py", "tentacle_drop.png", "drew out/tentacle_drop.png"),
+    ("gripper.py", "gripper.png", "drew out/gripper.png"),
+    ("gripper.py --friction 0.1 --seconds 0.8", "gripper.png", "drew out/gripper.png"),
     ("identify.py", None, "stopped after")])
 def test_example_runs_and_draws(tmp_path, script, picture, says):
     script, *args = script.split()
@@ -54,6 +56,18 @@ def test_example_runs_and_draws(tmp_path, script, picture, says):
         speed = float(line.split("at rest: ")[1].split()[0])
         assert gap > 0 and "inverted elements: 0;" in line and "converged: True" in line, line
         assert speed < 1e-3, line
+    if script == "gripper.py":  # lifted 30 mm by friction and held (slip under 0.1 mm), never
+        # intersecting; with friction 0.1 the box stays on the ground as the bases rise
+        rows = [x.split("|") for x in r.stdout.splitlines() if x.count("|") == 6][1:]
+        assert "steps that intersected: 0; inverted elements: 0; every step converged: True" \
+            in r.stdout, r.stdout
+        box_up = float(rows[-1][3])
+        if args:
+            assert float(rows[-1][2]) == 18.0 and box_up < 0.2, rows[-1]
+        else:
+            assert abs(box_up - 30.0) < 0.5, rows[-1]
+            slip = float(r.stdout.split("mm up, slipped ")[1].split()[0])
+            assert 0 <= slip < 0.1, r.stdout
     if script == "actuator_control.py":  # the tip follows the 10 mm path within 0.5 mm in
         # closed loop, and the full FEM under the same pressures within 0.1 mm of the runtime
         line = next(x for x in r.stdout.splitlines() if x.startswith("tip: largest error"))

@@ -72,7 +72,9 @@ SCHEMA = {
                  "(python -m export reduced fits its snapshots to them)",
     },
     "contact": {
-        "obstacles": "[contact.obstacles.NAME] tables, at least one",
+        "obstacles": "[contact.obstacles.NAME] tables, at least one unless self_contact",
+        "self_contact": "true: the surface's contact with itself and between the mesh's "
+                        "bodies (needs ipctk; default false)",
         "distance": "m, the distance at which the barrier starts (default 1e-3 of the body's "
                     "size)",
         "friction": "Coulomb's coefficient, >= 0 (default 0), in time steps only",

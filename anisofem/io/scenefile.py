@@ -433,10 +433,13 @@ class _Reader:
         """The [contact] table -> (an anisofem.Contact, the Timed parts of the obstacles that
         move along a curve)."""
         _keys(self, table, "contact", "contact")
-        obstacles = table.get("obstacles")
-        if not isinstance(obstacles, dict) or not obstacles:
+        itself = table.get("self_contact", False)
+        if not isinstance(itself, bool):
+            raise self.error("contact.self_contact", f"expected true or false, got {itself!r}")
+        obstacles = table.get("obstacles", {})
+        if not isinstance(obstacles, dict) or not (obstacles or itself):
             raise self.error("contact.obstacles", "expected [contact.obstacles.NAME] tables, "
-                                                  "at least one")
+                                                  "at least one (or self_contact = true)")
         given = {k: _number(self, table[k], f"contact.{k}")
                  for k in ("distance", "friction", "stiffness", "smoothing") if k in table}
         parts = []
@@ -449,7 +452,7 @@ class _Reader:
                                    obstacle=(name, _vector(self, spec["move"], f"{key}.move"))))
         try:
             return Contact([self.obstacle(name, spec) for name, spec in obstacles.items()],
-                           **given), parts
+                           self_contact=itself, **given), parts
         except ValueError as err:
             raise self.error("contact", str(err).removeprefix("contact: ")) from None
 

@@ -341,6 +341,14 @@ class Scene:
         moved.fixed_positions = x
         return moved
 
+    def with_contact(self, contact):
+        """The same scene with another contact (an anisofem.Contact, or None): for friction or
+        stiffness studies. Checked against the body at rest as the constructor's is; shares
+        what held_at shares."""
+        moved = self.held_at(self.fixed_positions)
+        moved.contact = _contact(contact, self.mesh, self.initial_positions())
+        return moved
+
     def loaded(self, share, prescribed=True):
         """The same scene under `share` of its load (0 to 1): the external force times share,
         and with prescribed the fixed components share of the way from rest to their prescribed
