@@ -11,6 +11,7 @@ import anisofem as af
 from anisofem.physics.contact import ContactTerm, body_size
 from anisofem.physics.curves import Timed
 from anisofem.physics.potential import Potential
+from anisofem.studies import drops
 
 OBSTACLES = {
     "plane": af.Plane((0.0, 0.0, -0.1), (0.3, -0.2, 1.0)),
@@ -138,15 +139,9 @@ def test_projected_contact_blocks_are_positive_semi_definite():
 
 def body(kind):
     """A Neo-Hookean body 2 cm above the ground: the 0.2 m beam, the T, a tentacle-like rod."""
-    material = af.Material(1e5, 0.45, 1000.0, np.array([1.0, 0, 0]), 1e5, model="neohookean")
-    if kind == "beam":
-        mesh = af.box_beam(size=(0.2, 0.02, 0.02), cells=(20, 2, 2))
-    elif kind == "tee":
-        mesh = af.t_shape()
-    else:
-        mesh = af.cylinder_beam(length=0.2, radius=0.015)
+    mesh = drops.body(kind)
     X = mesh.vertices - [0, 0, mesh.vertices[:, 2].min() - 0.02]
-    return af.TetMesh(X, mesh.tets), material
+    return af.TetMesh(X, mesh.tets), drops.MATERIAL
 
 
 @pytest.mark.parametrize("kind", ["beam", "tee", "rod"])
@@ -166,8 +161,7 @@ def test_drops_never_pass_the_ground_or_a_box(kind):
         scene = af.Scene(mesh, material, gravity=(0, 0, -9.81 * g),
                          contact=af.Contact([ground, box]))
         term = ContactTerm(scene)
-        steps = int(round(np.sqrt(2 * 0.03 / (9.81 * g)) * 3 / dt)) + 5   # falls, then rests
-        roll = af.simulate(scene, steps, dt=dt, warn=False)
+        roll = af.simulate(scene, drops.fall_steps(9.81 * g, dt), dt=dt, warn=False)
         assert roll.completed and roll.converged, (kind, g, dt)
         for s in roll.steps:
             assert term.distances(s.x).min() > 0, (kind, g, dt)
@@ -365,6 +359,34 @@ def test_a_block_dropped_on_a_block_never_passes_into_it():
             assert s.newton.inversion.inverted == 0
         assert itself.nearest(roll.steps[-1].x) < itself.dhat
         assert roll.steps[-1].x[lower:, 2].min() > 0.02
+
+
+@pytest.mark.parametrize("lower, upper, g, dt", [("tee", "beam", 1, 0.05),
+                                                  ("rod", "tee", 10, 0.02),
+                                                  ("beam", "rod", 100, 0.005)])
+def test_bodies_dropped_onto_each_other_never_intersect(monkeypatch, lower, upper, g, dt):
+    """One body lying on the ground, another dropped across it from 2 cm (friction 0.3;
+    scripts/stacked_drops.py runs every pair at every gravity and step): every step
+    converged, no point any solve evaluated intersects by ipctk's own test, nothing
+    inverted, and the upper body comes to lie on the lower within the barrier's reach."""
+    pytest.importorskip("ipctk")
+    from anisofem.physics import self_contact
+    mesh, n = drops.stacked(lower, upper)
+    scene = af.Scene(mesh, drops.MATERIAL, gravity=(0, 0, -9.81 * g), contact=af.Contact(
+        [af.Plane(name="ground")], friction=0.3, self_contact=True))
+    seen, energy = [], self_contact.SelfContact.energy
+
+    def watched(contact, x, grad=None):
+        seen.append(bool(contact.ipctk.has_intersections(contact.mesh, contact.vertices(x))))
+        return energy(contact, x, grad)
+    monkeypatch.setattr(self_contact.SelfContact, "energy", watched)
+    roll = af.simulate(scene, drops.fall_steps(9.81 * g, dt), dt=dt, warn=False)
+    assert roll.completed and roll.converged
+    assert len(seen) > len(roll.steps) and not any(seen)
+    assert all(s.newton.inversion.inverted == 0 for s in roll.steps)
+    itself = ContactTerm(scene).itself
+    assert 0 < itself.nearest(roll.steps[-1].x) < itself.dhat
+    assert roll.steps[-1].x[n:, 2].max() > mesh.vertices[:n, 2].max() + 0.01   # lies on it
 
 
 @pytest.mark.parametrize("friction", [0.0, 0.5])

@@ -14,6 +14,10 @@ import numpy as np
 from . import kernels
 from .contact import ContactTerm
 from .scene import ROUNDOFF_FACTOR, Scene
+
+#: A Newton step that moves no node by more than this share of the contact distance has
+#: resolved the contact (Potential.contact_resolved)
+RESOLVED = 1e-3
 from .._validate import as_float_array, as_scalar
 
 
@@ -186,6 +190,17 @@ class Potential:
             size += float((coupled.multiply(coupled)).sum())
         return (ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(x).max())
                 * math.sqrt(size))
+
+    def contact_resolved(self, p):
+        """Whether the move p (over the free unknowns, m) moves no node farther than RESOLVED
+        of the contact distance dhat: below that, a stalled line search has nothing left to
+        find (the pair distances are only once differentiable where their closest features
+        change, and near there an Armijo search can stall with the residual above its
+        tolerance; IPC stops on the Newton step's length for the same reason). False without
+        contact."""
+        if self.contact is None:
+            return False
+        return float(np.abs(p).max(initial=0.0)) <= RESOLVED * self.contact.dhat
 
     def step_limit(self, x, p):
         """The largest share in (0, 1] of the move p (over the free unknowns) from x (n, 3)

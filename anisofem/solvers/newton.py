@@ -29,6 +29,7 @@ import numpy as np
 
 from . import methods
 from ..physics.inversion import Inversion, inversion
+from ..physics.potential import RESOLVED
 
 ARMIJO = 1e-4
 MIN_STEP = 1e-10
@@ -44,6 +45,9 @@ NOISE_PROGRESS = 0.9
 #: 4e-13 of |G| while its gradient fell 20,000x (taking this as the noise level above made a
 #: StVK cantilever at 10,000 g stall instead)
 ENERGY_ROUNDOFF = 1e-11
+#: The message of a solve with contact stopped where its line search stalled with the Newton
+#: step a small share of the contact distance (Potential.contact_resolved)
+CONTACT_RESOLVED = f"converged: the Newton step within {RESOLVED:g} of the contact distance"
 #: The methods that take contact: those that assemble the Hessian at every iterate.
 CONTACT_METHODS = ("newton", "cg")
 
@@ -197,14 +201,17 @@ def _iterate(potential, x0, method, accept, deadline=None):
                                                               accept(x, energy)):
                 return x, False, it, res, energy, BUDGET_SPENT
             it += 1
-            step = None
+            step, tried = None, []
             for p in method.directions(x, g, res[-1]):
+                tried.append(_curved(p)[0])
                 step = _line_search(potential, x, energy, g, gnorm, free, *_curved(p))
                 if step is not None:
                     break
             if step is None:
                 if gnorm <= potential.contact_roundoff(x):   # the barrier's stiffness floor
                     return x, True, it - 1, res, energy, "converged"
+                if tried and potential.contact_resolved(tried[0]):
+                    return x, True, it - 1, res, energy, CONTACT_RESOLVED
                 return x, False, it, res, energy, "no descent direction: the line search stalled"
         x, energy, grad, s = step
         g_new = grad.ravel()[free]
