@@ -11,7 +11,7 @@ _moved.install(sys.modules[__name__])
 
 from .physics import inversion, metrics
 from .solvers import methods
-from .io.meshes import read_mesh, write_mesh
+from .io.meshes import read_mesh, read_surface, write_mesh
 from .studies.trade import trade
 from .studies.trade_report import trade_table
 from .physics.material import Material
@@ -24,16 +24,16 @@ from .physics.pressure import Pressure
 from .physics.controls import Activation
 from .physics.cables import Cable
 from .physics.contact import Contact
-from .physics.obstacles import Box, Capsule, Plane, Sphere
+from .physics.obstacles import Box, Capsule, Plane, Sphere, Surface
 from .physics.curves import LoadCurve
 from .physics.scene import Scene, default_scene
 from .io.scenefile import load_scene
 from .solvers.solve import Rollout, StepResult, Stepper, simulate, solve, step
 
-__all__ = ["inversion", "methods", "metrics", "read_mesh", "write_mesh", "trade", "trade_table", "Material",
+__all__ = ["inversion", "methods", "metrics", "read_mesh", "read_surface", "write_mesh", "trade", "trade_table", "Material",
            "TetMesh", "actuator", "box_beam", "cylinder_beam", "hexes_to_tets", "t_shape", "tube", "y_shape",
            "ConvergenceWarning", "InversionWarning", "NewtonResult", "element_energy", "energy",
-           "gradient", "hessian", "Pressure", "Activation", "Cable", "Contact", "Plane", "Sphere", "Box", "Capsule", "LoadCurve", "Scene", "Rollout", "StepResult", "Stepper", "default_scene",
+           "gradient", "hessian", "Pressure", "Activation", "Cable", "Contact", "Plane", "Sphere", "Box", "Capsule", "Surface", "LoadCurve", "Scene", "Rollout", "StepResult", "Stepper", "default_scene",
            "simulate", "solve", "step", "load_scene"]
 
 

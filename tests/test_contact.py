@@ -465,7 +465,8 @@ def test_self_contact_refuses_what_it_cannot_take():
                      contact=af.Contact(self_contact=True))
     with pytest.raises(ValueError, match="method: 'cg' cannot take self-contact"):
         af.simulate(scene, 1, method="cg")
-    with pytest.raises(ValueError, match="linear_solver: 'banded' cannot hold self-contact"):
+    with pytest.raises(ValueError, match="linear_solver: 'banded' cannot hold the couplings of "
+                                              "self-contact"):
         af.simulate(scene, 1, linear_solver="banded")
     with pytest.raises(TypeError, match="self_contact: expected True or False"):
         af.Contact(self_contact="yes")
@@ -656,3 +657,167 @@ def test_a_soft_ball_pressed_on_a_plane_follows_hertz():
         assert result.converged
         off.append(abs(force / hertz - 1))
     assert off[-1] < 0.05 and off[0] > off[1] > off[2], off
+
+
+def box_surface(center, half, name="block", friction=None):
+    """A closed box of 12 triangles (outward), as a Surface obstacle."""
+    corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+    faces = [[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+             [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]
+    return af.Surface(np.asarray(center) + corners * half, faces, name=name, friction=friction)
+
+
+def test_a_beam_draped_over_a_surface_box_never_crosses_its_edges():
+    """The beam dropped at 10 g over a block given as a surface of triangles (onto the
+    ground): every step converged, and by ipctk's own test no step intersects, nor any point
+    a solve evaluated (the analytic box's barrier acts on the beam's nodes only, and its edge
+    cuts into a face between them here; docs/contact.md)."""
+    pytest.importorskip("ipctk")
+    from anisofem.physics import self_contact
+    mesh, material = body("beam")
+    middle = mesh.vertices.mean(axis=0)
+    block = box_surface((middle[0], middle[1], 0.005), (0.02, 0.05, 0.005))
+    scene = af.Scene(mesh, material, gravity=(0, 0, -98.1),
+                     contact=af.Contact([af.Plane(name="ground"), block], friction=0.3))
+    seen, energy = [], self_contact.SelfContact.energy
+
+    def watched(contact, x, grad=None):
+        seen.append(bool(contact.ipctk.has_intersections(contact.mesh, contact.vertices(x))))
+        return energy(contact, x, grad)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(self_contact.SelfContact, "energy", watched)
+        roll = af.simulate(scene, 20, dt=0.01, warn=False)
+    assert roll.completed and roll.converged
+    assert len(seen) > 20 and not any(seen)
+    pairs = ContactTerm(scene).itself
+    last = roll.steps[-1].x
+    assert 0 < pairs.nearest(last) < pairs.dhat                   # it lies on the block
+    assert last[:, 2].max() > 0.01 and last[:, 2].min() < 0.005   # and droops beside it
+    analytic = af.Scene(mesh, material, gravity=(0, 0, -98.1), contact=af.Contact(
+        [af.Plane(name="ground"), af.Box(block.position, (0.02, 0.05, 0.005))], friction=0.3))
+    crossed = block_crossings(analytic, block, af.simulate(analytic, 20, dt=0.01, warn=False))
+    assert crossed > 0   # what the surface is for
+
+
+def block_crossings(scene, block, roll):
+    """How many steps of roll the body's surface crosses the surface `block` in."""
+    from anisofem.physics.self_contact import SelfContact
+    pairs = SelfContact(scene.mesh, 1e-4, 1.0, surfaces=(block,), itself=False)
+    return sum(bool(pairs.ipctk.has_intersections(pairs.mesh, pairs.vertices(s.x)))
+               for s in roll.steps)
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.5])
+def test_surface_contact_derivatives_match_central_differences(friction):
+    """A step's potential with the beam's nodes, edges and faces within reach of a surface
+    block's faces, edges and corners (its friction lagged at the step's start): gradient and
+    Hessian within 1e-6 of central differences."""
+    pytest.importorskip("ipctk")
+    mesh, material = body("beam")
+    X = mesh.vertices
+    low = X[:, 2].min()
+    block = box_surface((0.1, 0.0, low - 0.005 - 5e-5), (0.0123, 0.05, 0.005),
+                        friction=friction)
+    scene = af.Scene(mesh, material, gravity=(0, 0, -9.81), contact=af.Contact([block]))
+    rng = np.random.default_rng(6)
+    x_start = scene.initial_positions()
+    pot = Potential(scene, x_start, 0.01, x_start=x_start)
+    x = x_start + rng.normal(scale=3e-6, size=x_start.shape)
+    x[:, 0] += 1e-5
+    assert pot.contact.itself.nearest(x) < pot.contact.dhat
+    _, g, data = pot.hessian_data(x, scene.full_layout)
+    H = scene.full_layout.matrix(data) + pot.coupled_hessian(x, scene.full_layout)
+    for _ in range(3):
+        p = rng.normal(size=x.shape)
+        p /= np.linalg.norm(p)
+        slope, change = central_differences(pot, x, p, 1e-9)
+        assert abs(slope - float((g * p).sum())) <= 1e-6 * np.abs(g).sum()
+        Hp = (H @ p.ravel()).reshape(-1, 3)
+        assert np.abs(change - Hp).max() <= 1e-6 * np.abs(Hp).max()
+
+
+def test_a_block_slides_on_a_surface_by_its_own_friction():
+    """A 2 cm cube on a surface rectangle under gravity tilted by atan(0.5) (turned on over
+    0.1 s), the surface's own friction 0.3 over the contact's 0.9: it slides with
+    g (sin t - 0.3 cos t) within 5%."""
+    pytest.importorskip("ipctk")
+    theta, g, dt, mu = np.arctan(0.5), 9.81, 0.01, 0.3
+    cube = af.box_beam(size=(0.02, 0.02, 0.02), cells=(2, 2, 2))
+    C = cube.vertices - cube.vertices.min(axis=0) + [0.01, -0.01, 5e-5]
+    mesh = af.TetMesh(C, cube.tets)
+    floor = af.Surface([[0, -0.05, 0], [0.4, -0.05, 0], [0.4, 0.05, 0], [0, 0.05, 0]],
+                       [[0, 1, 2], [0, 2, 3]], name="floor", friction=mu)
+    material = af.Material(1e7, 0.4, 1000.0, model="neohookean")
+    m = af.Scene(mesh, material).masses
+    push = np.zeros((mesh.n_vertices, 3))
+    push[:, 0] = m * g * np.sin(theta)
+    scene = af.Scene(mesh, material, gravity=(0, 0, -g * np.cos(theta)), nodal_force=push,
+                     contact=af.Contact([floor], friction=0.9))
+    tilted = scene.following([Timed(af.LoadCurve([0, 0.1, 10], [0, 1, 1]), force=push)])
+    roll = af.simulate(tilted, 40, dt=dt, warn=False)
+    assert roll.converged
+    slide = np.array([m @ s.x[:, 0] for s in roll.steps]) / m.sum()
+    t = dt * np.arange(1, len(slide) + 1)
+    late = t > 0.15
+    a = 2 * np.polyfit(t[late], slide[late], 2)[0]
+    assert a == pytest.approx(g * (np.sin(theta) - mu * np.cos(theta)), rel=0.05)
+    assert roll.steps[-1].x[:, 2].min() > 0    # on it all along
+
+
+def test_surfaces_refuse_what_they_cannot_take(tmp_path):
+    pytest.importorskip("ipctk")
+    mesh, material = body("beam")
+    low = mesh.vertices[:, 2].min()
+    through = box_surface((0.1, 0.0, low), (0.02, 0.05, 0.005))
+    with pytest.raises(ValueError, match=r"contact: the body starts inside obstacle 'block' "
+                                         r"\(surface\): its triangles cross the body's "
+                                         r"surface, near \("):
+        af.Scene(mesh, material, contact=af.Contact([through]))
+    block = box_surface((0.1, 0.0, low - 0.01), (0.02, 0.05, 0.005))
+    scene = af.Scene(mesh, material, gravity=(0, 0, -9.81), contact=af.Contact([block]))
+    with pytest.raises(ValueError, match="timed\\[0\\].obstacle: 'block' is a surface, which "
+                                         "stays where it is"):
+        scene.following([Timed(af.LoadCurve([0, 1], [0, 1]), obstacle=("block", (0, 0, 1)))])
+    with pytest.raises(ValueError, match="method: 'cg' cannot take self-contact or surface"):
+        af.simulate(scene, 1, method="cg")
+    from anisofem.reduced import ReducedModel
+    held = af.Scene(mesh, af.Material(1e5, 0.45, 1000.0), fixed=mesh.vertices[:, 0] < 1e-9,
+                    contact=af.Contact([block]))
+    with pytest.raises(ValueError, match="not self-contact or surface obstacles; step it with "
+                                         "the FEM"):
+        ReducedModel(held, modes=4)
+    with pytest.raises(ValueError, match="block: triangles index vertices 0 to 7"):
+        af.Surface(block.vertices, [[0, 1, 8]], name="block")
+    af.write_mesh(str(tmp_path / "beam.vtu"), mesh)
+    with pytest.raises(ValueError, match="holds no triangles"):
+        af.read_surface(str(tmp_path / "beam.vtu"))
+    with pytest.raises(FileNotFoundError, match="no such surface file"):
+        af.read_surface(str(tmp_path / "bowl.stl"))
+
+
+def test_a_scene_file_takes_a_surface_from_a_file(beam_file):
+    """[contact.obstacles.NAME] surface = {file = ...}: the triangles read from an .stl next
+    to the scene file, its friction its own; a move on it, or a missing file, in one line."""
+    pytest.importorskip("ipctk")
+    import meshio
+    block = box_surface((0.05, 0.0, -0.03), (0.02, 0.05, 0.005))
+    meshio.write(str(beam_file / "block.stl"), meshio.Mesh(block.vertices,
+                                                           [("triangle", block.triangles)]))
+    (beam_file / "surface.toml").write_text(SCENE.format(
+        extra="", ball='surface = {file = "block.stl"}'))
+    scene = af.load_scene(str(beam_file / "surface.toml"))
+    ground, ball = scene.contact.obstacles
+    assert (ball.kind, ball.name, ball.friction) == ("surface", "ball", 0.1)
+    assert np.allclose(np.sort(ball.vertices, axis=0), np.sort(block.vertices, axis=0))
+    from anisofem.io.scenefile import SceneFileError
+    (beam_file / "moved.toml").write_text(SCENE.format(
+        extra="", ball='surface = {file = "block.stl"}\nmove = [0, 0, 1]\ncurve = "up"')
+        + "\n[curves.up]\ntimes = [0, 1]\nvalues = [0, 1]\n")
+    with pytest.raises(SceneFileError, match=r"contact.obstacles.ball.move: a surface stays "
+                                             r"where it is"):
+        af.load_scene(str(beam_file / "moved.toml"))
+    (beam_file / "missing.toml").write_text(SCENE.format(
+        extra="", ball='surface = {file = "bowl.stl"}'))
+    with pytest.raises(SceneFileError, match=r"contact.obstacles.ball.surface.file: no such "
+                                             r"surface file"):
+        af.load_scene(str(beam_file / "missing.toml"))

@@ -14,6 +14,7 @@ import numpy as np
 from .output import atomic_path, check_folder
 from .._validate import as_float_array
 from ..physics.mesh import TetMesh
+from ..physics.obstacles import Surface
 from ..physics.inversion import volume_change
 from ..physics.potential import element_energy
 
@@ -112,6 +113,25 @@ def _meshio_read(path):
             why = "" if isinstance(err, SystemExit) or not str(err) else f": {str(err)[:200]}"
             errors.append(f"not {fmt or 'a mesh'}{why}")
     raise ValueError(f"path: meshio cannot read {path!r} ({'; '.join(errors)})")
+
+
+def read_surface(path, *, name=None, friction=None):
+    """An obstacle (anisofem.Surface) of the triangles of a surface file (.stl, .obj, .ply,
+    .off, .msh, .vtu, ...: every triangle cell meshio reads), m; name defaults to the file's
+    name without its extension. A file without triangles is a ValueError naming it."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"path: no such surface file {path!r}")
+    m = _meshio_read(path)
+    blocks = [c.data for c in m.cells if c.type == "triangle"]
+    if not blocks:
+        raise ValueError(f"path: {path} holds no triangles (found "
+                         f"{sorted({c.type for c in m.cells})})")
+    triangles = np.concatenate(blocks).astype(np.int64)
+    used, triangles = np.unique(triangles, return_inverse=True)
+    name = name if name is not None else os.path.splitext(os.path.basename(path))[0]
+    return Surface(np.asarray(m.points, dtype=float)[used, :3], triangles.reshape(-1, 3),
+                   name=name, friction=friction)
 
 
 def check_output_path(path):

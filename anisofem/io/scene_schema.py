@@ -89,6 +89,9 @@ SCHEMA = {
         "box": "{center = [x, y, z], half = [hx, hy, hz]} (m), along the axes",
         "capsule": "{a = [x, y, z], b = [x, y, z], radius = r}: the points within r of the "
                    "segment ab",
+        "surface": "{file = \"NAME.stl\"}: the triangles of a surface file (.stl, .obj, "
+                   ".ply, .msh, ...; its path relative to the scene file), any shape, its "
+                   "edges and corners exact (needs ipctk); it stays where it is",
         "friction": "this obstacle's coefficient, >= 0 (default: [contact]'s)",
         "move": "[dx, dy, dz] m: where it goes, times its curve's factor (with curve)",
         "curve": "the name of the load curve it moves along (with move); a step moves it as "

@@ -26,7 +26,7 @@ from ..physics.meshgen import of_order
 from ..physics.obstacles import KINDS
 from ..physics.pressure import Pressure
 from ..physics.scene import Scene, traction_force
-from .meshes import read_tagged_mesh
+from .meshes import read_surface, read_tagged_mesh
 from .scene_schema import SCHEMA
 
 #: Sides a boundary entry may name: axis and end.
@@ -466,14 +466,26 @@ class _Reader:
         shape = shapes[0]
         where = f"{key}.{shape}"
         geometry = spec[shape]
+        friction = (_number(self, spec["friction"], f"{key}.friction") if "friction" in spec
+                    else None)
+        if shape == "surface":
+            if not isinstance(geometry, dict) or set(geometry) != {"file"} or \
+                    not isinstance(geometry["file"], str):
+                raise self.error(where, f"expected {{file = \"NAME.stl\"}}, got {geometry!r}")
+            if "move" in spec:
+                raise self.error(f"{key}.move", "a surface stays where it is; move a plane, "
+                                                "sphere, box or capsule")
+            path = os.path.join(os.path.dirname(self.path), geometry["file"])
+            try:
+                return read_surface(path, name=name, friction=friction)
+            except (OSError, ValueError) as err:
+                raise self.error(f"{where}.file", str(err).removeprefix("path: ")) from None
         # a box's axes are the world's in a scene file: its rotation is no key
         keys = [k for k in KINDS[shape].parameters if k != "rotation"]
         if not isinstance(geometry, dict) or set(geometry) != set(keys):
             raise self.error(where, f"expected {{{', '.join(keys)}}}, got {geometry!r}")
         values = [(_number if k == "radius" else _vector)(self, geometry[k], f"{where}.{k}")
                   for k in keys]
-        friction = (_number(self, spec["friction"], f"{key}.friction") if "friction" in spec
-                    else None)
         try:
             return KINDS[shape](*values, name=name, friction=friction)
         except ValueError as err:

@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .._validate import as_scalar
-from .obstacles import Obstacle
+from .obstacles import SHAPES, Obstacle
 from .self_contact import SelfContact
 
 #: The default contact distance dhat over the body's size (its rest bounding box diagonal).
@@ -43,7 +43,7 @@ KEEP = 0.1
 @dataclass(frozen=True)
 class Contact:
     """Contact of the body with rigid obstacles: obstacles (a sequence of anisofem Plane,
-    Sphere, Box, Capsule; may be empty with self_contact); distance dhat, m, at which the
+    Sphere, Box, Capsule, Surface; may be empty with self_contact); distance dhat, m, at which the
     barrier starts (default 1e-3 of the body's size); friction mu >= 0 (an obstacle's own
     coefficient wins); stiffness kappa, N/m^3 (default E / dhat); smoothing, m/s, the velocity
     below which friction sticks (default 1e-3 of the body's size per second); self_contact:
@@ -67,7 +67,7 @@ class Contact:
         for o in obstacles:
             if not isinstance(o, Obstacle):
                 raise TypeError(f"contact: obstacles: expected anisofem obstacles (Plane, "
-                                f"Sphere, Box, Capsule), got {type(o).__name__}")
+                                f"Sphere, Box, Capsule, Surface), got {type(o).__name__}")
         object.__setattr__(self, "obstacles", obstacles)
         for key in ("distance", "stiffness", "smoothing"):
             value = getattr(self, key)
@@ -81,6 +81,12 @@ class Contact:
             raise ValueError(f"contact: friction must be >= 0, got {friction:g}")
         object.__setattr__(self, "friction", friction)
 
+    @property
+    def pairs(self):
+        """Whether part of it is taken pair by pair (ipctk): self-contact, or a Surface
+        obstacle. Its pairs may couple nodes no element joins."""
+        return self.self_contact or any(not isinstance(o, SHAPES) for o in self.obstacles)
+
 
 class ContactTerm:
     """A scene's contact in one problem: the barrier (and, with dt, the friction lagged at
@@ -88,7 +94,9 @@ class ContactTerm:
 
     def __init__(self, scene, x_lag=None, dt=None):
         contact, mesh = scene.contact, scene.mesh
-        self.contact, self.obstacles = contact, contact.obstacles
+        self.contact = contact
+        self.obstacles = tuple(o for o in contact.obstacles if isinstance(o, SHAPES))
+        surfaces = tuple(o for o in contact.obstacles if not isinstance(o, SHAPES))
         self.nodes, self.area = surface_nodes(mesh)
         self.size = body_size(mesh)
         self.dhat = contact.distance or DISTANCE_SHARE * self.size
@@ -97,10 +105,11 @@ class ContactTerm:
         lagged = dt is not None and x_lag is not None
         if lagged:
             self.friction = self.friction_at(x_lag[self.nodes], dt)
-        if contact.self_contact:
+        if contact.pairs:
             self.itself = SelfContact(mesh, self.dhat, self.kappa, x_lag=x_lag,
                                       mu=contact.friction if lagged else 0.0,
-                                      eps=self.smoothing(dt) if lagged else None)
+                                      eps=self.smoothing(dt) if lagged else None,
+                                      surfaces=surfaces, itself=contact.self_contact)
         self._positions = {}
 
     def lagged(self, x, dt):

@@ -1,5 +1,6 @@
 """Rigid obstacles a body can touch: a plane, a sphere, a box and a capsule, each convex and
-given by its distance function.
+given by its distance function; and a surface of triangles of any shape (Surface), whose
+contact is taken pair by pair with ipctk (anisofem.physics.self_contact).
 
 A sphere, a capsule and a box are a convex core (a point, a segment, a box) grown by a radius
 (0 for the box): for a point x outside, with pi(x) its closest point of the core and
@@ -221,4 +222,43 @@ class Box(_Grown):
         return -depth[rows, axis], n
 
 
-KINDS = {cls.kind: cls for cls in (Plane, Sphere, Box, Capsule)}
+class Surface(Obstacle):
+    """A rigid surface of triangles: vertices (v, 3) m, triangles (f, 3) indices into them,
+    open or closed, of any shape (a bowl, a step, a scanned part; anisofem.read_surface reads
+    one from a file). Its contact with the body is taken pair by pair as the surface's with
+    itself is (anisofem.physics.self_contact, by ipctk: the body's vertices against its
+    triangles, its vertices against the body's, edges against edges), so its edges and
+    corners are exact; it needs ipctk, and the FEM's Newton method. It stays where it is."""
+    kind = "surface"
+    placed = ("vertices",)
+    parameters = ("vertices", "triangles")
+
+    def __init__(self, vertices, triangles, *, name=None, friction=None):
+        super().__init__(name, friction)
+        self.vertices = as_float_array(vertices, f"{self.name} vertices", shape=(None, 3))
+        triangles = np.asarray(triangles)
+        if triangles.ndim != 2 or triangles.shape[1] != 3 or not len(triangles) or \
+                not np.issubdtype(triangles.dtype, np.integer):
+            raise ValueError(f"{self.name}: triangles must be an (f, 3) integer array, f >= 1, "
+                             f"got shape {triangles.shape} of {triangles.dtype}")
+        if triangles.min() < 0 or triangles.max() >= len(self.vertices):
+            raise ValueError(f"{self.name}: triangles index vertices 0 to "
+                             f"{len(self.vertices) - 1}, got {triangles.min()} to "
+                             f"{triangles.max()}")
+        X = self.vertices
+        area = np.linalg.norm(np.cross(X[triangles[:, 1]] - X[triangles[:, 0]],
+                                       X[triangles[:, 2]] - X[triangles[:, 0]]), axis=1)
+        if not (area > 0).all():
+            raise ValueError(f"{self.name}: triangle {int(np.argmin(area))} has no area")
+        self.triangles = np.ascontiguousarray(triangles, dtype=np.int32)
+        self.triangles.setflags(write=False)
+
+    @property
+    def position(self):
+        """(3,) the mean of its vertices, m."""
+        return self.vertices.mean(axis=0)
+
+
+KINDS = {cls.kind: cls for cls in (Plane, Sphere, Box, Capsule, Surface)}
+#: The obstacles given by a distance function, taken node by node (the others are Surfaces)
+SHAPES = (Plane, Sphere, Box, Capsule)

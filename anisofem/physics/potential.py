@@ -52,8 +52,8 @@ class Potential:
         self.x_start = check_positions(scene, x_start, "x_start")
         self.contact = (ContactTerm(scene, self.x_start, dt if self.dynamic else None)
                         if scene.contact is not None else None)
-        #: whether the Hessian couples nodes no element joins (self-contact)
-        self.coupled = scene.contact is not None and scene.contact.self_contact
+        #: whether the Hessian couples nodes no element joins (self-contact, surfaces)
+        self.coupled = scene.contact is not None and scene.contact.pairs
 
     def loaded(self, share):
         """The same problem under `share` (0 to 1) of its load (load continuation,

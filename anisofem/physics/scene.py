@@ -15,8 +15,8 @@ from .material import Material
 from .mesh import TetMesh, block_coloring
 from .cables import Cable, CableLoad
 from .contact import DISTANCE_SHARE, Contact, body_size, surface_nodes
-from .obstacles import Plane
-from .self_contact import SelfContact, check_rest
+from .obstacles import Plane, Surface
+from .self_contact import SelfContact, check_rest, check_surface
 from .controls import Activation, control_mapping, control_number
 from .curves import Timed
 from .pressure import CavityLoad, Pressure
@@ -418,6 +418,10 @@ class Scene:
                 if part.obstacle[0] not in names:
                     raise ValueError(f"timed[{k}].obstacle: no obstacle {part.obstacle[0]!r}; "
                                      f"the scene has: {', '.join(names) or 'none'}")
+                if isinstance(self.contact.obstacles[names.index(part.obstacle[0])], Surface):
+                    raise ValueError(f"timed[{k}].obstacle: {part.obstacle[0]!r} is a surface, "
+                                     f"which stays where it is; move a plane, sphere, box or "
+                                     f"capsule")
                 as_float_array(part.obstacle[1], f"timed[{k}].obstacle move", shape=(3,))
         moved = self.held_at(self.fixed_positions)
         moved.timed = timed
@@ -579,6 +583,9 @@ def _contact(contact, mesh, x):
     if contact.self_contact:
         check_rest(SelfContact(mesh, DISTANCE_SHARE * body_size(mesh), 1.0), x)
     for o in contact.obstacles:
+        if isinstance(o, Surface):
+            check_surface(mesh, o, x)
+            continue
         d, _ = o.distance(x[nodes])
         if (d <= 0).any():
             worst = int(np.argmin(d))

@@ -22,7 +22,8 @@ import scipy.sparse as sp
 #: they are equal where kappa_i = SCALE kappa / dhat^2.
 SCALE = 3.0 * (0.5 + np.log(2.0)) / (8.0 * (1.5 * np.log(4.0) + 2.25))
 
-#: ipctk's CollisionMesh of each mesh alive
+#: ipctk's collision meshes of each mesh alive: {(itself, the surfaces' triangles' ids):
+#: (the surfaces' triangles, kept so their ids stay theirs; the CollisionMesh)}
 _COLLISION_MESHES = weakref.WeakKeyDictionary()
 
 
@@ -50,31 +51,49 @@ def surface_triangles(mesh):
 
 
 class SelfContact:
-    """The surface's contact with itself in one problem: dhat (m), kappa (N/m^3, the
-    Contact's), and with friction mu > 0 and eps (m, smoothing velocity times dt) the friction
-    lagged at x_lag (n, 3)."""
+    """Contact pair by pair in one problem: the body's surface with itself (itself=True) and
+    with the rigid `surfaces` (anisofem.Surface obstacles, where they are now); dhat (m),
+    kappa (N/m^3, the Contact's), and with friction (mu > 0 for the body, or a surface's own)
+    and eps (m, smoothing velocity times dt) the friction lagged at x_lag (n, 3), the
+    surfaces then where they were at the step's start (less their shift)."""
 
-    def __init__(self, mesh, dhat, kappa, x_lag=None, mu=0.0, eps=None):
+    def __init__(self, mesh, dhat, kappa, x_lag=None, mu=0.0, eps=None, surfaces=(),
+                 itself=True):
         ipctk = self.ipctk = ipctk_module()
-        if mesh not in _COLLISION_MESHES:
-            faces = surface_triangles(mesh)
-            _COLLISION_MESHES[mesh] = ipctk.CollisionMesh.build_from_full_mesh(
-                np.asfortranarray(mesh.vertices), ipctk.edges(faces), faces)
-        self.mesh = _COLLISION_MESHES[mesh]     # built once per mesh: every step reads it
+        self.surfaces = tuple(surfaces)
+        self.mesh = collision_mesh(mesh, self.surfaces, itself)
         self.dhat = dhat
         self.barrier = ipctk.BarrierPotential(dhat, kappa * SCALE / dhat ** 2)
         self.n = mesh.n_vertices
         self.friction = None
-        if mu > 0 and x_lag is not None:
-            lag = self.vertices(x_lag)
+        body_mu = mu if eps is not None else 0.0
+        mus = [body_mu] + [body_mu if o.friction is None else o.friction
+                           for o in self.surfaces]
+        if x_lag is not None and eps is not None and max(mus) > 0:
+            lag = self.mesh.vertices(np.asfortranarray(np.vstack(
+                [x_lag] + [o.vertices - o.shift for o in self.surfaces])))
             pairs = self.collisions(lag)
             if len(pairs):
                 tangential = ipctk.TangentialCollisions()
-                tangential.build(self.mesh, lag, pairs, self.barrier, mu)
+                if self.surfaces:   # a pair with a surface takes its coefficient
+                    owner = self.owners()
+                    each = np.where(owner > 0, np.array(mus)[owner], -1.0)[:, None]
+                    tangential.build(self.mesh, lag, pairs, self.barrier, each, each,
+                                     lambda a, b: body_mu if max(a, b) < 0 else max(a, b))
+                else:
+                    tangential.build(self.mesh, lag, pairs, self.barrier, body_mu)
                 self.friction = (tangential, ipctk.FrictionPotential(eps), lag)
 
+    def owners(self):
+        """(v,) int of the collision mesh's vertices: 0 the body's, k the k-th surface's."""
+        full = np.array([self.mesh.to_full_vertex_id(i) for i in range(self.mesh.num_vertices)])
+        ends = np.cumsum([self.n] + [len(o.vertices) for o in self.surfaces])
+        return np.searchsorted(ends, full, side="right")
+
     def vertices(self, x):
-        """The collision mesh's vertices at positions x (n, 3)."""
+        """The collision mesh's vertices with the body at positions x (n, 3)."""
+        if self.surfaces:
+            x = np.vstack([x] + [o.vertices for o in self.surfaces])
         return self.mesh.vertices(np.asfortranarray(x))
 
     def collisions(self, V):
@@ -99,7 +118,7 @@ class SelfContact:
             total += potential(tangential, self.mesh, V - lag)
             g = g + potential.gradient(tangential, self.mesh, V - lag)
         if grad is not None:
-            grad += self.mesh.to_full_dof(g).reshape(self.n, 3)
+            grad += self.mesh.to_full_dof(g).reshape(-1, 3)[:self.n]
         return float(total)
 
     def hessian(self, x, project=False):
@@ -115,12 +134,13 @@ class SelfContact:
         if self.friction is not None:
             tangential, potential, lag = self.friction
             H = H + potential.hessian(tangential, self.mesh, V - lag, how)
-        return self.mesh.to_full_dof(sp.csc_matrix(H))
+        H = self.mesh.to_full_dof(sp.csc_matrix(H))
+        return H if not self.surfaces else H.tocsr()[:3 * self.n].tocsc()[:, :3 * self.n]
 
     def max_step(self, x, dx):
         """The largest share in (0, 1] of the move dx (n, 3) from x along which no two parts of
         the surface come nearer than a tenth of their nearest distance now."""
-        V0, V1 = self.vertices(x), self.vertices(x + dx)
+        V0, V1 = self.vertices(x), self.vertices(x + dx)    # the surfaces stay
         pairs = self.collisions(V0)
         floor = 0.0
         if len(pairs):   # ipctk's distances are squared
@@ -137,8 +157,55 @@ class SelfContact:
                 else np.inf)
 
 
+def collision_mesh(mesh, surfaces=(), itself=True):
+    """ipctk's CollisionMesh of the mesh's boundary triangles and the surfaces' (their
+    vertices after the mesh's, in order), whose pairs are the body's with itself (itself) and
+    with each surface, never a surface's with itself or another. Built once per mesh and set
+    of surfaces (every step reads it)."""
+    ipctk = ipctk_module()
+    key = (itself,) + tuple(id(o.triangles) for o in surfaces)
+    built = _COLLISION_MESHES.setdefault(mesh, {})
+    if key not in built:
+        faces = [surface_triangles(mesh)]
+        start = mesh.n_vertices
+        for o in surfaces:
+            faces.append(o.triangles + start)
+            start += len(o.vertices)
+        faces = np.ascontiguousarray(np.concatenate(faces), dtype=np.int32)
+        rest = np.vstack([mesh.vertices] + [o.vertices for o in surfaces])
+        cm = ipctk.CollisionMesh.build_from_full_mesh(np.asfortranarray(rest),
+                                                      ipctk.edges(faces), faces)
+        if surfaces:   # ipctk keeps the full mesh's order: the body's vertices come first
+            fixed = np.array([cm.to_full_vertex_id(i) >= mesh.n_vertices
+                              for i in range(cm.num_vertices)])
+            if fixed[:int((~fixed).sum())].any():
+                raise RuntimeError("ipctk reordered the collision mesh's vertices; its filter "
+                                   "of the surfaces' pairs needs the body's first")
+            cm.can_collide = (ipctk.make_static_obstacle_filter(int((~fixed).sum())) if itself
+                              else ipctk.make_vertex_patches_filter(fixed.astype(np.int32)))
+        built[key] = ([o.triangles for o in surfaces], cm)
+    return built[key][1]
+
+
 def check_rest(contact, x):
-    """ValueError where the surface at x (n, 3) intersects (or touches) itself."""
+    """ValueError where the body's surface at x (n, 3) intersects (or touches) itself."""
     if contact.ipctk.has_intersections(contact.mesh, contact.vertices(x)):
         raise ValueError("contact: self_contact: the body's surface intersects or touches "
                          "itself at rest; self-contact needs parts apart")
+
+
+def check_surface(mesh, surface, x):
+    """ValueError naming the surface obstacle where the body at x (n, 3) crosses or touches
+    it, with the body's surface node nearest its vertices."""
+    pairs = SelfContact(mesh, 1e-3 * float(np.ptp(x, axis=0).max()), 1.0,
+                        surfaces=(surface,), itself=False)
+    V = pairs.vertices(x)
+    if pairs.ipctk.has_intersections(pairs.mesh, V) or pairs.nearest(x) <= 0:
+        from scipy.spatial import cKDTree
+        nodes = np.unique(surface_triangles(mesh))
+        _, at = cKDTree(x[nodes]).query(surface.vertices)
+        near = x[nodes[at[np.argmin(np.linalg.norm(x[nodes[at]] - surface.vertices,
+                                                   axis=1))]]]
+        raise ValueError(f"contact: the body starts inside obstacle {surface.name!r} "
+                         f"(surface): its triangles cross the body's surface, near "
+                         f"({', '.join(f'{v:.4g}' for v in near)})")

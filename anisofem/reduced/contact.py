@@ -26,9 +26,10 @@ class ReducedContact:
     ContactTerm), U (k, 3, r) the nodes' basis rows, x0 (k, 3) their rest positions."""
 
     def __init__(self, scene, x0, basis):
-        if scene.contact.self_contact:
-            raise ValueError("scene: the reduced model takes contact with obstacles, not "
-                             "self-contact; step it with the FEM")
+        if scene.contact.pairs:
+            raise ValueError("scene: the reduced model takes contact with planes, spheres, "
+                             "boxes and capsules, not self-contact or surface obstacles; step "
+                             "it with the FEM")
         self.term = ContactTerm(scene)
         nodes = self.term.nodes
         r = basis.shape[1]

@@ -174,10 +174,10 @@ NAMES = ("auto", "banded", "dense", "superlu", "superlu-colamd", "cholmod")
 
 def make(name, n_unknowns, coupled=False):
     """The solver called `name` (see NAMES) for a system of n_unknowns; coupled: the system
-    couples nodes no element joins (self-contact), which no band holds."""
+    couples nodes no element joins (self-contact, surface obstacles), which no band holds."""
     if name == "banded" and coupled:
-        raise ValueError("linear_solver: 'banded' cannot hold self-contact's couplings; use "
-                         "'superlu', 'cholmod' or 'dense'")
+        raise ValueError("linear_solver: 'banded' cannot hold the couplings of self-contact "
+                         "and surface obstacles; use 'superlu', 'cholmod' or 'dense'")
     if name == "auto":
         if n_unknowns <= BANDED_MAX and not coupled:
             name = "banded"

@@ -136,8 +136,8 @@ def minimize(potential, x0, method="auto", *, warn=True, accept=None, deadline=N
     """
     method = methods.make(method, potential.scene.n_free, **options)
     if potential.coupled and method.name != "newton":
-        raise ValueError(f"method: {method.name!r} cannot take self-contact, whose pairs "
-                         f"couple nodes no element joins; use 'newton'")
+        raise ValueError(f"method: {method.name!r} cannot take self-contact or surface "
+                         f"obstacles, whose pairs couple nodes no element joins; use 'newton'")
     if potential.contact is not None and method.name not in CONTACT_METHODS:
         raise ValueError(f"method: {method.name!r} keeps factors of earlier Hessians, which "
                          f"know nothing of a contact that has begun; with contact use "
