@@ -28,6 +28,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ("cable_finger.py", "cable_finger.png", "drew out/cable_finger.png"),
     ("tentacle_drop.py", "tentacle_drop.png", "drew out/tentacle_drop.png"),
     ("gripper.py", "gripper.png", "drew out/gripper.png"),
+    ("tee_wall.py", "tee_wall.png", "drew out/tee_wall.png"),
     ("gripper.py --friction 0.1 --seconds 0.8", "gripper.png", "drew out/gripper.png"),
     ("identify.py", None, "stopped after")])
 def test_example_runs_and_draws(tmp_path, script, picture, says):
@@ -68,6 +69,13 @@ def test_example_runs_and_draws(tmp_path, script, picture, says):
             assert abs(box_up - 30.0) < 0.5, rows[-1]
             slip = float(r.stdout.split("mm up, slipped ")[1].split()[0])
             assert 0 <= slip < 0.1, r.stdout
+    if script == "tee_wall.py":  # pushed to the wall and squeezed there, never through either
+        line = next(x for x in r.stdout.splitlines() if x.startswith("smallest gaps"))
+        gaps = [float(g.split()[1]) for g in line.split(";")[0].split(": ")[1].split(", ")]
+        assert len(gaps) == 3 and min(gaps) > 0, line
+        assert "inverted elements: 0; every step converged: True" in line, line
+        rows = [x.split("|") for x in r.stdout.splitlines() if x.count("|") == 6][1:]
+        assert float(rows[-1][2]) < 99.0 and float(rows[-1][4]) < 100.0, rows[-1]
     if script == "actuator_control.py":  # the tip follows the 10 mm path within 0.5 mm in
         # closed loop, and the full FEM under the same pressures within 0.1 mm of the runtime
         line = next(x for x in r.stdout.splitlines() if x.startswith("tip: largest error"))

@@ -1,6 +1,7 @@
 """Write the example scene files' meshes next to them, as Gmsh files with named physical groups
 (what Gmsh's own Python API would write): actuator.msh (anisofem.physics.meshgen.actuator),
-gripper.msh (two of those actuators hanging on either side of a box), part.msh (a 0.08 m beam in two halves, "left" and "right", with its ends named "base" and
+gripper.msh (two of those actuators hanging on either side of a box), tee.msh (the T of
+anisofem.physics.meshgen.t_shape), part.msh (a 0.08 m beam in two halves, "left" and "right", with its ends named "base" and
 "end") and tentacle.msh (a 0.2 m cylinder in four bands around its axis, "up", "down",
 "left" and "right", with its ends named "base" and "tip").
 
@@ -12,7 +13,7 @@ import numpy as np
 
 from anisofem.io.meshes import write_tagged_mesh
 from anisofem.physics.mesh import TetMesh
-from anisofem.physics.meshgen import actuator, box_beam, cylinder_beam
+from anisofem.physics.meshgen import actuator, box_beam, cylinder_beam, t_shape
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -76,7 +77,14 @@ def gripper_mesh():
                                 "base": 4}
 
 
-MESHES = {"actuator.msh": actuator, "gripper.msh": gripper_mesh, "part.msh": part_mesh, "tentacle.msh": tentacle_mesh}
+def tee_mesh():
+    """(mesh, volumes, surfaces, names) of the T (meshgen.t_shape: 10 cm wide, 8 cm tall,
+    standing on z = 0 in the x-z plane), one group "tee"."""
+    mesh = t_shape()
+    return mesh, np.ones(mesh.n_tets, int), {}, {"tee": 1}
+
+
+MESHES = {"actuator.msh": actuator, "gripper.msh": gripper_mesh, "tee.msh": tee_mesh, "part.msh": part_mesh, "tentacle.msh": tentacle_mesh}
 
 if __name__ == "__main__":
     for name, make in MESHES.items():
