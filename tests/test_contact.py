@@ -769,9 +769,6 @@ def test_surfaces_refuse_what_they_cannot_take(tmp_path):
         af.Scene(mesh, material, contact=af.Contact([through]))
     block = box_surface((0.1, 0.0, low - 0.01), (0.02, 0.05, 0.005))
     scene = af.Scene(mesh, material, gravity=(0, 0, -9.81), contact=af.Contact([block]))
-    with pytest.raises(ValueError, match="timed\\[0\\].obstacle: 'block' is a surface, which "
-                                         "stays where it is"):
-        scene.following([Timed(af.LoadCurve([0, 1], [0, 1]), obstacle=("block", (0, 0, 1)))])
     with pytest.raises(ValueError, match="method: 'cg' cannot take self-contact or surface"):
         af.simulate(scene, 1, method="cg")
     from anisofem.reduced import ReducedModel
@@ -791,7 +788,7 @@ def test_surfaces_refuse_what_they_cannot_take(tmp_path):
 
 def test_a_scene_file_takes_a_surface_from_a_file(beam_file):
     """[contact.obstacles.NAME] surface = {file = ...}: the triangles read from an .stl next
-    to the scene file, its friction its own; a move on it, or a missing file, in one line."""
+    to the scene file, its friction its own; a missing file in one line."""
     pytest.importorskip("ipctk")
     import meshio
     block = box_surface((0.05, 0.0, -0.03), (0.02, 0.05, 0.005))
@@ -804,14 +801,38 @@ def test_a_scene_file_takes_a_surface_from_a_file(beam_file):
     assert (ball.kind, ball.name, ball.friction) == ("surface", "ball", 0.1)
     assert np.allclose(np.sort(ball.vertices, axis=0), np.sort(block.vertices, axis=0))
     from anisofem.io.scenefile import SceneFileError
-    (beam_file / "moved.toml").write_text(SCENE.format(
-        extra="", ball='surface = {file = "block.stl"}\nmove = [0, 0, 1]\ncurve = "up"')
-        + "\n[curves.up]\ntimes = [0, 1]\nvalues = [0, 1]\n")
-    with pytest.raises(SceneFileError, match=r"contact.obstacles.ball.move: a surface stays "
-                                             r"where it is"):
-        af.load_scene(str(beam_file / "moved.toml"))
     (beam_file / "missing.toml").write_text(SCENE.format(
         extra="", ball='surface = {file = "bowl.stl"}'))
     with pytest.raises(SceneFileError, match=r"contact.obstacles.ball.surface.file: no such "
                                              r"surface file"):
         af.load_scene(str(beam_file / "missing.toml"))
+
+
+def test_a_surface_moved_along_a_curve_pushes_the_body():
+    """A surface block lifted 16 mm over 0.32 s under the beam held at one end: every step it
+    reaches where its curve puts it, the beam is pushed up over it, and no point any solve
+    evaluated intersects the block where that solve had it (ipctk; the block moves into where
+    the step began, and each solve starts from where the last push left the beam)."""
+    pytest.importorskip("ipctk")
+    mesh, material = body("beam")
+    low = mesh.vertices[:, 2].min()
+    block = box_surface((0.15, 0.0, low - 0.006), (0.02, 0.05, 0.005))
+    scene = af.Scene(mesh, material, gravity=(0, 0, -9.81), fixed=mesh.vertices[:, 0] < 1e-9,
+                     contact=af.Contact([block]))
+    lifted = scene.following([Timed(af.LoadCurve([0, 0.32], [0, 1]),
+                                    obstacle=("block", (0, 0, 0.016)))])
+    seen, evaluate = [], Potential.energy_gradient
+
+    def watched(potential, x):
+        pairs = potential.contact.itself
+        seen.append(bool(pairs.ipctk.has_intersections(pairs.mesh, pairs.vertices(x))))
+        return evaluate(potential, x)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(Potential, "energy_gradient", watched)
+        roll = af.simulate(lifted, 16, dt=0.02, warn=False)
+    assert roll.converged and len(seen) > 16 and not any(seen)
+    for k in range(1, 17):
+        wanted = lifted.at(k * 0.02).contact.obstacles[0].position
+        assert np.allclose(roll.obstacles[k, 0], wanted, atol=1e-12), k
+    tip = mesh.vertices[:, 0] > 0.2 - 1e-9
+    assert roll.positions[-1][tip, 2].min() > mesh.vertices[tip, 2].min() + 0.01

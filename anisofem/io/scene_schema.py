@@ -91,7 +91,7 @@ SCHEMA = {
                    "segment ab",
         "surface": "{file = \"NAME.stl\"}: the triangles of a surface file (.stl, .obj, "
                    ".ply, .msh, ...; its path relative to the scene file), any shape, its "
-                   "edges and corners exact (needs ipctk); it stays where it is",
+                   "edges and corners exact (needs ipctk)",
         "friction": "this obstacle's coefficient, >= 0 (default: [contact]'s)",
         "move": "[dx, dy, dz] m: where it goes, times its curve's factor (with curve)",
         "curve": "the name of the load curve it moves along (with move); a step moves it as "

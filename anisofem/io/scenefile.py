@@ -472,9 +472,6 @@ class _Reader:
             if not isinstance(geometry, dict) or set(geometry) != {"file"} or \
                     not isinstance(geometry["file"], str):
                 raise self.error(where, f"expected {{file = \"NAME.stl\"}}, got {geometry!r}")
-            if "move" in spec:
-                raise self.error(f"{key}.move", "a surface stays where it is; move a plane, "
-                                                "sphere, box or capsule")
             path = os.path.join(os.path.dirname(self.path), geometry["file"])
             try:
                 return read_surface(path, name=name, friction=friction)

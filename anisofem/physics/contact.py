@@ -258,9 +258,9 @@ class ContactTerm:
 
     def clear(self, x):
         """Whether every surface node at x (n, 3) is off every obstacle, and the surface off
-        itself."""
+        itself and the surfaces (nowhere touching or crossing them)."""
         return bool((self.distances(x) > 0).all()) and (
-            self.itself is None or self.itself.nearest(x) > 0)
+            self.itself is None or self.itself.clear(x))
 
     def distances(self, x):
         """(k, obstacles) every surface node's distance to every obstacle at x (n, 3), m."""
@@ -269,18 +269,22 @@ class ContactTerm:
                                or [np.full(len(xs), np.inf)])
 
 
-def advance(target, placed, xs, origin):
+def advance(target, placed, mesh, x, origin):
     """(the Contact `target` with each obstacle moved from where the Contact `placed` (the same
-    obstacles) has it toward where target has it, as far as the surface nodes at xs (k, 3)
-    let it with the body held, whether every one got there): each node kept at KEEP of its gap
-    (the share of the way first_touch allows), so a moving obstacle pushes the body and never
-    jumps into it. Each obstacle's shift is its move since `origin` (where its step began),
-    which friction's anchor follows."""
+    obstacles) has it toward where target has it, as far as the body of `mesh` at x (n, 3)
+    lets it, held, whether every one got there): the body kept at KEEP of its gap (the share
+    of the way first_touch allows its surface nodes, or ipctk's collision test a surface's),
+    so a moving obstacle pushes the body and never jumps into it. Each obstacle's shift is its
+    move since `origin` (where its step began), which friction's anchor follows."""
     obstacles, arrived = [], True
+    xs = x[surface_nodes(mesh)[0]]
     for aim, now, before in zip(target.obstacles, placed.obstacles, origin.obstacles):
         delta = aim.position - now.position
         share = 1.0
-        if np.any(delta):
+        if np.any(delta) and not isinstance(now, SHAPES):
+            share = SelfContact(mesh, 1.0, 1.0, surfaces=(now,), itself=False).surface_share(
+                x, delta)
+        elif np.any(delta):
             d, _ = now.distance(xs)
             share = float(now.first_touch(xs, np.broadcast_to(-delta, xs.shape),
                                           KEEP * d).min(initial=1.0))

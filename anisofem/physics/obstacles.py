@@ -228,7 +228,8 @@ class Surface(Obstacle):
     one from a file). Its contact with the body is taken pair by pair as the surface's with
     itself is (anisofem.physics.self_contact, by ipctk: the body's vertices against its
     triangles, its vertices against the body's, edges against edges), so its edges and
-    corners are exact; it needs ipctk, and the FEM's Newton method. It stays where it is."""
+    corners are exact; it needs ipctk, and the FEM's Newton method. It moves by translation
+    (position: the mean of its vertices)."""
     kind = "surface"
     placed = ("vertices",)
     parameters = ("vertices", "triangles")
@@ -250,7 +251,8 @@ class Surface(Obstacle):
                                        X[triangles[:, 2]] - X[triangles[:, 0]]), axis=1)
         if not (area > 0).all():
             raise ValueError(f"{self.name}: triangle {int(np.argmin(area))} has no area")
-        self.triangles = np.ascontiguousarray(triangles, dtype=np.int32)
+        # its own array: the collision mesh made of it is kept by the array's identity
+        self.triangles = np.array(triangles, dtype=np.int32, order="C", copy=True)
         self.triangles.setflags(write=False)
 
     @property

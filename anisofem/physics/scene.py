@@ -418,10 +418,6 @@ class Scene:
                 if part.obstacle[0] not in names:
                     raise ValueError(f"timed[{k}].obstacle: no obstacle {part.obstacle[0]!r}; "
                                      f"the scene has: {', '.join(names) or 'none'}")
-                if isinstance(self.contact.obstacles[names.index(part.obstacle[0])], Surface):
-                    raise ValueError(f"timed[{k}].obstacle: {part.obstacle[0]!r} is a surface, "
-                                     f"which stays where it is; move a plane, sphere, box or "
-                                     f"capsule")
                 as_float_array(part.obstacle[1], f"timed[{k}].obstacle move", shape=(3,))
         moved = self.held_at(self.fixed_positions)
         moved.timed = timed

@@ -9,7 +9,7 @@ from . import methods
 from .._validate import as_count, as_scalar
 from .continuation import ramp, worth_ramping
 from .newton import TIME_SPENT, NewtonResult, minimize, report
-from ..physics.contact import advance, surface_nodes
+from ..physics.contact import advance
 from ..physics.curves import LoadCurve
 from ..physics.potential import Potential, check_positions
 from ..physics.scene import check_scene
@@ -231,11 +231,10 @@ class Stepper:
         """A step whose obstacles go from where the last step left them (placed) to where the
         scene has them: moved as far as the body lets it, the step solved, again from there,
         up to PUSHES times (an obstacle still short of its place goes on at the next step)."""
-        nodes, _ = surface_nodes(self.scene.mesh)
         placed, start = self.placed, None
         for _ in range(PUSHES):
-            now, arrived = advance(self.scene.contact, placed,
-                                   (x if start is None else start)[nodes], self.placed)
+            now, arrived = advance(self.scene.contact, placed, self.scene.mesh,
+                                   x if start is None else start, self.placed)
             scene = copy.copy(self.scene)
             scene.contact = now
             res = step(scene, x, v, self.dt, a, self.method, False, start=start)
