@@ -7,7 +7,7 @@ from 2 cm, at 1, 10 and 100 g and dt 0.005, 0.02 and 0.05 s (friction 0.3).
 For each rollout: every step converged, Newton iterations (the most in a step, and in all),
 the nearest the two surfaces and the ground came, inverted elements, and how many of the
 points the solves evaluated (every Newton iterate and every line search's trial point)
-intersect by ipctk's own test (has_intersections). About fifteen minutes.
+intersect by ipctk's own test (has_intersections). About ten minutes.
 """
 import argparse
 import itertools
