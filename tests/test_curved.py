@@ -1,6 +1,7 @@
 """Curved quadratic tets (isoparametric 10-node tets, midside nodes off their edges' middles,
 as Gmsh places them on curved surfaces): their volumes, Lame's thick sphere under internal
-pressure, derivatives, and a folded tet named. Meshes: tests/data (scripts/make_curved_meshes.py)."""
+pressure, derivatives, and a folded tet named. Meshes: tests/data
+(scripts/make_curved_meshes.py)."""
 import os
 
 import numpy as np

@@ -39,7 +39,6 @@ PLACE_TOLERANCE = 1e-9
 UNIT_TOLERANCE = 1e-6
 
 
-
 class SceneFileError(ValueError):
     """A scene file that cannot be read as a scene: the message names the file and the key."""
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from .._validate import as_scalar
 from .obstacles import SHAPES, Obstacle
-from .self_contact import SelfContact
+from .self_contact import SelfContact, surface_share
 
 #: The default contact distance dhat over the body's size (its rest bounding box diagonal).
 DISTANCE_SHARE = 1e-3
@@ -43,8 +43,8 @@ KEEP = 0.1
 @dataclass(frozen=True)
 class Contact:
     """Contact of the body with rigid obstacles: obstacles (a sequence of anisofem Plane,
-    Sphere, Box, Capsule, Surface; may be empty with self_contact); distance dhat, m, at which the
-    barrier starts (default 1e-3 of the body's size); friction mu >= 0 (an obstacle's own
+    Sphere, Box, Capsule, Surface; may be empty with self_contact); distance dhat, m, at which
+    the barrier starts (default 1e-3 of the body's size); friction mu >= 0 (an obstacle's own
     coefficient wins); stiffness kappa, N/m^3 (default E / dhat); smoothing, m/s, the velocity
     below which friction sticks (default 1e-3 of the body's size per second); self_contact:
     the surface's contact with itself and between the bodies of one mesh too (by ipctk,
@@ -280,11 +280,11 @@ def advance(target, placed, mesh, x, origin):
     xs = x[surface_nodes(mesh)[0]]
     for aim, now, before in zip(target.obstacles, placed.obstacles, origin.obstacles):
         delta = aim.position - now.position
-        share = 1.0
-        if np.any(delta) and not isinstance(now, SHAPES):
-            share = SelfContact(mesh, 1.0, 1.0, surfaces=(now,), itself=False).surface_share(
-                x, delta)
-        elif np.any(delta):
+        if not np.any(delta):
+            share = 1.0
+        elif not isinstance(now, SHAPES):
+            share = surface_share(mesh, now, x, delta)
+        else:
             d, _ = now.distance(xs)
             share = float(now.first_touch(xs, np.broadcast_to(-delta, xs.shape),
                                           KEEP * d).min(initial=1.0))

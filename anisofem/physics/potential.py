@@ -14,11 +14,11 @@ import numpy as np
 from . import kernels
 from .contact import ContactTerm
 from .scene import ROUNDOFF_FACTOR, Scene
+from .._validate import as_float_array, as_scalar
 
 #: A Newton step that moves no node by more than this share of the contact distance has
 #: resolved the contact (Potential.contact_resolved)
 RESOLVED = 1e-3
-from .._validate import as_float_array, as_scalar
 
 
 _NO_MASS = np.empty(0)

@@ -23,7 +23,7 @@ import scipy.sparse as sp
 SCALE = 3.0 * (0.5 + np.log(2.0)) / (8.0 * (1.5 * np.log(4.0) + 2.25))
 
 #: ipctk's collision meshes of each mesh alive: {(itself, the surfaces' triangles' ids):
-#: (the surfaces' triangles, kept so their ids stay theirs; the CollisionMesh)}
+#: (the surfaces' triangles, kept so their ids stay theirs; the CollisionMesh; its owners)}
 _COLLISION_MESHES = weakref.WeakKeyDictionary()
 
 
@@ -61,12 +61,9 @@ class SelfContact:
                  itself=True):
         ipctk = self.ipctk = ipctk_module()
         self.surfaces = tuple(surfaces)
-        self.mesh = collision_mesh(mesh, self.surfaces, itself)
+        self.mesh, owner = collision_mesh(mesh, self.surfaces, itself)
         self.dhat = dhat
         self.barrier = ipctk.BarrierPotential(dhat, kappa * SCALE / dhat ** 2)
-        # additive CCD (Li et al. 2021): tight inclusion's default took 11 s for one step of the
-        # beam over a surface block, whose faces are much larger than the beam's
-        self.ccd = ipctk.AdditiveCCD()
         self.n = mesh.n_vertices
         self.friction = None
         body_mu = mu if eps is not None else 0.0
@@ -79,19 +76,12 @@ class SelfContact:
             if len(pairs):
                 tangential = ipctk.TangentialCollisions()
                 if self.surfaces:   # a pair with a surface takes its coefficient
-                    owner = self.owners()
                     each = np.where(owner > 0, np.array(mus)[owner], -1.0)[:, None]
                     tangential.build(self.mesh, lag, pairs, self.barrier, each, each,
                                      lambda a, b: body_mu if max(a, b) < 0 else max(a, b))
                 else:
                     tangential.build(self.mesh, lag, pairs, self.barrier, body_mu)
                 self.friction = (tangential, ipctk.FrictionPotential(eps), lag)
-
-    def owners(self):
-        """(v,) int of the collision mesh's vertices: 0 the body's, k the k-th surface's."""
-        full = np.array([self.mesh.to_full_vertex_id(i) for i in range(self.mesh.num_vertices)])
-        ends = np.cumsum([self.n] + [len(o.vertices) for o in self.surfaces])
-        return np.searchsorted(ends, full, side="right")
 
     def vertices(self, x):
         """The collision mesh's vertices with the body at positions x (n, 3)."""
@@ -143,28 +133,7 @@ class SelfContact:
     def max_step(self, x, dx):
         """The largest share in (0, 1] of the move dx (n, 3) from x along which no two parts of
         the surface come nearer than a tenth of their nearest distance now."""
-        V0, V1 = self.vertices(x), self.vertices(x + dx)    # the surfaces stay
-        pairs = self.collisions(V0)
-        floor = 0.0
-        if len(pairs):   # ipctk's distances are squared
-            floor = 0.1 * np.sqrt(pairs.compute_minimum_distance(self.mesh, V0))
-        return float(self.ipctk.compute_collision_free_stepsize(
-            self.mesh, V0, V1, min_distance=floor, narrow_phase_ccd=self.ccd))
-
-    def surface_share(self, x, delta):
-        """The largest share in (0, 1] of a move delta (3,) m of the surfaces, the body held at
-        x (n, 3), along which they come no nearer to it than a tenth of their nearest distance
-        now (ipctk's collision test)."""
-        V0 = self.vertices(x)
-        reach = self.ipctk.NormalCollisions()   # only what is nearer than the move can be met
-        reach.build(self.mesh, V0, float(np.linalg.norm(delta)))
-        if not len(reach):
-            return 1.0
-        moved = np.vstack([x] + [o.vertices + delta for o in self.surfaces])
-        V1 = self.mesh.vertices(np.asfortranarray(moved))
-        floor = 0.1 * float(np.sqrt(reach.compute_minimum_distance(self.mesh, V0)))
-        return float(self.ipctk.compute_collision_free_stepsize(
-            self.mesh, V0, V1, min_distance=floor, narrow_phase_ccd=self.ccd))
+        return free_share(self.mesh, self.vertices(x), self.vertices(x + dx), self.dhat)
 
     def clear(self, x):
         """Whether the body's surface at x (n, 3) nowhere touches or crosses itself or the
@@ -182,11 +151,38 @@ class SelfContact:
                 else np.inf)
 
 
+def free_share(cm, V0, V1, reach):
+    """The largest share in (0, 1] of the move of the collision mesh cm's vertices from V0 to
+    V1 along which no two parts within `reach` m of each other at V0 come nearer than a tenth
+    of their nearest distance there (ipctk's additive CCD, Li et al. 2021: its tight-inclusion
+    default took 11 s for one step of the beam over a surface block, whose faces are much
+    larger than the beam's)."""
+    ipctk = ipctk_module()
+    pairs = ipctk.NormalCollisions()
+    pairs.build(cm, V0, reach)
+    floor = 0.0
+    if len(pairs):   # ipctk's distances are squared
+        floor = 0.1 * float(np.sqrt(pairs.compute_minimum_distance(cm, V0)))
+    return float(ipctk.compute_collision_free_stepsize(cm, V0, V1, min_distance=floor,
+                                                       narrow_phase_ccd=ipctk.AdditiveCCD()))
+
+
+def surface_share(mesh, surface, x, delta):
+    """The largest share in (0, 1] of a move delta (3,) m of the Surface `surface`, the body
+    of `mesh` held at x (n, 3), along which it comes no nearer to the body than a tenth of
+    their nearest distance now (only what is nearer than the move can be met)."""
+    cm, _ = collision_mesh(mesh, (surface,), itself=False)
+    V0, V1 = (cm.vertices(np.asfortranarray(np.vstack([x, surface.vertices + d])))
+              for d in (0.0, delta))
+    return free_share(cm, V0, V1, float(np.linalg.norm(delta)))
+
+
 def collision_mesh(mesh, surfaces=(), itself=True):
-    """ipctk's CollisionMesh of the mesh's boundary triangles and the surfaces' (their
+    """(ipctk's CollisionMesh of the mesh's boundary triangles and the surfaces' (their
     vertices after the mesh's, in order), whose pairs are the body's with itself (itself) and
-    with each surface, never a surface's with itself or another. Built once per mesh and set
-    of surfaces (every step reads it)."""
+    with each surface, never a surface's with itself or another; (v,) int the owner of each of
+    its vertices, 0 the body, k the k-th surface). Built once per mesh and set of surfaces
+    (every step reads it)."""
     ipctk = ipctk_module()
     key = (itself,) + tuple(id(o.triangles) for o in surfaces)
     built = _COLLISION_MESHES.setdefault(mesh, {})
@@ -200,16 +196,19 @@ def collision_mesh(mesh, surfaces=(), itself=True):
         rest = np.vstack([mesh.vertices] + [o.vertices for o in surfaces])
         cm = ipctk.CollisionMesh.build_from_full_mesh(np.asfortranarray(rest),
                                                       ipctk.edges(faces), faces)
+        full = cm.vertices(np.asfortranarray(np.repeat(np.arange(len(rest), dtype=float)[:, None],
+                                                       3, axis=1)))[:, 0]   # its full ids
+        ends = np.cumsum([mesh.n_vertices] + [len(o.vertices) for o in surfaces])
+        owner = np.searchsorted(ends, full, side="right")
         if surfaces:   # ipctk keeps the full mesh's order: the body's vertices come first
-            fixed = np.array([cm.to_full_vertex_id(i) >= mesh.n_vertices
-                              for i in range(cm.num_vertices)])
+            fixed = owner > 0
             if fixed[:int((~fixed).sum())].any():
                 raise RuntimeError("ipctk reordered the collision mesh's vertices; its filter "
                                    "of the surfaces' pairs needs the body's first")
             cm.can_collide = (ipctk.make_static_obstacle_filter(int((~fixed).sum())) if itself
                               else ipctk.make_vertex_patches_filter(fixed.astype(np.int32)))
-        built[key] = ([o.triangles for o in surfaces], cm)
-    return built[key][1]
+        built[key] = ([o.triangles for o in surfaces], cm, owner)
+    return built[key][1:]
 
 
 def check_rest(contact, x):

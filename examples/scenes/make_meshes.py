@@ -1,8 +1,8 @@
 """Write the example scene files' meshes next to them, as Gmsh files with named physical groups
 (what Gmsh's own Python API would write): actuator.msh (anisofem.physics.meshgen.actuator),
 gripper.msh (two of those actuators hanging on either side of a box), tee.msh (the T of
-anisofem.physics.meshgen.t_shape), part.msh (a 0.08 m beam in two halves, "left" and "right", with its ends named "base" and
-"end") and tentacle.msh (a 0.2 m cylinder in four bands around its axis, "up", "down",
+anisofem.physics.meshgen.t_shape), part.msh (a 0.08 m beam in two halves, "left" and
+"right", with its ends named "base" and "end") and tentacle.msh (a 0.2 m cylinder in four bands around its axis, "up", "down",
 "left" and "right", with its ends named "base" and "tip").
 
     python examples/scenes/make_meshes.py
@@ -84,7 +84,8 @@ def tee_mesh():
     return mesh, np.ones(mesh.n_tets, int), {}, {"tee": 1}
 
 
-MESHES = {"actuator.msh": actuator, "gripper.msh": gripper_mesh, "tee.msh": tee_mesh, "part.msh": part_mesh, "tentacle.msh": tentacle_mesh}
+MESHES = {"actuator.msh": actuator, "gripper.msh": gripper_mesh, "tee.msh": tee_mesh,
+          "part.msh": part_mesh, "tentacle.msh": tentacle_mesh}
 
 if __name__ == "__main__":
     for name, make in MESHES.items():
