@@ -497,7 +497,7 @@ def test_the_reduced_contact_is_the_fems_at_its_positions(sagging):
     scene, model = sagging
     rng = np.random.default_rng(5)
     q_lag = model.solve()[0]
-    touching = model.contact.touching(q_lag, 0.01)
+    [touching] = model.contact.touching(q_lag, 0.01)
     q = q_lag + rng.normal(scale=1e-8, size=model.r)
     x = model.positions(q)
     assert 0 < fem_gap(scene, x) < ContactTerm(scene).dhat
@@ -774,8 +774,8 @@ def test_surfaces_refuse_what_they_cannot_take(tmp_path):
     from anisofem.reduced import ReducedModel
     held = af.Scene(mesh, af.Material(1e5, 0.45, 1000.0), fixed=mesh.vertices[:, 0] < 1e-9,
                     contact=af.Contact([block]))
-    with pytest.raises(ValueError, match="not self-contact or surface obstacles; step it with "
-                                         "the FEM"):
+    with pytest.raises(ValueError, match="capsules and itself, not surface obstacles; step it "
+                                         "with the FEM"):
         ReducedModel(held, modes=4)
     with pytest.raises(ValueError, match="block: triangles index vertices 0 to 7"):
         af.Surface(block.vertices, [[0, 1, 8]], name="block")
@@ -836,3 +836,69 @@ def test_a_surface_moved_along_a_curve_pushes_the_body():
         assert np.allclose(roll.obstacles[k, 0], wanted, atol=1e-12), k
     tip = mesh.vertices[:, 0] > 0.2 - 1e-9
     assert roll.positions[-1][tip, 2].min() > mesh.vertices[tip, 2].min() + 0.01
+
+
+@pytest.fixture(scope="module")
+def gripping():
+    """The gripper's reduced model (2 modes) after 25 steps of its grip: the fingers on the
+    box."""
+    pytest.importorskip("ipctk")
+    from anisofem.io.scenefile import SceneFile
+    from anisofem.reduced import ReducedModel
+    read = SceneFile(os.path.join(os.path.dirname(__file__), os.pardir, "examples", "scenes",
+                                  "gripper.toml"))
+    model = ReducedModel(read.scene.at(0.0), modes=2, validate=False)
+    q, v = np.zeros(model.r), np.zeros(model.r)
+    for k in range(1, 26):
+        q, v, report = model.step(q, v, 0.01, controls=read.scene.at(0.01 * k).control_values)
+        assert report.converged, report
+    box = np.unique(read.scene.mesh.tets[read.region("box")])
+    return model, q, box
+
+
+def test_near_pairs_are_ipctks_pairs(gripping):
+    """The few pairs NearPairs keeps give the barrier's energy, gradient and Hessian and the
+    collision-free share of ipctk's search over the whole surface, exactly."""
+    from anisofem.physics.self_contact import NearPairs, SelfContact
+    model, q, _ = gripping
+    term = model.contact.term
+    x = model.positions(q)
+    near = NearPairs(term.dhat, 4 * term.dhat)
+    whole, few = (SelfContact(model.scene.mesh, term.dhat, term.kappa, near=n)
+                  for n in (None, near))
+    assert 0 < whole.nearest(x) < term.dhat, "the fingers press on the box"
+    g_whole, g_few = np.zeros_like(x), np.zeros_like(x)
+    assert few.energy(x, g_few) == whole.energy(x, g_whole) > 0
+    assert np.array_equal(g_few, g_whole)
+    assert abs(few.hessian(x) - whole.hessian(x)).max() == 0
+    assert len(near.found) < 0.1 * len(whole.collisions(whole.vertices(x))) + 1000
+    rng = np.random.default_rng(3)
+    for scale in (1e-5, 3e-4, 3e-3):   # within the margin, beyond it (pieces), far
+        dx = (model.basis @ rng.normal(size=model.r)).reshape(-1, 3)
+        dx *= scale / np.abs(dx).max()
+        exact = whole.max_step(x, dx)
+        assert few.max_step(x, dx, whole=True) == pytest.approx(exact, rel=1e-9)
+        assert few.max_step(x, dx) <= exact + 1e-12
+
+
+def test_a_free_body_moves_rigidly_in_the_basis(gripping):
+    """The box, a part of the mesh with no held vertex, translates exactly in the basis (its
+    rigid motions are columns) and its translation strains nothing."""
+    model, _, box = gripping
+    for axis in range(3):
+        u = np.zeros((model.scene.mesh.n_vertices, 3))
+        u[box, axis] = 1e-3
+        q, *_ = np.linalg.lstsq(model.basis, u.ravel(), rcond=None)
+        assert np.abs(model.basis @ q - u.ravel()).max() < 1e-12
+        assert abs(model.polynomial.energy(q)) < 1e-12 * model.polynomial.energy(
+            np.linalg.norm(q) * np.eye(model.r)[-1])
+
+
+def test_a_reduced_model_with_self_contact_is_not_exported(gripping, tmp_path):
+    from export.writers.reduced import write
+    model, *_ = gripping
+    with pytest.raises(ValueError, match="model: the runtimes take contact with planes, "
+                                         "spheres, boxes and capsules, not self-contact"):
+        write(model, str(tmp_path / "gripper.npz"))
+    with pytest.raises(ValueError, match="carried"):
+        model.step(np.zeros(model.r), np.zeros(model.r), 0.01, carried=(0, 0, 0))

@@ -341,6 +341,18 @@ class Scene:
         moved.fixed_positions = x
         return moved
 
+    def holding(self, vertices):
+        """The same scene with `vertices` (indices) held too, where they are, and no contact:
+        what a reduced model's static snapshots of the parts that carry a free body solve."""
+        moved = copy.copy(self)
+        mask = self.fixed_mask.copy()
+        mask[np.asarray(vertices, dtype=int)] = True
+        moved.fixed_mask, moved.contact, moved._layouts = mask, None, {}
+        for cached in ("dof_map", "free_dofs", "force_unit", "gradient_roundoff",
+                       "full_layout"):
+            moved.__dict__.pop(cached, None)
+        return moved
+
     def with_contact(self, contact):
         """The same scene with another contact (an anisofem.Contact, or None): for friction or
         stiffness studies. Checked against the body at rest as the constructor's is; shares

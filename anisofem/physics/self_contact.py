@@ -10,6 +10,7 @@ Contact's kappa times SCALE / dhat^2, so that between two parallel faces at dhat
 pressure equals the obstacles' barrier's there (anisofem.physics.contact). The surface is the
 mesh's boundary triangles (a quadratic face split into its four corner-midside triangles).
 """
+import math
 import weakref
 
 import numpy as np
@@ -58,11 +59,12 @@ class SelfContact:
     surfaces then where they were at the step's start (less their shift)."""
 
     def __init__(self, mesh, dhat, kappa, x_lag=None, mu=0.0, eps=None, surfaces=(),
-                 itself=True):
+                 itself=True, near=None):
         ipctk = self.ipctk = ipctk_module()
         self.surfaces = tuple(surfaces)
         self.mesh, owner = collision_mesh(mesh, self.surfaces, itself)
         self.dhat = dhat
+        self.near = near
         self.barrier = ipctk.BarrierPotential(dhat, kappa * SCALE / dhat ** 2)
         self.n = mesh.n_vertices
         self.friction = None
@@ -93,16 +95,27 @@ class SelfContact:
         """The pairs nearer than dhat at collision-mesh vertices V."""
         pairs = self.ipctk.NormalCollisions()
         pairs.use_area_weighting = True
-        pairs.build(self.mesh, V, self.dhat)
+        if self.near is not None:
+            pairs.build(self.near.candidates(self.mesh, V), self.mesh, V, self.dhat)
+        else:
+            pairs.build(self.mesh, V, self.dhat)
         return pairs
 
     def energy(self, x, grad=None):
         """The barrier's and friction's energy at x (n, 3), J (inf where two parts of the
         surface meet); adds the gradient to grad (n, 3) when given."""
-        V = self.vertices(x)
-        pairs = self.collisions(V)
+        total, g = self.surface_energy(self.vertices(x))
+        if grad is not None and np.isfinite(total):
+            grad += self.mesh.to_full_dof(g).reshape(-1, 3)[:self.n]
+        return total
+
+    def surface_energy(self, V, pairs=None):
+        """(energy J, gradient (3v,) N over the collision mesh's unknowns) at its vertices V
+        (v, 3) (pairs: their collisions there, found if None); inf (and no gradient) where
+        two parts of the surface meet."""
+        pairs = self.collisions(V) if pairs is None else pairs
         if len(pairs) and pairs.compute_minimum_distance(self.mesh, V) <= 0.0:
-            return np.inf
+            return np.inf, None
         total = self.barrier(pairs, self.mesh, V) if len(pairs) else 0.0
         g = (self.barrier.gradient(pairs, self.mesh, V) if len(pairs)
              else np.zeros(V.size))
@@ -110,30 +123,49 @@ class SelfContact:
             tangential, potential, lag = self.friction
             total += potential(tangential, self.mesh, V - lag)
             g = g + potential.gradient(tangential, self.mesh, V - lag)
-        if grad is not None:
-            grad += self.mesh.to_full_dof(g).reshape(-1, 3)[:self.n]
-        return float(total)
+        return float(total), g
+
+    def surface_derivatives(self, V):
+        """(energy J, gradient (3v,) N, Hessian (3v, 3v) scipy CSR N/m) at the collision
+        mesh's vertices V (v, 3), its pairs found once."""
+        pairs = self.collisions(V)
+        energy, g = self.surface_energy(V, pairs)
+        return energy, g, self.surface_hessian(V, pairs=pairs).tocsr()
 
     def hessian(self, x, project=False):
         """(3n, 3n) scipy sparse, the barrier's and friction's Hessian at x (n, 3); project:
         each pair's clamped to positive semi-definite."""
-        V = self.vertices(x)
+        H = self.mesh.to_full_dof(self.surface_hessian(self.vertices(x), project))
+        return H if not self.surfaces else H.tocsr()[:3 * self.n].tocsc()[:, :3 * self.n]
+
+    def surface_hessian(self, V, project=False, pairs=None):
+        """(3v, 3v) scipy CSC, the Hessian over the collision mesh's unknowns at V (v, 3)
+        (pairs: their collisions there, found if None)."""
         how = (self.ipctk.PSDProjectionMethod.CLAMP if project
                else self.ipctk.PSDProjectionMethod.NONE)
-        pairs = self.collisions(V)
+        pairs = self.collisions(V) if pairs is None else pairs
         H = sp.csc_matrix((V.size, V.size))
         if len(pairs):
             H = self.barrier.hessian(pairs, self.mesh, V, how)
         if self.friction is not None:
             tangential, potential, lag = self.friction
             H = H + potential.hessian(tangential, self.mesh, V - lag, how)
-        H = self.mesh.to_full_dof(sp.csc_matrix(H))
-        return H if not self.surfaces else H.tocsr()[:3 * self.n].tocsc()[:, :3 * self.n]
+        return sp.csc_matrix(H)
 
-    def max_step(self, x, dx):
+    def max_step(self, x, dx, whole=False):
         """The largest share in (0, 1] of the move dx (n, 3) from x along which no two parts of
-        the surface come nearer than a tenth of their nearest distance now."""
-        return free_share(self.mesh, self.vertices(x), self.vertices(x + dx), self.dhat)
+        the surface come nearer than a tenth of their nearest distance now (whole: with
+        NearPairs, found for all of the move however far; else as far as they hold)."""
+        return self.surface_max_step(self.vertices(x), self.vertices(x + dx), whole)
+
+    def surface_max_step(self, V0, V1, whole=False):
+        """max_step for the collision mesh's vertices moving from V0 to V1 (v, 3)."""
+        if self.near is None:
+            return free_share(self.mesh, V0, V1, self.dhat)
+        candidates, reach = self.near.along(self.mesh, V0, V1, whole)
+        if reach < 1.0:
+            V1 = V0 + reach * (V1 - V0)
+        return reach * free_share(self.mesh, V0, V1, self.dhat, candidates)
 
     def clear(self, x):
         """Whether the body's surface at x (n, 3) nowhere touches or crosses itself or the
@@ -151,20 +183,131 @@ class SelfContact:
                 else np.inf)
 
 
-def free_share(cm, V0, V1, reach):
+def free_share(cm, V0, V1, reach, candidates=None):
     """The largest share in (0, 1] of the move of the collision mesh cm's vertices from V0 to
     V1 along which no two parts within `reach` m of each other at V0 come nearer than a tenth
     of their nearest distance there (ipctk's additive CCD, Li et al. 2021: its tight-inclusion
     default took 11 s for one step of the beam over a surface block, whose faces are much
-    larger than the beam's)."""
+    larger than the beam's). candidates: ipctk's Candidates holding every pair that can meet
+    along the move (NearPairs), or None to find them."""
     ipctk = ipctk_module()
     pairs = ipctk.NormalCollisions()
-    pairs.build(cm, V0, reach)
+    if candidates is None:
+        pairs.build(cm, V0, reach)
+    else:
+        pairs.build(candidates, cm, V0, reach)
     floor = 0.0
     if len(pairs):   # ipctk's distances are squared
         floor = 0.1 * float(np.sqrt(pairs.compute_minimum_distance(cm, V0)))
-    return float(ipctk.compute_collision_free_stepsize(cm, V0, V1, min_distance=floor,
-                                                       narrow_phase_ccd=ipctk.AdditiveCCD()))
+    ccd = ipctk.AdditiveCCD()
+    if candidates is None:
+        return float(ipctk.compute_collision_free_stepsize(cm, V0, V1, min_distance=floor,
+                                                           narrow_phase_ccd=ccd))
+    return float(candidates.compute_collision_free_stepsize(cm, V0, V1, min_distance=floor,
+                                                            narrow_phase_ccd=ccd))
+
+
+class NearPairs:
+    """The pairs of a collision mesh that can come within dhat while its vertices stay near
+    where they were found: the point-triangle and edge-edge pairs within dhat + m at V_c (m at
+    least margin, m), which hold every pair that can come within dhat for as long as each
+    vertex's move since V_c, less their common translation, stays under m / 2 (then no
+    distance changed by more than m). Found again where a move leaves that. For a solve whose
+    surface's shape changes little between its evaluations (a reduced model's): ipctk's broad
+    phase keeps the surface's neighbouring features (thousands of pairs, as costly to test as
+    the few that matter); these are the few."""
+
+    def __init__(self, dhat, margin):
+        self.dhat, self.margin = dhat, margin
+        self.at, self.found, self.held, self.builds = None, None, 0.0, 0
+
+    def holds(self, V):
+        """Whether the pairs found hold every pair that can come within dhat at V (v, 3)."""
+        return self.at is not None and _shape_change(V - self.at) <= 0.5 * self.held
+
+    def candidates(self, cm, V):
+        """ipctk's Candidates holding every pair of cm that can come within dhat at V."""
+        if not self.holds(V):
+            self._find(cm, V, self.margin)
+        return self.found
+
+    def along(self, cm, V0, V1, whole=False):
+        """(ipctk's Candidates, share): the pairs that can come within dhat anywhere along the
+        first `share` in (0, 1] of the straight move from V0 to V1 (v, 3). Found again at V0
+        where the move leaves them (whole: with a margin that holds all of it); share < 1
+        where the move changes the surface's shape by more than margin / 2 (each vertex's move
+        less the common one grows linearly along it)."""
+        if self.holds(V0) and self.holds(V1):
+            return self.found, 1.0
+        far = _shape_change(V1 - V0)
+        self._find(cm, V0, max(self.margin, 2.0 * far) if whole else self.margin)
+        return self.found, 1.0 if far <= 0.5 * self.held else 0.5 * self.held / far
+
+    def _find(self, cm, V, margin):
+        self.found = near_candidates(cm, V, self.dhat + margin)
+        self.at, self.held, self.builds = V.copy(), margin, self.builds + 1
+
+
+def _shape_change(move):
+    """The largest of the vertices' moves (v, 3), m, less their common translation (the
+    middle of their range)."""
+    d = move - 0.5 * (move.max(axis=0) + move.min(axis=0))
+    return math.sqrt(float(np.einsum("ij,ij->i", d, d).max()))
+
+
+def near_candidates(cm, V, reach):
+    """ipctk's Candidates of the point-triangle and edge-edge pairs of cm (not sharing a
+    vertex) within `reach` m at V: ipctk's broad and narrow phases find the pairs of closest
+    features within reach (vertex-vertex, edge-vertex, edge-edge, face-vertex), and each gives
+    back every triangle-point and edge-edge pair whose closest features it can be."""
+    ipctk = ipctk_module()
+    wide = ipctk.Candidates()
+    wide.build(cm, np.asfortranarray(V), reach)
+    near = ipctk.NormalCollisions()
+    near.build(wide, cm, np.asfortranarray(V), reach)
+    faces_of, edges_of, edge_faces = _adjacency(cm)
+    fv, ee = set(), set()
+    for c in near.fv_collisions:
+        fv.add((c.face_id, c.vertex_id))
+    for c in near.ee_collisions:
+        ee.add((c.edge0_id, c.edge1_id))
+    for c in near.ev_collisions:
+        fv.update((f, c.vertex_id) for f in edge_faces[c.edge_id])
+        ee.update((c.edge_id, e) for e in edges_of[c.vertex_id])
+    for c in near.vv_collisions:
+        a, b = c.vertex0_id, c.vertex1_id
+        fv.update((f, b) for f in faces_of[a])
+        fv.update((f, a) for f in faces_of[b])
+        ee.update((e, e1) for e in edges_of[a] for e1 in edges_of[b])
+    F, E = cm.faces, cm.edges
+    found = ipctk.Candidates()
+    found.fv_candidates = [ipctk.FaceVertexCandidate(int(f), int(v)) for f, v in fv
+                           if v not in F[f]]
+    found.ee_candidates = [ipctk.EdgeEdgeCandidate(int(a), int(b)) for a, b in
+                           {tuple(sorted(p)) for p in ee} if not set(E[a]) & set(E[b])]
+    return found
+
+
+#: Each collision mesh's (faces of each vertex, edges of each vertex, faces of each edge).
+_ADJACENCY = weakref.WeakKeyDictionary()
+
+
+def _adjacency(cm):
+    if cm not in _ADJACENCY:
+        faces_of = [[] for _ in range(cm.num_vertices)]
+        edges_of = [[] for _ in range(cm.num_vertices)]
+        edge_faces = [[] for _ in range(cm.num_edges)]
+        for f, (a, b, c) in enumerate(cm.faces):
+            for v in (a, b, c):
+                faces_of[v].append(f)
+        for e, (a, b) in enumerate(cm.edges):
+            edges_of[a].append(e)
+            edges_of[b].append(e)
+        for f, row in enumerate(cm.faces_to_edges):
+            for e in row:
+                edge_faces[e].append(f)
+        _ADJACENCY[cm] = (faces_of, edges_of, edge_faces)
+    return _ADJACENCY[cm]
 
 
 def surface_share(mesh, surface, x, delta):

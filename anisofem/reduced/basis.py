@@ -11,6 +11,9 @@ import math
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from scipy.sparse.csgraph import connected_components
+
+from .domains import edge_graph
 
 #: A candidate direction is dropped from the basis when mass-orthogonalization leaves less
 #: than this share of its norm (it depends on the others).
@@ -77,3 +80,60 @@ def mass_orthonormal(V, mass):
         if norm > DEPENDENT * norm0:
             kept.append(v / norm)
     return np.column_stack(kept)
+
+
+def bodies(scene):
+    """(the vertex indices of each free body: a connected part of the mesh with no held
+    vertex, whose static stiffness is singular; (n,) bool, the vertices of the parts that
+    hold a held vertex, which carry the held vertices' motion)."""
+    mesh = scene.mesh
+    count, label = connected_components(edge_graph(mesh), directed=False)
+    used = np.zeros(mesh.n_vertices, bool)
+    used[mesh.cells.ravel()] = True
+    holding = np.zeros(count, bool)
+    holding[label[scene.fixed_mask.any(axis=1) & used]] = True
+    free = [np.flatnonzero(label == c) for c in range(count)
+            if not holding[c] and used[label == c].any()]
+    return free, holding[label] & used
+
+
+def rigid_motions(x, vertices):
+    """(3n, 6) the rigid motions of the vertices `vertices` of positions x (n, 3), m: three
+    translations (1 m) and three small turns (1 rad) about their centroid, 0 elsewhere."""
+    arm = x[vertices] - x[vertices].mean(axis=0)
+    out = np.zeros((x.shape[0], 3, 6))
+    for k in range(3):
+        out[vertices, k, k] = 1.0
+        out[vertices, :, 3 + k] = np.cross(np.eye(3)[k], arm)
+    return out.reshape(-1, 6)
+
+
+def free_body_modes(K, mass, count):
+    """The `count` lowest vibration modes (N, count) of a free body, K its (singular) free
+    Hessian (N, N), mass its lumped mass per unknown (N,): shift-invert Lanczos about a
+    negative shift, below its six rigid motions' 0 (K + |shift| M is positive definite), the
+    six left out."""
+    shift = -SHIFT_SHARE * float(K.diagonal().sum() / mass.sum())
+    lam, phi = spla.eigsh(K.tocsc(), k=min(count + 6, K.shape[0] - 1),
+                          M=sp.diags(mass).tocsc(), sigma=shift, which="LM", v0=np.sqrt(mass))
+    return phi[:, np.argsort(lam)[6:]]
+
+
+#: free_body_modes' shift over the body's mean squared frequency (trace K / trace M): far
+#: below its elastic modes, yet a shifted K that float64 factors well.
+SHIFT_SHARE = 1e-6
+
+
+class HeldFactor:
+    """K^-1 over the unknowns outside the free bodies (`kept`, indices among N free unknowns),
+    the free bodies' left at 0: the held part's static responses (a free body's K is
+    singular). solve(b) (N,) -> (N,)."""
+
+    def __init__(self, K, kept, size):
+        self.kept, self.size = kept, size
+        self.lu = spla.splu(K[kept][:, kept].tocsc())
+
+    def solve(self, b):
+        out = np.zeros(self.size)
+        out[self.kept] = self.lu.solve(np.ascontiguousarray(b[self.kept]))
+        return out

@@ -6,6 +6,13 @@ continuous collision test along the reduced step, exact because the positions ar
 a reduced step p moves each surface node by U_i p. Cost per evaluation: O(k r) for the k
 surface nodes' positions, O(c r^2) for the c nodes in contact.
 
+Self-contact (and contact between the bodies of one mesh) is subspace self-contact (Teng,
+Otaduy and Kim 2014) by the FEM's ipctk pairs (anisofem.physics.self_contact) at x0 + U q:
+gradient U^T g, Hessian U_c^T H_c U_c over the c nodes of the pairs within dhat, the
+collision test ipctk's along the reduced step's straight move. Its broad phase runs once for
+as long as the surface's shape changes by less than a margin (NearPairs): a carried gripper
+moves centimetres with its pairs found a few times.
+
 A reduced step minimizes the exact quartic plus these terms by Newton with a backtracking
 search (ReducedModel._newton, extra terms), its first trial clipped to the collision-free
 share of the step. Friction is lagged at the step's start, as in the FEM.
@@ -15,49 +22,95 @@ import math
 import numpy as np
 
 from ..physics.contact import ContactTerm
+from ..physics.obstacles import SHAPES
 from ..physics.scene import ROUNDOFF_FACTOR
+from ..physics.self_contact import NearPairs, SelfContact, collision_mesh
 
 #: The share of the contact's energy below which two of its values cannot be told apart.
 NOISE = 1e-12
 
+#: NearPairs' margin over the contact distance: the surface's shape may change by this much
+#: before its broad phase runs again.
+MARGIN_SHARE = 4.0
+
 
 class ReducedContact:
-    """The contact of a ReducedModel's scene over its surface nodes: term (the FEM's
-    ContactTerm), U (k, 3, r) the nodes' basis rows, x0 (k, 3) their rest positions."""
+    """The contact of a ReducedModel's scene: term (the FEM's ContactTerm), U (k, 3, r) the
+    surface nodes' basis rows, x0 (k, 3) their rest positions, and with self-contact the
+    basis (n, 3, r), the rest positions (n, 3) and the NearPairs of the whole mesh. carrying
+    (n,) bool: the vertices a translation of the held vertices carries (ReducedModel.step's
+    carried)."""
 
-    def __init__(self, scene, x0, basis):
-        if scene.contact.pairs:
+    def __init__(self, scene, x0, basis, carrying):
+        if any(not isinstance(o, SHAPES) for o in scene.contact.obstacles):
             raise ValueError("scene: the reduced model takes contact with planes, spheres, "
-                             "boxes and capsules, not self-contact or surface obstacles; step "
-                             "it with the FEM")
+                             "boxes, capsules and itself, not surface obstacles; step it with "
+                             "the FEM")
         self.term = ContactTerm(scene)
         nodes = self.term.nodes
         r = basis.shape[1]
-        self.U = np.ascontiguousarray(basis.reshape(-1, 3, r)[nodes])
+        self.basis = basis.reshape(-1, 3, r)
+        self.U = np.ascontiguousarray(self.basis[nodes])
+        self.U2 = self.U.reshape(-1, r)
         self.x0 = x0[nodes]
+        self.rest, self.carrying, self.mesh, self.near = x0, carrying, scene.mesh, None
+        if scene.contact.self_contact:
+            self.near = NearPairs(self.term.dhat, MARGIN_SHARE * self.term.dhat)
+            ids = np.repeat(np.arange(len(x0), dtype=float)[:, None], 3, axis=1)
+            full = collision_mesh(scene.mesh)[0].vertices(np.asfortranarray(ids))[:, 0]
+            full = np.rint(full).astype(int)
+            self.surface_rest, self.surface_carried = x0[full], carrying[full]
+            self.surface_basis = np.ascontiguousarray(self.basis[full].reshape(-1, r))
 
-    def positions(self, q):
-        """(k, 3) the surface nodes at coordinates q (r,), m."""
-        return self.x0 + self.U @ q
+    def positions(self, q, shift=None):
+        """(k, 3) the surface nodes at coordinates q (r,), the carried ones moved by shift
+        (3,), m."""
+        x = self.x0 + (self.U2 @ q).reshape(-1, 3)
+        return x if shift is None else x + self.carrying[self.term.nodes, None] * shift
 
-    def touching(self, q_lag=None, dt=None):
-        """The Touching term of one solve: with dt, friction lagged at q_lag."""
-        return Touching(self, self.term if dt is None
-                        else self.term.lagged(self.positions(q_lag), dt))
+    def surface(self, q, shift=None):
+        """(v, 3) the collision mesh's vertices at coordinates q, the carried ones moved by
+        shift, m (Fortran order, as ipctk takes them)."""
+        V = self.surface_rest + (self.surface_basis @ q).reshape(-1, 3)
+        if shift is not None:
+            V += self.surface_carried[:, None] * shift
+        return np.asfortranarray(V)
+
+    def touching(self, q_lag=None, dt=None, shift=None, lag_shift=None):
+        """The terms of one solve (a Touching for the obstacles, a TouchingPairs for
+        self-contact), the carried vertices moved by shift (3,) m: with dt, friction lagged at
+        q_lag, the carried vertices then moved by lag_shift."""
+        terms = []
+        if self.term.obstacles:
+            terms.append(Touching(self, self.term if dt is None else self.term.lagged(
+                self.positions(q_lag, lag_shift), dt), shift))
+        if self.near is not None:
+            term, contact = self.term, self.term.contact
+            lagged = dt is not None and contact.friction > 0
+            lag = None
+            if lagged:
+                lag = self.rest + (self.basis @ q_lag)
+                if lag_shift is not None:
+                    lag += self.carrying[:, None] * lag_shift
+            terms.append(TouchingPairs(self, SelfContact(
+                self.mesh, term.dhat, term.kappa, x_lag=lag,
+                mu=contact.friction, eps=term.smoothing(dt) if lagged else None,
+                near=self.near), shift))
+        return terms
 
 
 class Touching:
     """The contact's part of one reduced solve, in the interface of ReducedModel's extra
     terms: derivatives, change, limit."""
 
-    def __init__(self, contact, term):
-        self.contact, self.term = contact, term
+    def __init__(self, contact, term, shift=None):
+        self.contact, self.term, self.shift = contact, term, shift
         self._at = (None, 0.0, None)     # (q, energy, slope) of the last derivatives
 
     def energy(self, q):
         """The barrier's and friction's energy at q, J (inf where a node reached an
         obstacle)."""
-        return self.term.surface_energy(self.contact.positions(q))[0]
+        return self.term.surface_energy(self.contact.positions(q, self.shift))[0]
 
     def derivatives(self, q):
         """(dE/dq (r,) N, d2E/dq2 (r, r) N/m, the gradient's round-off floor N) at q: each
@@ -66,7 +119,7 @@ class Touching:
         curvature, left Newton crawling: 61 iterations for a step of the page's tentacle);
         the floor ROUNDOFF_FACTOR eps R |H| (R the largest coordinate), which float64 cannot
         resolve in a barrier's force."""
-        x = self.contact.positions(q)
+        x = self.contact.positions(q, self.shift)
         energy, g = self.term.surface_energy(x)
         slope = np.einsum("kir,ki->r", self.contact.U, g)
         self._at = (q.copy(), energy, slope)
@@ -95,4 +148,48 @@ class Touching:
     def limit(self, q, p):
         """The largest share in (0, 1] of the step p (r,) from q that keeps every surface
         node clear of the obstacles (anisofem.physics.obstacles.first_touch)."""
-        return self.term.surface_max_step(self.contact.positions(q), self.contact.U @ p)
+        return self.term.surface_max_step(self.contact.positions(q, self.shift),
+                                          self.contact.U @ p)
+
+    def carried_share(self, q, before):
+        """The share in (0, 1] of the carried vertices' move from shift `before` (3,) to this
+        solve's, the body at q, that keeps every surface node clear (1: all of it)."""
+        start = self.contact.positions(q, before)
+        return self.term.surface_max_step(start, self.contact.positions(q, self.shift) - start)
+
+
+class TouchingPairs(Touching):
+    """Self-contact's part of one reduced solve: term a SelfContact (ipctk's pairs, with the
+    solve's lagged friction) over the collision mesh's vertices at x0_c + U_c q."""
+
+    def energy(self, q):
+        """The pairs' barrier and friction at q, J (inf where the surface meets itself)."""
+        return self.term.surface_energy(self.contact.surface(q, self.shift))[0]
+
+    def derivatives(self, q):
+        """(dE/dq (r,) N, d2E/dq2 (r, r) N/m, the gradient's round-off floor N) at q: the
+        pairs' Hessian projected on the basis rows of the nodes they join."""
+        V = self.contact.surface(q, self.shift)
+        energy, g, H = self.term.surface_derivatives(V)
+        B = self.contact.surface_basis
+        slope = B.T @ g
+        self._at = (q.copy(), energy, slope)
+        rows = np.flatnonzero(np.diff(H.indptr))
+        H = B[rows].T @ (H @ B)[rows]
+        floor = (ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(V).max())
+                 * math.sqrt(float((H * H).sum())))
+        return slope, H, floor
+
+    def limit(self, q, p):
+        """The largest share in (0, 1] of the step p (r,) from q along which no two parts of
+        the surface come nearer than a tenth of their nearest distance now (ipctk)."""
+        V = self.contact.surface(q, self.shift)
+        return self.term.surface_max_step(V, V + (self.contact.surface_basis @ p).reshape(
+            V.shape))
+
+    def carried_share(self, q, before):
+        """The share in (0, 1] of the carried vertices' move from shift `before` (3,) to this
+        solve's, the body at q, along which no two parts of the surface come nearer than a
+        tenth of their nearest distance (1: all of it)."""
+        return self.term.surface_max_step(self.contact.surface(q, before),
+                                          self.contact.surface(q, self.shift), whole=True)

@@ -18,7 +18,6 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse.linalg as spla
 
 from .._validate import as_float_array
 from ..physics.densities import STVK
@@ -42,6 +41,10 @@ from .controls import (control_parts, control_responses, control_values, control
 #: Default number of vibration modes; the basis holds them and their m (m + 1) / 2 modal
 #: derivatives, less dependent directions (6 modes: r = 27).
 MODES = 6
+
+#: A free body's (a part of the mesh with no held vertex) lowest vibration modes in the basis,
+#: beside its six rigid motions (translations exact; turns to first order).
+FREE_BODY_MODES = 3
 
 #: The validation of a model with declared loads: unseen load cases, each held for HOLD_STEPS
 #: backward-Euler steps of VALIDATION_DT s from rest and released for as many.
@@ -157,15 +160,27 @@ class ReducedModel:
         layout = scene.layout("csr")
         potential = Potential(scene)
         K = _basis.free_hessian(potential, self.x0, layout)
-        factor = spla.splu(K)
-        omega2, phi = _basis.vibration_modes(K, factor, mass, modes)
+        self.free_bodies, self.carrying = _basis.bodies(scene)
+        at = np.full(3 * scene.mesh.n_vertices, -1)
+        at[free] = np.arange(free.size)
+        body_dofs = [d[d >= 0] for d in (at[(3 * v[:, None] + np.arange(3)).ravel()]
+                                         for v in self.free_bodies)]
+        kept = np.setdiff1d(np.arange(free.size), np.concatenate([[]] + body_dofs).astype(int))
+        factor = _basis.HeldFactor(K, kept, free.size)
+        omega2, phi = _basis.vibration_modes(K[kept][:, kept], factor.lu, mass[kept], modes)
         self.frequencies = np.sqrt(np.maximum(omega2, 0.0)) / (2.0 * math.pi)
-        responses = control_responses(scene, self.x0, factor, free)
-        columns = [phi, responses]
+        columns = [np.zeros((free.size, modes)), control_responses(scene, self.x0, factor,
+                                                                   free)]
+        columns[0][kept] = phi
         if derivatives:
             both = _basis.mass_orthonormal(np.hstack(columns), mass)
             columns.append(_basis.modal_derivatives(potential, self.x0, layout, factor, both,
                                                     free))
+        for vertices, dofs in zip(self.free_bodies, body_dofs):
+            columns.append(_basis.rigid_motions(self.x0, vertices)[free])
+            own = np.zeros((free.size, FREE_BODY_MODES))
+            own[dofs] = _basis.free_body_modes(K[dofs][:, dofs], mass[dofs], FREE_BODY_MODES)
+            columns.append(own)
         U = _basis.mass_orthonormal(np.hstack(columns), mass)
         credit = 0.0  # the static solves' time where another model of this scene ran them
         if snapshots:
@@ -173,15 +188,18 @@ class ReducedModel:
             t1 = time.perf_counter()
             U = self._fit(U, snapshots, mass)
             credit = max(self.snapshots.seconds - (time.perf_counter() - t1), 0.0)
-        self.basis = np.zeros((3 * scene.mesh.n_vertices, U.shape[1]))
+        n = scene.mesh.n_vertices
+        self.basis = np.zeros((3 * n, U.shape[1]))
         self.basis[free] = U
         need = build_bytes(U.shape[1], scene.elements.weights.size)
         say(f"the energy's polynomial in r = {U.shape[1]} coordinates (about "
             f"{need / 2 ** 30:.2g} GiB at its peak; its quartic grows as r^4)")
         self._energy_polynomial(scene)
         self.external = self.project(scene.external_force)
-        self.contact = (ReducedContact(scene, self.x0, self.basis) if scene.contact is not None
-                        else None)
+        self.contact = (ReducedContact(scene, self.x0, self.basis, self.carrying)
+                        if scene.contact is not None else None)
+        self._carried_mass = self.basis.T @ (
+            np.repeat(scene.masses * self.carrying, 3)[:, None] * np.tile(np.eye(3), (n, 1)))
         self.build_seconds = time.perf_counter() - t0 + credit
         if validate:
             say("its validation against the full FEM")
@@ -191,7 +209,9 @@ class ReducedModel:
         """U (free unknowns, k; mass-orthonormal) with up to `count` principal directions of the
         full FEM's static equilibria under the declared loads added (snapshots, fitted)."""
         free = self.scene.free_dofs
-        states, self.snapshots = static_states(self.scene, self.loads)
+        held = (self.scene.holding(np.concatenate(self.free_bodies)) if self.free_bodies
+                else self.scene)   # a free body's equilibrium is not unique
+        states, self.snapshots = static_states(held, self.loads)
         report = self.snapshots
         if report.inverted or report.failed:
             warnings.warn(
@@ -294,9 +314,11 @@ class ReducedModel:
         """Number of reduced coordinates."""
         return self.basis.shape[1]
 
-    def positions(self, q):
-        """Full positions x0 + U q, (n, 3) in m, of reduced coordinates q (r,)."""
-        return self.x0 + (self.basis @ q).reshape(-1, 3)
+    def positions(self, q, shift=None):
+        """Full positions x0 + U q, (n, 3) in m, of reduced coordinates q (r,), the parts that
+        hold the held vertices moved by shift (3,), m (step's carried)."""
+        x = self.x0 + (self.basis @ q).reshape(-1, 3)
+        return x if shift is None else x + self.carrying[:, None] * shift
 
     def basis_at(self, points):
         """The basis at rest points (p, 3), m, of the same body (the vertices of a coarser
@@ -333,40 +355,54 @@ class ReducedModel:
         load = self._load(force)
         return self._newton(controls, load, q, None, 0.0, rtol * _norm(load), rtol, max_iter)
 
-    def step(self, q, v, dt, force=None, rtol=1e-8, max_iter=50, controls=None):
+    def step(self, q, v, dt, force=None, rtol=1e-8, max_iter=50, controls=None, carried=None):
         """One backward-Euler step of dt s from the reduced state (q, v) under the scene's
         loads plus nodal forces `force` (n, 3), N, with the controls at the step's end set to
         `controls` (a mapping name -> value or one value per control; None: as the scene
-        wrote them): returns (q_next, v_next, NewtonReport)."""
+        wrote them): returns (q_next, v_next, NewtonReport). carried: the held vertices moved
+        by a translation, (its value (3,) m at the step before, at this step's start, at its
+        end): the parts that hold them go with it (positions(q, shift) at the end's), the
+        step in their moving frame with its inertia (a translation strains nothing)."""
         if not dt > 0:
             raise ValueError(f"dt: the time step must be > 0 s, got {dt}")
         q_hat = q + dt * v
         load = self._load(force)
+        shift = lag_shift = None
+        if carried is not None:
+            before, lag_shift, shift = (as_float_array(c, "carried", shape=(3,))
+                                        for c in carried)
+            load = load - self._carried_mass @ ((shift - 2.0 * lag_shift + before) / dt ** 2)
         q_next, report = self._newton(controls, load, q_hat.copy(), q_hat, 1.0 / dt ** 2,
                                       rtol * (_norm(load) + _norm(v) / dt), rtol, max_iter,
-                                      q_start=q)
+                                      q_start=q, shift=shift, lag_shift=lag_shift)
         return q_next, (q_next - q) / dt, report
 
     def _load(self, force):
         return self.external if force is None else self.external + self.project(force)
 
     def _newton(self, controls, load, q, q_hat, inertia, tolerance, rtol, max_iter,
-                q_start=None):
+                q_start=None, shift=None, lag_shift=None):
         """Minimize V(q) - load . q + inertia |q - q_hat|^2 / 2, V the energy under controls,
         from q (inertia 1/dt^2, or 0 for statics) to a gradient norm of tolerance + rtol
         |dV/dq(q)| (N: rtol times the problem's force size) or the round-off floor
         (anisofem.reduced.kernels.newton; with cables pulled or contact, extra_newton). A step
-        starts at q_start (its friction lagged there; q moved back toward it as far as the
-        obstacles ask)."""
+        starts at q_start (its friction lagged there, the carried vertices then moved by
+        lag_shift; q moved back toward it as far as the contact asks); shift: where the
+        carried vertices are (3,), m."""
         P, pulled = self.energy_at(controls)
         extras = [Pulled(part, T) for part, T in pulled]
         if self.contact is not None:
             if q_start is None:
-                extras.append(self.contact.touching())
+                extras += self.contact.touching(shift=shift)
             else:
-                touching = self.contact.touching(q_start, 1.0 / math.sqrt(inertia))
-                q = q_start + touching.limit(q_start, q - q_start) * (q - q_start)
-                extras.append(touching)
+                touching = self.contact.touching(q_start, 1.0 / math.sqrt(inertia), shift,
+                                                 lag_shift)
+                if shift is not None and np.any(shift != lag_shift) and min(
+                        t.carried_share(q_start, lag_shift) for t in touching) < 1.0:
+                    return q_start, NewtonReport(False, 0, math.inf, CARRIED_INTO_CONTACT)
+                share = min(t.limit(q_start, q - q_start) for t in touching)
+                q = q_start + share * (q - q_start)
+                extras += touching
         q_hat = q if q_hat is None else q_hat
         if extras:
             return extra_newton(P, extras, load, q, q_hat, inertia, tolerance, rtol, max_iter)
@@ -454,6 +490,11 @@ def extra_newton(P, extras, load, q, q_hat, inertia, tolerance, rtol, max_iter):
     return q, NewtonReport(status == kernels.CONVERGED, it, residual,
                            _MESSAGES[status].format(max_iter))
 
+
+#: A step's report where the carried vertices' prescribed move alone brings the body into
+#: contact (a move no solve can undo).
+CARRIED_INTO_CONTACT = ("the carried vertices' move drives the body into contact with "
+                        "itself or an obstacle")
 
 _MESSAGES = {kernels.CONVERGED: "converged", kernels.SPENT: "{} iterations spent",
              kernels.NO_DESCENT: "line search found no decrease",

@@ -131,6 +131,9 @@ def contact_arrays(model):
     if model.contact is None:
         return None, {}
     term, contact = model.contact.term, model.scene.contact
+    if contact.self_contact:
+        raise ValueError("model: the runtimes take contact with planes, spheres, boxes and "
+                         "capsules, not self-contact (the library's ReducedModel steps it)")
     rows, entries = [], []
     for o in term.obstacles:
         values = [np.asarray(getattr(o, key), dtype=float).ravel()
