@@ -15,6 +15,7 @@ import weakref
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 #: ipctk's stiffness per unit of the Contact's kappa, times dhat^2. Between two parallel faces
 #: at distance d its area-weighted pairs press with C kappa_i 2 d |B'(d^2)| per area, B(s) =
@@ -126,11 +127,19 @@ class SelfContact:
         return float(total), g
 
     def surface_derivatives(self, V):
-        """(energy J, gradient (3v,) N, Hessian (3v, 3v) scipy CSR N/m) at the collision
-        mesh's vertices V (v, 3), its pairs found once."""
+        """(energy J, gradient (3v,) N, the Hessian's parts (scipy sparse (3v, 3v), N/m: the
+        barrier's, and the friction's), summing to the Hessian) at the collision mesh's
+        vertices V (v, 3), its pairs found once."""
         pairs = self.collisions(V)
         energy, g = self.surface_energy(V, pairs)
-        return energy, g, self.surface_hessian(V, pairs=pairs).tocsr()
+        return energy, g, self._hessian_parts(V, pairs, self.ipctk.PSDProjectionMethod.NONE)
+
+    def _hessian_parts(self, V, pairs, how):
+        parts = [self.barrier.hessian(pairs, self.mesh, V, how)] if len(pairs) else []
+        if self.friction is not None:
+            tangential, potential, lag = self.friction
+            parts.append(potential.hessian(tangential, self.mesh, V - lag, how))
+        return parts
 
     def hessian(self, x, project=False):
         """(3n, 3n) scipy sparse, the barrier's and friction's Hessian at x (n, 3); project:
@@ -144,25 +153,20 @@ class SelfContact:
         how = (self.ipctk.PSDProjectionMethod.CLAMP if project
                else self.ipctk.PSDProjectionMethod.NONE)
         pairs = self.collisions(V) if pairs is None else pairs
-        H = sp.csc_matrix((V.size, V.size))
-        if len(pairs):
-            H = self.barrier.hessian(pairs, self.mesh, V, how)
-        if self.friction is not None:
-            tangential, potential, lag = self.friction
-            H = H + potential.hessian(tangential, self.mesh, V - lag, how)
-        return sp.csc_matrix(H)
+        return sp.csc_matrix(sum(self._hessian_parts(V, pairs, how),
+                                 sp.csc_matrix((V.size, V.size))))
 
-    def max_step(self, x, dx, whole=False):
+    def max_step(self, x, dx):
         """The largest share in (0, 1] of the move dx (n, 3) from x along which no two parts of
-        the surface come nearer than a tenth of their nearest distance now (whole: with
-        NearPairs, found for all of the move however far; else as far as they hold)."""
-        return self.surface_max_step(self.vertices(x), self.vertices(x + dx), whole)
+        the surface come nearer than a tenth of their nearest distance now (with NearPairs: as
+        far as the pairs found for it hold)."""
+        return self.surface_max_step(self.vertices(x), self.vertices(x + dx))
 
-    def surface_max_step(self, V0, V1, whole=False):
+    def surface_max_step(self, V0, V1):
         """max_step for the collision mesh's vertices moving from V0 to V1 (v, 3)."""
         if self.near is None:
             return free_share(self.mesh, V0, V1, self.dhat)
-        candidates, reach = self.near.along(self.mesh, V0, V1, whole)
+        candidates, reach = self.near.along(self.mesh, V0, V1)
         if reach < 1.0:
             V1 = V0 + reach * (V1 - V0)
         return reach * free_share(self.mesh, V0, V1, self.dhat, candidates)
@@ -209,50 +213,62 @@ def free_share(cm, V0, V1, reach, candidates=None):
 
 class NearPairs:
     """The pairs of a collision mesh that can come within dhat while its vertices stay near
-    where they were found: the point-triangle and edge-edge pairs within dhat + m at V_c (m at
-    least margin, m), which hold every pair that can come within dhat for as long as each
-    vertex's move since V_c, less their common translation, stays under m / 2 (then no
-    distance changed by more than m). Found again where a move leaves that. For a solve whose
+    where they were found: the point-triangle and edge-edge pairs within dhat + margin (m) at
+    V_c, which hold every pair that can come within dhat for as long as each vertex's move
+    since V_c, less their common translation, stays under margin / 2 (then no distance
+    changed by more than margin). Found again where a move leaves that. For a solve whose
     surface's shape changes little between its evaluations (a reduced model's): ipctk's broad
     phase keeps the surface's neighbouring features (thousands of pairs, as costly to test as
     the few that matter); these are the few."""
 
     def __init__(self, dhat, margin):
         self.dhat, self.margin = dhat, margin
-        self.at, self.found, self.held, self.builds = None, None, 0.0, 0
+        self.at, self.found, self.builds = None, None, 0
 
     def holds(self, V):
         """Whether the pairs found hold every pair that can come within dhat at V (v, 3)."""
-        return self.at is not None and _shape_change(V - self.at) <= 0.5 * self.held
+        return self.at is not None and _shape_change(V - self.at) <= 0.5 * self.margin
 
     def candidates(self, cm, V):
         """ipctk's Candidates holding every pair of cm that can come within dhat at V."""
         if not self.holds(V):
-            self._find(cm, V, self.margin)
+            self._find(cm, V)
         return self.found
 
-    def along(self, cm, V0, V1, whole=False):
+    def along(self, cm, V0, V1):
         """(ipctk's Candidates, share): the pairs that can come within dhat anywhere along the
         first `share` in (0, 1] of the straight move from V0 to V1 (v, 3). Found again at V0
-        where the move leaves them (whole: with a margin that holds all of it); share < 1
-        where the move changes the surface's shape by more than margin / 2 (each vertex's move
-        less the common one grows linearly along it)."""
+        where the move leaves them; share < 1 where the move changes the surface's shape by
+        more than margin / 2 (each vertex's move less the common one grows linearly along
+        it)."""
         if self.holds(V0) and self.holds(V1):
             return self.found, 1.0
+        self._find(cm, V0)
         far = _shape_change(V1 - V0)
-        self._find(cm, V0, max(self.margin, 2.0 * far) if whole else self.margin)
-        return self.found, 1.0 if far <= 0.5 * self.held else 0.5 * self.held / far
+        return self.found, 1.0 if far <= 0.5 * self.margin else 0.5 * self.margin / far
 
-    def _find(self, cm, V, margin):
-        self.found = near_candidates(cm, V, self.dhat + margin)
-        self.at, self.held, self.builds = V.copy(), margin, self.builds + 1
+    def _find(self, cm, V):
+        self.found = near_candidates(cm, V, self.dhat + self.margin)
+        self.at, self.builds = V.copy(), self.builds + 1
 
 
+@njit(cache=True)
 def _shape_change(move):
     """The largest of the vertices' moves (v, 3), m, less their common translation (the
     middle of their range)."""
-    d = move - 0.5 * (move.max(axis=0) + move.min(axis=0))
-    return math.sqrt(float(np.einsum("ij,ij->i", d, d).max()))
+    lo, hi = move[0].copy(), move[0].copy()
+    for i in range(move.shape[0]):
+        for k in range(3):
+            lo[k] = min(lo[k], move[i, k])
+            hi[k] = max(hi[k], move[i, k])
+    mid = 0.5 * (lo + hi)
+    far = 0.0
+    for i in range(move.shape[0]):
+        d = 0.0
+        for k in range(3):
+            d += (move[i, k] - mid[k]) ** 2
+        far = max(far, d)
+    return math.sqrt(far)
 
 
 def near_candidates(cm, V, reach):
@@ -262,7 +278,7 @@ def near_candidates(cm, V, reach):
     back every triangle-point and edge-edge pair whose closest features it can be."""
     ipctk = ipctk_module()
     wide = ipctk.Candidates()
-    wide.build(cm, np.asfortranarray(V), reach)
+    wide.build(cm, np.asfortranarray(V), 0.5 * reach)   # boxes apart by more: pairs too
     near = ipctk.NormalCollisions()
     near.build(wide, cm, np.asfortranarray(V), reach)
     faces_of, edges_of, edge_faces = _adjacency(cm)

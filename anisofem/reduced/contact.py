@@ -151,11 +151,12 @@ class Touching:
         return self.term.surface_max_step(self.contact.positions(q, self.shift),
                                           self.contact.U @ p)
 
-    def carried_share(self, q, before):
-        """The share in (0, 1] of the carried vertices' move from shift `before` (3,) to this
-        solve's, the body at q, that keeps every surface node clear (1: all of it)."""
-        start = self.contact.positions(q, before)
-        return self.term.surface_max_step(start, self.contact.positions(q, self.shift) - start)
+    def moved_share(self, q_from, before, q_to):
+        """The share in (0, 1] of the straight move from q_from, the carried vertices at shift
+        `before` (3,), to q_to at this solve's shift that keeps every surface node clear of
+        the obstacles."""
+        start = self.contact.positions(q_from, before)
+        return self.term.surface_max_step(start, self.contact.positions(q_to, self.shift) - start)
 
 
 class TouchingPairs(Touching):
@@ -170,12 +171,14 @@ class TouchingPairs(Touching):
         """(dE/dq (r,) N, d2E/dq2 (r, r) N/m, the gradient's round-off floor N) at q: the
         pairs' Hessian projected on the basis rows of the nodes they join."""
         V = self.contact.surface(q, self.shift)
-        energy, g, H = self.term.surface_derivatives(V)
+        energy, g, parts = self.term.surface_derivatives(V)
         B = self.contact.surface_basis
         slope = B.T @ g
         self._at = (q.copy(), energy, slope)
-        rows = np.flatnonzero(np.diff(H.indptr))
-        H = B[rows].T @ (H @ B)[rows]
+        H = np.zeros((B.shape[1], B.shape[1]))
+        for part in parts:   # sum over the entries (CSC): B[row]^T h B[col]
+            col = np.repeat(np.arange(part.shape[1]), np.diff(part.indptr))
+            H += B[part.indices].T @ (part.data[:, None] * B[col])
         floor = (ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(V).max())
                  * math.sqrt(float((H * H).sum())))
         return slope, H, floor
@@ -187,9 +190,7 @@ class TouchingPairs(Touching):
         return self.term.surface_max_step(V, V + (self.contact.surface_basis @ p).reshape(
             V.shape))
 
-    def carried_share(self, q, before):
-        """The share in (0, 1] of the carried vertices' move from shift `before` (3,) to this
-        solve's, the body at q, along which no two parts of the surface come nearer than a
-        tenth of their nearest distance (1: all of it)."""
-        return self.term.surface_max_step(self.contact.surface(q, before),
-                                          self.contact.surface(q, self.shift), whole=True)
+    def moved_share(self, q_from, before, q_to):
+        """1: the carried move is taken with the whole mesh translated (ReducedModel._newton),
+        which changes no distance between its parts."""
+        return 1.0

@@ -198,8 +198,11 @@ class ReducedModel:
         self.external = self.project(scene.external_force)
         self.contact = (ReducedContact(scene, self.x0, self.basis, self.carrying)
                         if scene.contact is not None else None)
+        translation = np.tile(np.eye(3), (n, 1))          # (3n, 3) every vertex by 1 m
         self._carried_mass = self.basis.T @ (
-            np.repeat(scene.masses * self.carrying, 3)[:, None] * np.tile(np.eye(3), (n, 1)))
+            np.repeat(scene.masses * self.carrying, 3)[:, None] * translation)
+        self._free_translation = self.basis.T @ (   # the free bodies' translation's q
+            np.repeat(scene.masses * ~self.carrying, 3)[:, None] * translation)
         self.build_seconds = time.perf_counter() - t0 + credit
         if validate:
             say("its validation against the full FEM")
@@ -397,11 +400,15 @@ class ReducedModel:
             else:
                 touching = self.contact.touching(q_start, 1.0 / math.sqrt(inertia), shift,
                                                  lag_shift)
-                if shift is not None and np.any(shift != lag_shift) and min(
-                        t.carried_share(q_start, lag_shift) for t in touching) < 1.0:
-                    return q_start, NewtonReport(False, 0, math.inf, CARRIED_INTO_CONTACT)
-                share = min(t.limit(q_start, q - q_start) for t in touching)
-                q = q_start + share * (q - q_start)
+                start = q_start
+                if shift is not None and np.any(shift != lag_shift):
+                    # the whole mesh translated with the carried move (the free bodies too):
+                    # no distance between its parts changes, only the obstacles are tested
+                    start = q_start + self._free_translation @ (shift - lag_shift)
+                    if min(t.moved_share(q_start, lag_shift, start) for t in touching) < 1.0:
+                        return q_start, NewtonReport(False, 0, math.inf, CARRIED_INTO_CONTACT)
+                share = min(t.limit(start, q - start) for t in touching)
+                q = start + share * (q - start)
                 extras += touching
         q_hat = q if q_hat is None else q_hat
         if extras:
@@ -491,10 +498,9 @@ def extra_newton(P, extras, load, q, q_hat, inertia, tolerance, rtol, max_iter):
                            _MESSAGES[status].format(max_iter))
 
 
-#: A step's report where the carried vertices' prescribed move alone brings the body into
-#: contact (a move no solve can undo).
-CARRIED_INTO_CONTACT = ("the carried vertices' move drives the body into contact with "
-                        "itself or an obstacle")
+#: A step's report where the carried move (the whole mesh translated) alone brings the body
+#: into an obstacle (a move no solve can undo).
+CARRIED_INTO_CONTACT = "the carried move drives the body into an obstacle"
 
 _MESSAGES = {kernels.CONVERGED: "converged", kernels.SPENT: "{} iterations spent",
              kernels.NO_DESCENT: "line search found no decrease",
