@@ -504,7 +504,8 @@ def test_the_reduced_contact_is_the_fems_at_its_positions(sagging):
     fem = ContactTerm(scene, model.positions(q_lag), 0.01)
     assert touching.energy(q) == pytest.approx(fem.energy(x), rel=1e-12)
     assert fem.friction, "the tip touches the ground: friction is lagged there"
-    g, H, _ = touching.derivatives(q)
+    g = touching.gradient(q)
+    H, _ = touching.hessian(q)
     for _ in range(3):
         p = rng.normal(size=model.r)
         p /= np.linalg.norm(p)
@@ -513,7 +514,7 @@ def test_the_reduced_contact_is_the_fems_at_its_positions(sagging):
                     ) / (12 * h)
         slope = richardson(touching.energy)
         assert slope == pytest.approx(float(g @ p), rel=1e-6, abs=1e-9 * np.abs(g).sum())
-        change = richardson(lambda at: touching.derivatives(at)[0])
+        change = richardson(touching.gradient)
         assert np.abs(change - H @ p).max() <= 1e-6 * np.abs(H @ p).max()
 
 
@@ -859,11 +860,11 @@ def gripping():
 def test_near_pairs_are_ipctks_pairs(gripping):
     """The few pairs NearPairs keeps give the barrier's energy, gradient and Hessian and the
     collision-free share of ipctk's search over the whole surface, exactly."""
-    from anisofem.physics.self_contact import NearPairs, SelfContact
+    from anisofem.physics.self_contact import NearPairs, SelfContact, collision_mesh
     model, q, _ = gripping
     term = model.contact.term
     x = model.positions(q)
-    near = NearPairs(term.dhat, 4 * term.dhat)
+    near = NearPairs(collision_mesh(model.scene.mesh)[0], term.dhat, 4 * term.dhat)
     whole, few = (SelfContact(model.scene.mesh, term.dhat, term.kappa, near=n)
                   for n in (None, near))
     assert 0 < whole.nearest(x) < term.dhat, "the fingers press on the box"
@@ -915,12 +916,13 @@ def test_reduced_self_contact_derivatives_match_central_differences(gripping):
     q_lag = q - 1e-6 * rng.normal(size=model.r)
     *_, pairs = model.contact.touching(q_lag, 0.01)
     assert pairs.term.friction is not None, "the fingers touch the box: friction is lagged"
-    g, H, _ = pairs.derivatives(q)
+    g = pairs.gradient(q)
+    H, _ = pairs.hessian(q)
     for _ in range(3):
         p = rng.normal(size=model.r)
         p *= 1e-3 / np.abs(model.basis @ p).max()     # a direction moving nodes up to 1 mm
         h = 1e-5
         slope = (pairs.energy(q + h * p) - pairs.energy(q - h * p)) / (2 * h)
         assert slope == pytest.approx(float(g @ p), rel=1e-5)
-        change = (pairs.derivatives(q + h * p)[0] - pairs.derivatives(q - h * p)[0]) / (2 * h)
+        change = (pairs.gradient(q + h * p) - pairs.gradient(q - h * p)) / (2 * h)
         assert np.abs(change - H @ p).max() <= 1e-4 * np.abs(H @ p).max()

@@ -239,11 +239,12 @@ class ContactTerm:
 
     def surface_max_step(self, xs, ds):
         """max_step's obstacle part for surface nodes at xs (k, 3) moving by ds (k, 3)."""
-        moving = np.einsum("ij,ij->i", ds, ds) > 0
+        move = np.sqrt(np.einsum("ij,ij->i", ds, ds))
         share = 1.0
         for o in self.obstacles:
-            d, _ = o.distance(xs[moving])
-            share = min(share, float(o.first_touch(xs[moving], ds[moving], KEEP * d).min(
+            d, _ = o.distance(xs)
+            near = move > (1.0 - KEEP) * d   # the others cannot come within KEEP d
+            share = min(share, float(o.first_touch(xs[near], ds[near], KEEP * d[near]).min(
                 initial=1.0)))
         return share
 

@@ -97,7 +97,7 @@ class SelfContact:
         pairs = self.ipctk.NormalCollisions()
         pairs.use_area_weighting = True
         if self.near is not None:
-            pairs.build(self.near.candidates(self.mesh, V), self.mesh, V, self.dhat)
+            pairs.build(self.near.candidates(V), self.mesh, V, self.dhat)
         else:
             pairs.build(self.mesh, V, self.dhat)
         return pairs
@@ -126,15 +126,11 @@ class SelfContact:
             g = g + potential.gradient(tangential, self.mesh, V - lag)
         return float(total), g
 
-    def surface_derivatives(self, V):
-        """(energy J, gradient (3v,) N, the Hessian's parts (scipy sparse (3v, 3v), N/m: the
-        barrier's, and the friction's), summing to the Hessian) at the collision mesh's
-        vertices V (v, 3), its pairs found once."""
-        pairs = self.collisions(V)
-        energy, g = self.surface_energy(V, pairs)
-        return energy, g, self._hessian_parts(V, pairs, self.ipctk.PSDProjectionMethod.NONE)
-
-    def _hessian_parts(self, V, pairs, how):
+    def hessian_parts(self, V, pairs, how=None):
+        """The Hessian's parts at the collision mesh's vertices V (v, 3), pairs their
+        collisions there: [the barrier's, the friction's] (scipy CSC (3v, 3v), N/m; how:
+        ipctk's PSD projection, default none)."""
+        how = self.ipctk.PSDProjectionMethod.NONE if how is None else how
         parts = [self.barrier.hessian(pairs, self.mesh, V, how)] if len(pairs) else []
         if self.friction is not None:
             tangential, potential, lag = self.friction
@@ -153,7 +149,7 @@ class SelfContact:
         how = (self.ipctk.PSDProjectionMethod.CLAMP if project
                else self.ipctk.PSDProjectionMethod.NONE)
         pairs = self.collisions(V) if pairs is None else pairs
-        return sp.csc_matrix(sum(self._hessian_parts(V, pairs, how),
+        return sp.csc_matrix(sum(self.hessian_parts(V, pairs, how),
                                  sp.csc_matrix((V.size, V.size))))
 
     def max_step(self, x, dx):
@@ -166,10 +162,11 @@ class SelfContact:
         """max_step for the collision mesh's vertices moving from V0 to V1 (v, 3)."""
         if self.near is None:
             return free_share(self.mesh, V0, V1, self.dhat)
-        candidates, reach = self.near.along(self.mesh, V0, V1)
+        candidates, reach = self.near.along(V0, V1)
         if reach < 1.0:
             V1 = V0 + reach * (V1 - V0)
-        return reach * free_share(self.mesh, V0, V1, self.dhat, candidates)
+        return reach * free_share(self.mesh, V0, V1, self.dhat, candidates,
+                                  self.near.dhat + self.near.margin)
 
     def clear(self, x):
         """Whether the body's surface at x (n, 3) nowhere touches or crosses itself or the
@@ -187,22 +184,25 @@ class SelfContact:
                 else np.inf)
 
 
-def free_share(cm, V0, V1, reach, candidates=None):
+def free_share(cm, V0, V1, reach, candidates=None, apart=None):
     """The largest share in (0, 1] of the move of the collision mesh cm's vertices from V0 to
     V1 along which no two parts within `reach` m of each other at V0 come nearer than a tenth
     of their nearest distance there (ipctk's additive CCD, Li et al. 2021: its tight-inclusion
     default took 11 s for one step of the beam over a surface block, whose faces are much
     larger than the beam's). candidates: ipctk's Candidates holding every pair that can meet
-    along the move (NearPairs), or None to find them."""
+    along the move (NearPairs), the others at least `apart` m apart at V0 (>= reach), or None
+    to find them. A move that changes no distance by more than 0.9 of the nearest (twice the
+    largest vertex move less the common one) is free without a CCD."""
     ipctk = ipctk_module()
     pairs = ipctk.NormalCollisions()
     if candidates is None:
         pairs.build(cm, V0, reach)
     else:
-        pairs.build(candidates, cm, V0, reach)
-    floor = 0.0
-    if len(pairs):   # ipctk's distances are squared
-        floor = 0.1 * float(np.sqrt(pairs.compute_minimum_distance(cm, V0)))
+        pairs.build(candidates, cm, V0, apart)
+    nearest = float(np.sqrt(pairs.compute_minimum_distance(cm, V0))) if len(pairs) else np.inf
+    if candidates is not None and 2.0 * _shape_change(V1 - V0) <= 0.9 * min(nearest, apart):
+        return 1.0
+    floor = 0.1 * nearest if nearest < reach else 0.0   # ipctk's distances are squared
     ccd = ipctk.AdditiveCCD()
     if candidates is None:
         return float(ipctk.compute_collision_free_stepsize(cm, V0, V1, min_distance=floor,
@@ -212,30 +212,31 @@ def free_share(cm, V0, V1, reach, candidates=None):
 
 
 class NearPairs:
-    """The pairs of a collision mesh that can come within dhat while its vertices stay near
-    where they were found: the point-triangle and edge-edge pairs within dhat + margin (m) at
-    V_c, which hold every pair that can come within dhat for as long as each vertex's move
-    since V_c, less their common translation, stays under margin / 2 (then no distance
+    """The pairs of the collision mesh cm that can come within dhat while its vertices stay
+    near where they were found: the point-triangle and edge-edge pairs within dhat + margin
+    (m) at V_c, which hold every pair that can come within dhat for as long as each vertex's
+    move since V_c, less their common translation, stays under margin / 2 (then no distance
     changed by more than margin). Found again where a move leaves that. For a solve whose
     surface's shape changes little between its evaluations (a reduced model's): ipctk's broad
     phase keeps the surface's neighbouring features (thousands of pairs, as costly to test as
     the few that matter); these are the few."""
 
-    def __init__(self, dhat, margin):
-        self.dhat, self.margin = dhat, margin
+    def __init__(self, cm, dhat, margin):
+        self.cm, self.dhat, self.margin = cm, dhat, margin
+        self.adjacency = _adjacency(cm)
         self.at, self.found, self.builds = None, None, 0
 
     def holds(self, V):
         """Whether the pairs found hold every pair that can come within dhat at V (v, 3)."""
         return self.at is not None and _shape_change(V - self.at) <= 0.5 * self.margin
 
-    def candidates(self, cm, V):
-        """ipctk's Candidates holding every pair of cm that can come within dhat at V."""
+    def candidates(self, V):
+        """ipctk's Candidates holding every pair that can come within dhat at V."""
         if not self.holds(V):
-            self._find(cm, V)
+            self._find(V)
         return self.found
 
-    def along(self, cm, V0, V1):
+    def along(self, V0, V1):
         """(ipctk's Candidates, share): the pairs that can come within dhat anywhere along the
         first `share` in (0, 1] of the straight move from V0 to V1 (v, 3). Found again at V0
         where the move leaves them; share < 1 where the move changes the surface's shape by
@@ -243,12 +244,12 @@ class NearPairs:
         it)."""
         if self.holds(V0) and self.holds(V1):
             return self.found, 1.0
-        self._find(cm, V0)
+        self._find(V0)
         far = _shape_change(V1 - V0)
         return self.found, 1.0 if far <= 0.5 * self.margin else 0.5 * self.margin / far
 
-    def _find(self, cm, V):
-        self.found = near_candidates(cm, V, self.dhat + self.margin)
+    def _find(self, V):
+        self.found = near_candidates(self.cm, V, self.dhat + self.margin, self.adjacency)
         self.at, self.builds = V.copy(), self.builds + 1
 
 
@@ -271,7 +272,7 @@ def _shape_change(move):
     return math.sqrt(far)
 
 
-def near_candidates(cm, V, reach):
+def near_candidates(cm, V, reach, adjacency):
     """ipctk's Candidates of the point-triangle and edge-edge pairs of cm (not sharing a
     vertex) within `reach` m at V: ipctk's broad and narrow phases find the pairs of closest
     features within reach (vertex-vertex, edge-vertex, edge-edge, face-vertex), and each gives
@@ -281,7 +282,7 @@ def near_candidates(cm, V, reach):
     wide.build(cm, np.asfortranarray(V), 0.5 * reach)   # boxes apart by more: pairs too
     near = ipctk.NormalCollisions()
     near.build(wide, cm, np.asfortranarray(V), reach)
-    faces_of, edges_of, edge_faces = _adjacency(cm)
+    faces_of, edges_of, edge_faces = adjacency
     fv, ee = set(), set()
     for c in near.fv_collisions:
         fv.add((c.face_id, c.vertex_id))
@@ -304,26 +305,22 @@ def near_candidates(cm, V, reach):
     return found
 
 
-#: Each collision mesh's (faces of each vertex, edges of each vertex, faces of each edge).
-_ADJACENCY = weakref.WeakKeyDictionary()
-
-
 def _adjacency(cm):
-    if cm not in _ADJACENCY:
-        faces_of = [[] for _ in range(cm.num_vertices)]
-        edges_of = [[] for _ in range(cm.num_vertices)]
-        edge_faces = [[] for _ in range(cm.num_edges)]
-        for f, (a, b, c) in enumerate(cm.faces):
-            for v in (a, b, c):
-                faces_of[v].append(f)
-        for e, (a, b) in enumerate(cm.edges):
-            edges_of[a].append(e)
-            edges_of[b].append(e)
-        for f, row in enumerate(cm.faces_to_edges):
-            for e in row:
-                edge_faces[e].append(f)
-        _ADJACENCY[cm] = (faces_of, edges_of, edge_faces)
-    return _ADJACENCY[cm]
+    """(the faces of each vertex, the edges of each vertex, the faces of each edge) of the
+    collision mesh cm, lists of lists."""
+    faces_of = [[] for _ in range(cm.num_vertices)]
+    edges_of = [[] for _ in range(cm.num_vertices)]
+    edge_faces = [[] for _ in range(cm.num_edges)]
+    for f, (a, b, c) in enumerate(cm.faces):
+        for v in (a, b, c):
+            faces_of[v].append(f)
+    for e, (a, b) in enumerate(cm.edges):
+        edges_of[a].append(e)
+        edges_of[b].append(e)
+    for f, row in enumerate(cm.faces_to_edges):
+        for e in row:
+            edge_faces[e].append(f)
+    return faces_of, edges_of, edge_faces
 
 
 def surface_share(mesh, surface, x, delta):

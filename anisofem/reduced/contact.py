@@ -55,9 +55,10 @@ class ReducedContact:
         self.x0 = x0[nodes]
         self.rest, self.carrying, self.mesh, self.near = x0, carrying, scene.mesh, None
         if scene.contact.self_contact:
-            self.near = NearPairs(self.term.dhat, MARGIN_SHARE * self.term.dhat)
+            cm = collision_mesh(scene.mesh)[0]
+            self.near = NearPairs(cm, self.term.dhat, MARGIN_SHARE * self.term.dhat)
             ids = np.repeat(np.arange(len(x0), dtype=float)[:, None], 3, axis=1)
-            full = collision_mesh(scene.mesh)[0].vertices(np.asfortranarray(ids))[:, 0]
+            full = cm.vertices(np.asfortranarray(ids))[:, 0]
             full = np.rint(full).astype(int)
             self.surface_rest, self.surface_carried = x0[full], carrying[full]
             self.surface_basis = np.ascontiguousarray(self.basis[full].reshape(-1, r))
@@ -101,7 +102,7 @@ class ReducedContact:
 
 class Touching:
     """The contact's part of one reduced solve, in the interface of ReducedModel's extra
-    terms: derivatives, change, limit."""
+    terms: gradient, hessian, change, limit."""
 
     def __init__(self, contact, term, shift=None):
         self.contact, self.term, self.shift = contact, term, shift
@@ -112,24 +113,28 @@ class Touching:
         obstacle)."""
         return self.term.surface_energy(self.contact.positions(q, self.shift))[0]
 
-    def derivatives(self, q):
-        """(dE/dq (r,) N, d2E/dq2 (r, r) N/m, the gradient's round-off floor N) at q: each
-        node's exact Hessian block projected on its basis rows (the step clamps the whole
-        Hessian's negative eigenvalues; clamping each block's, a curved obstacle's tangential
-        curvature, left Newton crawling: 61 iterations for a step of the page's tentacle);
-        the floor ROUNDOFF_FACTOR eps R |H| (R the largest coordinate), which float64 cannot
-        resolve in a barrier's force."""
+    def gradient(self, q):
+        """dE/dq (r,), N, at q (kept for hessian and change at the same q)."""
         x = self.contact.positions(q, self.shift)
         energy, g = self.term.surface_energy(x)
-        slope = np.einsum("kir,ki->r", self.contact.U, g)
+        slope = self.contact.U2.T @ g.ravel()
         self._at = (q.copy(), energy, slope)
+        self._x = x
+        return slope
+
+    def hessian(self, q):
+        """(d2E/dq2 (r, r) N/m, the gradient's round-off floor N) at q, the q of the last
+        gradient: each node's exact Hessian block projected on its basis rows (the step clamps
+        the whole Hessian's negative eigenvalues; clamping each block's, a curved obstacle's
+        tangential curvature, left Newton crawling: 61 iterations for a step of the page's
+        tentacle); the floor ROUNDOFF_FACTOR eps R |H| (R the largest coordinate), which
+        float64 cannot resolve in a barrier's force."""
+        x = self._x
         live = np.flatnonzero(self.term.in_reach(x))
         U = self.contact.U[live]
         H = np.einsum("kir,kij,kjs->rs", U, self.term.surface_hessians(x[live], live),
                       U)
-        floor = (ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(x).max())
-                 * math.sqrt(float((H * H).sum())))
-        return slope, H, floor
+        return H, _floor(x, H)
 
     def change(self, q, step):
         """E(q + step) - E(q), J; its first-order part g . step where the two differ by less
@@ -167,21 +172,26 @@ class TouchingPairs(Touching):
         """The pairs' barrier and friction at q, J (inf where the surface meets itself)."""
         return self.term.surface_energy(self.contact.surface(q, self.shift))[0]
 
-    def derivatives(self, q):
-        """(dE/dq (r,) N, d2E/dq2 (r, r) N/m, the gradient's round-off floor N) at q: the
-        pairs' Hessian projected on the basis rows of the nodes they join."""
+    def gradient(self, q):
+        """dE/dq (r,), N, at q (its pairs kept for hessian at the same q)."""
         V = self.contact.surface(q, self.shift)
-        energy, g, parts = self.term.surface_derivatives(V)
-        B = self.contact.surface_basis
-        slope = B.T @ g
+        pairs = self.term.collisions(V)
+        energy, g = self.term.surface_energy(V, pairs)
+        slope = self.contact.surface_basis.T @ g
         self._at = (q.copy(), energy, slope)
+        self._x = (V, pairs)
+        return slope
+
+    def hessian(self, q):
+        """(d2E/dq2 (r, r) N/m, the gradient's round-off floor N) at q, the q of the last
+        gradient: the pairs' Hessian projected on the basis rows of the nodes they join."""
+        V, pairs = self._x
+        B = self.contact.surface_basis
         H = np.zeros((B.shape[1], B.shape[1]))
-        for part in parts:   # sum over the entries (CSC): B[row]^T h B[col]
+        for part in self.term.hessian_parts(V, pairs):   # over its entries (CSC)
             col = np.repeat(np.arange(part.shape[1]), np.diff(part.indptr))
             H += B[part.indices].T @ (part.data[:, None] * B[col])
-        floor = (ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(V).max())
-                 * math.sqrt(float((H * H).sum())))
-        return slope, H, floor
+        return H, _floor(V, H)
 
     def limit(self, q, p):
         """The largest share in (0, 1] of the step p (r,) from q along which no two parts of
@@ -194,3 +204,10 @@ class TouchingPairs(Touching):
         """1: the carried move is taken with the whole mesh translated (ReducedModel._newton),
         which changes no distance between its parts."""
         return 1.0
+
+
+def _floor(x, H):
+    """The round-off floor of a contact gradient, N: ROUNDOFF_FACTOR eps R |H|, R the largest
+    coordinate of the positions x (m), |H| the Frobenius norm of its reduced Hessian."""
+    return (ROUNDOFF_FACTOR * np.finfo(float).eps * float(np.abs(x).max())
+            * math.sqrt(float((H * H).sum())))

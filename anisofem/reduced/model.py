@@ -42,6 +42,10 @@ from .controls import (control_parts, control_responses, control_values, control
 #: derivatives, less dependent directions (6 modes: r = 27).
 MODES = 6
 
+#: Newton iterations a reduced solve may take by default; with contact more (near a contact
+#: starting, clipped steps and friction's stick-slip can take tens).
+MAX_ITER, CONTACT_MAX_ITER = 50, 500
+
 #: A free body's (a part of the mesh with no held vertex) lowest vibration modes in the basis,
 #: beside its six rigid motions (translations exact; turns to first order).
 FREE_BODY_MODES = 3
@@ -351,18 +355,22 @@ class ReducedModel:
                 H = H + T * part.hessian(q)
         return (g, H) if hessian else g
 
-    def solve(self, force=None, q0=None, rtol=1e-8, max_iter=50, controls=None):
+    def solve(self, force=None, q0=None, rtol=1e-8, max_iter=None, controls=None):
         """The static equilibrium under the scene's loads plus nodal forces `force` (n, 3), N,
-        with controls (see control_values), from q0 (default 0): returns (q, NewtonReport)."""
+        with controls (see control_values), from q0 (default 0), in at most max_iter Newton
+        iterations (default MAX_ITER, CONTACT_MAX_ITER with contact): returns (q,
+        NewtonReport)."""
         q = np.zeros(self.r) if q0 is None else as_float_array(q0, "q0", shape=(self.r,))
         load = self._load(force)
         return self._newton(controls, load, q, None, 0.0, rtol * _norm(load), rtol, max_iter)
 
-    def step(self, q, v, dt, force=None, rtol=1e-8, max_iter=50, controls=None, carried=None):
+    def step(self, q, v, dt, force=None, rtol=1e-8, max_iter=None, controls=None,
+             carried=None):
         """One backward-Euler step of dt s from the reduced state (q, v) under the scene's
         loads plus nodal forces `force` (n, 3), N, with the controls at the step's end set to
         `controls` (a mapping name -> value or one value per control; None: as the scene
-        wrote them): returns (q_next, v_next, NewtonReport). carried: the held vertices moved
+        wrote them), in at most max_iter Newton iterations (as solve): returns (q_next, v_next,
+        NewtonReport). carried: the held vertices moved
         by a translation, (its value (3,) m at the step before, at this step's start, at its
         end): the parts that hold them go with it (positions(q, shift) at the end's), the
         step in their moving frame with its inertia (a translation strains nothing)."""
@@ -392,6 +400,8 @@ class ReducedModel:
         starts at q_start (its friction lagged there, the carried vertices then moved by
         lag_shift; q moved back toward it as far as the contact asks); shift: where the
         carried vertices are (3,), m."""
+        if max_iter is None:
+            max_iter = MAX_ITER if self.contact is None else CONTACT_MAX_ITER
         P, pulled = self.energy_at(controls)
         extras = [Pulled(part, T) for part, T in pulled]
         if self.contact is not None:
@@ -426,9 +436,13 @@ class Pulled:
     def __init__(self, part, tension):
         self.part, self.tension = part, tension
 
-    def derivatives(self, q):
-        """(T dL/dq (r,), T d2L/dq2 (r, r), 0: no round-off floor of its own)."""
-        return self.tension * self.part.slope(q), self.tension * self.part.hessian(q), 0.0
+    def gradient(self, q):
+        """T dL/dq (r,), N."""
+        return self.tension * self.part.slope(q)
+
+    def hessian(self, q):
+        """(T d2L/dq2 (r, r) N/m, 0: no round-off floor of its own)."""
+        return self.tension * self.part.hessian(q), 0.0
 
     def change(self, q, step):
         """T (L(q + step) - L(q)), free of the difference's cancellation."""
@@ -440,7 +454,7 @@ class Pulled:
 
 def extra_newton(P, extras, load, q, q_hat, inertia, tolerance, rtol, max_iter):
     """ReducedModel._newton with terms beside the polynomial (pulled cables, Pulled; contact,
-    anisofem.reduced.contact.Touching: each with derivatives, change and limit):
+    anisofem.reduced.contact.Touching: each with gradient, hessian, change and limit):
     Newton with the Hessian's negative eigenvalues clamped and a backtracking Armijo search
     on the energy along the step, its polynomial part the exact quartic in the step length
     (as kernels.newton) and each term's change, from the share of the step the terms allow
@@ -452,13 +466,7 @@ def extra_newton(P, extras, load, q, q_hat, inertia, tolerance, rtol, max_iter):
     residual, status = math.inf, kernels.SPENT
     for it in range(max_iter + 1):
         g, H = kernels.derivatives(P.c1, P.C2, S3, A, q, inertia)
-        extra_g, extra_H = np.zeros(r), np.zeros((r, r))
-        floor = 0.0
-        for term in extras:
-            term_g, term_H, term_floor = term.derivatives(q)
-            extra_g += term_g
-            extra_H += term_H
-            floor = max(floor, term_floor)
+        extra_g = sum((term.gradient(q) for term in extras), np.zeros(r))
         if it == 0:
             tolerance += rtol * _norm(g + extra_g)
         g = g + extra_g - load + inertia * (q - q_hat)
@@ -466,6 +474,14 @@ def extra_newton(P, extras, load, q, q_hat, inertia, tolerance, rtol, max_iter):
         if not math.isfinite(residual):
             status = kernels.NOT_FINITE
             break
+        if residual <= tolerance:   # the terms' Hessians only where the step needs them
+            status = kernels.CONVERGED
+            break
+        extra_H, floor = np.zeros((r, r)), 0.0
+        for term in extras:
+            term_H, term_floor = term.hessian(q)
+            extra_H += term_H
+            floor = max(floor, term_floor)
         terms = np.abs(H + extra_H) @ np.abs(q) + np.abs(load) + np.abs(P.c1)
         floor = max(floor, ROUNDOFF_FACTOR * eps * r * _norm(terms))
         if residual <= max(tolerance, floor):
