@@ -27,7 +27,8 @@ MODES, SNAPSHOTS = 4, 6
 
 def reduced_grasp(seconds=2.0):
     """The gripper's reduced model (built from the scene at rest, its grip declared over the
-    curve's range) stepped for `seconds` s like gripper.grasp. Returns (the model, positions
+    curve's range) stepped for `seconds` s like gripper.grasp, its controls and lift read from
+    the scene's curves before the steps (a controller's inputs). Returns (the model, positions
     (k, n, 3) m after each step, every step's NewtonReport, build seconds, stepping
     seconds)."""
     read = SceneFile(SCENE)
@@ -39,17 +40,19 @@ def reduced_grasp(seconds=2.0):
                          loads=Loads(controls={"grip": (0.0, top)}))
     built = time.perf_counter() - t0
     held = scene.fixed_mask.all(axis=1)
-    shifts = [np.zeros(3), np.zeros(3)]
+    steps = int(round(seconds / DT))
+    controls, shifts = [], [np.zeros(3), np.zeros(3)]   # the scene's curves, step by step
+    for k in range(1, steps + 1):
+        now = scene.at(k * DT)
+        controls.append(now.control_values)
+        shifts.append((now.fixed_positions[held] - rest.fixed_positions[held]).mean(axis=0))
     q, v = np.zeros(model.r), np.zeros(model.r)
     xs, reports = [], []
     t0 = time.perf_counter()
-    for k in range(1, int(round(seconds / DT)) + 1):
-        now = scene.at(k * DT)
-        shifts.append((now.fixed_positions[held] - rest.fixed_positions[held]).mean(axis=0))
-        q, v, report = model.step(q, v, DT, controls=now.control_values,
-                                  carried=shifts[-3:])
+    for k in range(steps):
+        q, v, report = model.step(q, v, DT, controls=controls[k], carried=shifts[k:k + 3])
         reports.append(report)
-        xs.append(model.positions(q, shifts[-1]))
+        xs.append(model.positions(q, shifts[k + 2]))
         if not report.converged:
             break
     return model, np.array(xs), reports, built, time.perf_counter() - t0

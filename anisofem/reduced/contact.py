@@ -108,14 +108,23 @@ class Touching:
         self.contact, self.term, self.shift = contact, term, shift
         self._at = (None, 0.0, None)     # (q, energy, slope) of the last derivatives
 
+    def where(self, q):
+        """(k, 3) the surface nodes at coordinates q, m."""
+        return self.contact.positions(q, self.shift)
+
+    def placed(self, q):
+        """where(q), from the last gradient's when q is its q."""
+        at = self._at[0]
+        return self._x if at is not None and np.array_equal(at, q) else self.where(q)
+
     def energy(self, q):
         """The barrier's and friction's energy at q, J (inf where a node reached an
         obstacle)."""
-        return self.term.surface_energy(self.contact.positions(q, self.shift))[0]
+        return self.term.surface_energy(self.where(q))[0]
 
     def gradient(self, q):
         """dE/dq (r,), N, at q (kept for hessian and change at the same q)."""
-        x = self.contact.positions(q, self.shift)
+        x = self.where(q)
         energy, g = self.term.surface_energy(x)
         slope = self.contact.U2.T @ g.ravel()
         self._at = (q.copy(), energy, slope)
@@ -153,8 +162,7 @@ class Touching:
     def limit(self, q, p):
         """The largest share in (0, 1] of the step p (r,) from q that keeps every surface
         node clear of the obstacles (anisofem.physics.obstacles.first_touch)."""
-        return self.term.surface_max_step(self.contact.positions(q, self.shift),
-                                          self.contact.U @ p)
+        return self.term.surface_max_step(self.placed(q), self.contact.U @ p)
 
     def moved_share(self, q_from, before, q_to):
         """The share in (0, 1] of the straight move from q_from, the carried vertices at shift
@@ -168,13 +176,22 @@ class TouchingPairs(Touching):
     """Self-contact's part of one reduced solve: term a SelfContact (ipctk's pairs, with the
     solve's lagged friction) over the collision mesh's vertices at x0_c + U_c q."""
 
+    def where(self, q):
+        """(v, 3) the collision mesh's vertices at coordinates q, m."""
+        return self.contact.surface(q, self.shift)
+
+    def placed(self, q):
+        """where(q), from the last gradient's when q is its q."""
+        at = self._at[0]
+        return self._x[0] if at is not None and np.array_equal(at, q) else self.where(q)
+
     def energy(self, q):
         """The pairs' barrier and friction at q, J (inf where the surface meets itself)."""
-        return self.term.surface_energy(self.contact.surface(q, self.shift))[0]
+        return self.term.surface_energy(self.where(q))[0]
 
     def gradient(self, q):
         """dE/dq (r,), N, at q (its pairs kept for hessian at the same q)."""
-        V = self.contact.surface(q, self.shift)
+        V = self.where(q)
         pairs = self.term.collisions(V)
         energy, g = self.term.surface_energy(V, pairs)
         slope = self.contact.surface_basis.T @ g
@@ -196,7 +213,7 @@ class TouchingPairs(Touching):
     def limit(self, q, p):
         """The largest share in (0, 1] of the step p (r,) from q along which no two parts of
         the surface come nearer than a tenth of their nearest distance now (ipctk)."""
-        V = self.contact.surface(q, self.shift)
+        V = self.placed(q)
         return self.term.surface_max_step(V, V + (self.contact.surface_basis @ p).reshape(
             V.shape))
 
