@@ -926,3 +926,14 @@ def test_reduced_self_contact_derivatives_match_central_differences(gripping):
         assert slope == pytest.approx(float(g @ p), rel=1e-5)
         change = (pairs.gradient(q + h * p) - pairs.gradient(q - h * p)) / (2 * h)
         assert np.abs(change - H @ p).max() <= 1e-4 * np.abs(H @ p).max()
+
+
+def test_a_free_body_asks_for_rollouts_not_a_static_check():
+    pytest.importorskip("ipctk")
+    from anisofem.io.scenefile import SceneFile
+    from anisofem.reduced import ReducedModel
+    read = SceneFile(os.path.join(os.path.dirname(__file__), os.pardir, "examples", "scenes",
+                                  "gripper.toml"))
+    with pytest.raises(ValueError, match="validate: the scene has a part no held vertex "
+                                         "holds, whose static equilibrium is not unique"):
+        ReducedModel(read.scene.at(0.0), modes=2)

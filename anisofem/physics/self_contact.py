@@ -57,7 +57,8 @@ class SelfContact:
     with the rigid `surfaces` (anisofem.Surface obstacles, where they are now); dhat (m),
     kappa (N/m^3, the Contact's), and with friction (mu > 0 for the body, or a surface's own)
     and eps (m, smoothing velocity times dt) the friction lagged at x_lag (n, 3), the
-    surfaces then where they were at the step's start (less their shift)."""
+    surfaces then where they were at the step's start (less their shift). near: a NearPairs
+    whose pairs every collision test takes (a reduced model's; None: ipctk's broad phase)."""
 
     def __init__(self, mesh, dhat, kappa, x_lag=None, mu=0.0, eps=None, surfaces=(),
                  itself=True, near=None):

@@ -129,13 +129,20 @@ class ReducedModel:
     Loads, or None);
     snapshots (a SnapshotReport, or None); fitted (how many of the r directions are fitted to
     the loads); build_seconds (basis and polynomial, with the snapshots' solves even where
-    another model of the scene solved them); validation (a Validation, or None).
+    another model of the scene solved them); validation (a Validation, or None); free_bodies
+    (the vertex indices of each part of the mesh with no held vertex: its rigid motions and
+    FREE_BODY_MODES lowest modes are columns of the basis); carrying (n,) bool, the vertices of
+    the parts that hold a held vertex (step's carried moves them).
     """
 
     def __init__(self, scene, modes=MODES, derivatives=None, snapshots=0, loads=None,
                  validate=True, progress=None):
         check_polynomial_scene(scene, "reduced model")
         scene.check_static()
+        if validate and loads is None and _basis.bodies(scene)[0]:
+            raise ValueError("validate: the scene has a part no held vertex holds, whose static "
+                             "equilibrium is not unique; build with validate=False and compare "
+                             "rollouts with the FEM's (examples/gripper_reduced.py)")
         modes = _count(modes, "modes", 1)
         snapshots = _count(snapshots, "snapshots", 0)
         derivatives = snapshots == 0 if derivatives is None else bool(derivatives)
