@@ -2,7 +2,8 @@
 name), `python -m export bench` (onnxruntime vs torch per step), `python -m export bake
 SCENE -o PATH` (a scene's constant tensors for an engine), `python -m export reduced SCENE
 -o PATH` (a scene's reduced model for runtime.ReducedSimulator; no torch needed) and
-`python -m export bench-reduced` (its build, size and step times)."""
+`python -m export bench-reduced` (its build, size and step times) and `python -m export mujoco
+FILE` (the MJCF that places a model file on a MuJoCo body, export/mujoco.py)."""
 import argparse
 import sys
 import time
@@ -19,7 +20,8 @@ COMMANDS = {"bench": "onnxruntime against torch per step (table + JSON)",
             "bake": "a scene's constant model inputs for an engine (PATH.json + PATH.bin)",
             "reduced": "a scene's reduced model for runtime.ReducedSimulator (no torch needed)",
             "bake-reduced": "the browser page's reduced models of a baked scene",
-            "bench-reduced": "the reduced model's build, size and step times"}
+            "bench-reduced": "the reduced model's build, size and step times",
+            "mujoco": "the MJCF that places a model file on a MuJoCo body (the plugin)"}
 
 def fail(parser, err):
     """End the command with one line naming the problem and exit status 2 (as `python -m
@@ -66,6 +68,8 @@ def main(argv=None):
         return _bake_reduced(argv[1:])
     if argv[:1] == ["bench-reduced"]:
         return _bench_reduced(argv[1:])
+    if argv[:1] == ["mujoco"]:
+        return _mujoco(argv[1:])
     from anisognn import shipped
     from anisognn.cli import add_galerkin_arguments, stepping
 
@@ -346,3 +350,25 @@ def _bake_reduced(argv):
           f"fiber "
           f"angles {header['fiber_angles']}; tip within {100 * worst:.2g}% of the full FEM "
           f"{where} at every angle")
+
+
+def _mujoco(argv):
+    """Print the MJCF of a model file on a MuJoCo body, checked by compiling it with the
+    plugin (built on first use)."""
+    from . import mujoco as plugin
+    parser = Parser(prog="python -m export mujoco", description="print the MJCF that places "
+                    "a model file (python -m export reduced) on a MuJoCo body, checked by "
+                    "MuJoCo's compiler with the anisofem.soft plugin")
+    parser.add_argument("file", help="the model file's path, without extension")
+    parser.add_argument("--body", default="soft", help="the carrying body's name "
+                        "(default %(default)s)")
+    parser.add_argument("--substeps", type=int, default=1,
+                        help="soft steps per MuJoCo step (default %(default)s)")
+    args = parser.parse_args(argv)
+    try:
+        text = plugin.mjcf(args.file, body=args.body, substeps=args.substeps)
+        plugin.load_plugin()
+        plugin.mujoco_module().MjModel.from_xml_string(text)
+    except (RuntimeError,) + BAD_INPUT as err:
+        fail(parser, err)
+    print(text, end="")

@@ -50,16 +50,25 @@ def build(folder=None):
     takes) unless it is there for these sources; returns its path. folder: by default a cache
     folder named by the sources' hash ($ANISOFEM_CACHE, else ~/.cache/anisofem). RuntimeError
     without a C compiler or where it fails."""
-    digest = hashlib.sha256()
-    for path in SOURCES + HEADERS:
+    return compile_library("libanisofem.so", SOURCES, HEADERS, [], folder, "c")
+
+
+def compile_library(name, sources, headers, extra, folder=None, prefix="c"):
+    """Compile sources (C99, the first of FLAGS the compiler takes, then the arguments extra:
+    include folders, libraries) into folder/name unless it is there for these sources, headers
+    and extra; returns its path. folder: by default the cache folder prefix-HASH
+    ($ANISOFEM_CACHE, else ~/.cache/anisofem). RuntimeError without a C compiler or where it
+    fails, with the compiler's message."""
+    digest = hashlib.sha256(" ".join(extra).encode())
+    for path in tuple(sources) + tuple(headers):
         with open(path, "rb") as f:
             digest.update(f.read())
     tag = digest.hexdigest()[:16]
     if folder is None:
         cache = os.environ.get("ANISOFEM_CACHE") or os.path.join(
             os.path.expanduser("~"), ".cache", "anisofem")
-        folder = os.path.join(cache, f"c-{tag}")
-    lib = os.path.join(folder, "libanisofem.so")
+        folder = os.path.join(cache, f"{prefix}-{tag}")
+    lib = os.path.join(folder, name)
     stamp = lib + ".sources"
     if os.path.exists(lib) and os.path.exists(stamp):
         with open(stamp) as f:
@@ -73,12 +82,13 @@ def build(folder=None):
     os.makedirs(folder, exist_ok=True)
     tmp = lib + f".{os.getpid()}.tmp"
     for flags in FLAGS:
-        done = subprocess.run([cc, "-std=c99", *flags, "-shared", "-fPIC", "-o", tmp, *SOURCES,
-                               "-lm"], capture_output=True, text=True)
+        done = subprocess.run([cc, "-std=c99", *flags, "-shared", "-fPIC", "-o", tmp,
+                               *sources, *extra, "-lm"], capture_output=True, text=True)
         if done.returncode == 0:
             break
     if done.returncode != 0:
-        raise RuntimeError(f"compiling the C runtime in {FOLDER} failed:\n{done.stderr}")
+        raise RuntimeError(f"compiling {name} from {os.path.dirname(sources[0])} failed:\n"
+                           f"{done.stderr}")
     os.replace(tmp, lib)
     with open(stamp + f".{os.getpid()}.tmp", "w") as f:
         f.write(tag)
@@ -103,6 +113,7 @@ def library(lib=None):
             "af_vertices": (ctypes.c_int, [handle]),
             "af_state_size": (ctypes.c_int, [handle]),
             "af_rest_state": (None, [handle, _DOUBLE_P]),
+            "af_carry_state": (ctypes.c_int, [handle, _DOUBLE_P, _DOUBLE_P]),
             "af_set_constant_force": (ctypes.c_int, [handle, _DOUBLE_P]),
             "af_set_solver": (ctypes.c_int, [handle, ctypes.c_double, ctypes.c_int]),
             "af_step": (ctypes.c_int, [handle, _DOUBLE_P, _DOUBLE_P, _DOUBLE_P,

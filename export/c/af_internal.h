@@ -125,6 +125,10 @@ af_framed *af_framed_open(const af_file *f, int n, const double *rest, const dou
 void af_framed_close(af_framed *m);
 int af_framed_size(const af_framed *m);
 void af_framed_rest(const af_framed *m, double *state);
+/* base: 12 doubles, a rotation (row-major) and a translation: a rigid motion to 1e-9 */
+int af_rigid(const double *base);
+/* state (one copy: frames, coordinates, base) moved rigidly by base (R row-major, then t) */
+void af_framed_carry(const af_framed *m, double *state, const double *base);
 int af_framed_set_force(af_framed *m, const double *force);
 int af_framed_advance(af_framed *m, const double *now, const double *before, double *next,
                       const double *force, const double *base, double dt, double tolerance,

@@ -84,6 +84,11 @@ AF_API int af_set_solver(af_model *model, double tolerance, int max_iter);
  * and af_error saying why. */
 AF_API int af_step(af_model *model, double *state, const double *force, const double *base,
                    double dt);
+/* state moved rigidly by base (12 doubles, as af_step's): a framed model's frames and held
+ * vertices carried there with no change of shape or speed (a body placed where its carrier
+ * starts). A reduced model's held vertices stay where the file has them: AF_OK for the
+ * identity, else AF_BAD_INPUT; AF_BAD_INPUT for a base that is not rigid. */
+AF_API int af_carry_state(af_model *model, double *state, const double *base);
 /* The model's controls, named inputs a controller sets every step: pressures in cavities (Pa)
  * and fiber activations (in [0, 1): the fibers' rest stretch is 1 - a). Their number (0 for
  * a model without, and a framed model), the name of control i (NULL out of range) and its

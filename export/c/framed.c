@@ -303,6 +303,24 @@ void af_framed_rest(const af_framed *m, double *state) {
     for (i = 0; i < 3; i++) BASE(m, state)[4 * i] = 1.0;
 }
 
+void af_framed_carry(const af_framed *m, double *state, const double *base) {
+    double *c = state, *R = state + 3 * m->D, *g = BASE(m, state), t[9];
+    long d, a, b, k;
+    for (d = 0; d < m->D + 1; d++) {   /* every frame, then the base */
+        double *Rd = d < m->D ? R + 9 * d : g, *cd = d < m->D ? c + 3 * d : g + 9, y[3];
+        for (a = 0; a < 3; a++)
+            for (b = 0; b < 3; b++) {
+                t[3 * a + b] = 0.0;
+                for (k = 0; k < 3; k++) t[3 * a + b] += base[3 * a + k] * Rd[3 * k + b];
+            }
+        memcpy(Rd, t, sizeof t);
+        for (a = 0; a < 3; a++)
+            y[a] = base[3 * a] * cd[0] + base[3 * a + 1] * cd[1] + base[3 * a + 2] * cd[2]
+                   + base[9 + a];
+        memcpy(cd, y, sizeof y);
+    }
+}
+
 /* positions (3 per node) of `nodes` (count of them; all where NULL) into out */
 static void framed_positions(const af_framed *m, const double *st, const int *nodes, long count,
                              double *out) {
@@ -904,8 +922,7 @@ static void framed_extrapolated(const af_framed *m, const double *now, const dou
     for (i = 0; i < m->Q; i++) out[12 * D + i] = 2.0 * now[12 * D + i] - before[12 * D + i];
 }
 
-/* base: 12 doubles, a rotation (row-major) and a translation: a rigid motion to 1e-9 */
-static int rigid(const double *base) {
+int af_rigid(const double *base) {
     int i, j, k;
     for (i = 0; i < 12; i++) if (!isfinite(base[i])) return 0;
     for (i = 0; i < 3; i++)
@@ -928,7 +945,7 @@ int af_framed_advance(af_framed *m, const double *now, const double *before, dou
     double *g, *H, *N, *HN, *CN, *L, *V, *B, *lam, *t1, *dz, *gc, *state, *trial, *t, *t2;
 #define TAKE(count) (cursor += (count), cursor - (count))
     if (!base) base = BASE(m, now);
-    if (!rigid(base)) {
+    if (!af_rigid(base)) {
         af_say(error, error_size, "base: not a rigid motion (its first 9 numbers must be a "
                "rotation, row-major, to 1e-9; then a translation)");
         return AF_BAD_INPUT;

@@ -263,6 +263,28 @@ void af_rest_state(const af_model *m, double *state) {
     }
 }
 
+int af_carry_state(af_model *m, double *state, const double *base) {
+    int i, half = af_state_size(m) / 2;
+    m->error[0] = '\0';
+    if (!base || !af_rigid(base)) {
+        af_say(m->error, ERROR_SIZE, "base: not a rigid motion (its first 9 numbers must be a "
+               "rotation, row-major, to 1e-9; then a translation)");
+        return AF_BAD_INPUT;
+    }
+    if (m->kind == AF_REDUCED) {
+        for (i = 0; i < 12; i++)
+            if (base[i] != (i == 0 || i == 4 || i == 8 ? 1.0 : 0.0)) {
+                af_say(m->error, ERROR_SIZE, "base: a reduced model holds its vertices where "
+                       "the file has them; only a framed model is carried");
+                return AF_BAD_INPUT;
+            }
+        return AF_OK;
+    }
+    af_framed_carry(m->framed, state, base);
+    af_framed_carry(m->framed, state + half, base);
+    return AF_OK;
+}
+
 const int *af_surface(const af_model *m, int *count) {
     if (count) *count = m->surface_count;
     return m->surface;

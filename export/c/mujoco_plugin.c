@@ -1,0 +1,269 @@
+/* anisofem's soft body as a MuJoCo engine plugin ("anisofem.soft", passive): a model file
+ * written by `python -m export reduced [--framed]`, stepped by this runtime (anisofem.h) as
+ * MuJoCo steps, carried by the body that names the plugin's instance.
+ *
+ *   <extension>
+ *     <plugin plugin="anisofem.soft">
+ *       <instance name="finger">
+ *         <config key="file" value="models/finger"/>   <!-- path without extension -->
+ *         <config key="substeps" value="1"/>            <!-- soft steps per MuJoCo step -->
+ *       </instance>
+ *     </plugin>
+ *   </extension>
+ *   <worldbody> <body name="hand" pos="0 0 0.5"> <plugin instance="finger"/> </body> </worldbody>
+ *
+ * The file's coordinates are the carrying body's: its held vertices sit where the body puts
+ * them, x = R_body x0 + p_body. A reduced (linear) model holds them still, so its body must
+ * not move (fixed to the world); a framed model's move with the body. Gravity is MuJoCo's.
+ *
+ * The soft state lives in MuJoCo's plugin state (mjData.plugin_state, saved and reset with
+ * it): [the time it is at, the runtime's state (af_state_size doubles)]. The first passive
+ * forces after a reset place it at rest where its body is; each later time they are computed
+ * past the soft state's (once per mj_step), the soft body steps there in `substeps`
+ * backward-Euler steps, the held vertices where the body is then.
+ */
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <mujoco/mujoco.h>
+
+#include "anisofem.h"
+
+/* The plugin state: the time the soft state is at (UNPLACED until the first passive forces
+ * place it where its body is), then the runtime's state. */
+enum { AT = 0, HEADER = 1 };
+#define UNPLACED (-1.0)
+
+typedef struct {
+    af_model *model;
+    int body;      /* the body that carries it */
+    int substeps;
+} soft;
+
+static const char *attributes[] = {"file", "substeps"};
+
+/* The model file the instance names, loaded; NULL with the reason in error. */
+static af_model *load(const mjModel *m, int instance, char *error, size_t size) {
+    const char *file = mj_getPluginConfig(m, instance, "file");
+    char why[512];
+    af_model *model;
+    if (!file || !*file) {
+        snprintf(error, size, "anisofem.soft: no 'file' in the instance's config (the model "
+                 "file's path without extension, written by python -m export reduced)");
+        return NULL;
+    }
+    model = af_load(file, NULL, why, sizeof why);
+    if (!model)
+        snprintf(error, size, "anisofem.soft: %s: %s", file, why);
+    return model;
+}
+
+/* The body whose <plugin instance=...> names this instance, or -1. */
+static int carrier(const mjModel *m, int instance) {
+    for (int b = 0; b < m->nbody; b++)
+        if (m->body_plugin[b] == instance)
+            return b;
+    return -1;
+}
+
+/* Whether body b moves: a joint on it or on a body it hangs from, or a mocap body. */
+static int moves(const mjModel *m, int b) {
+    for (; b > 0; b = m->body_parentid[b])
+        if (m->body_jntnum[b] > 0 || m->body_mocapid[b] >= 0)
+            return 1;
+    return 0;
+}
+
+static int substeps(const mjModel *m, int instance, char *error, size_t size) {
+    const char *text = mj_getPluginConfig(m, instance, "substeps");
+    char *end;
+    long count;
+    if (!text || !*text)
+        return 1;
+    count = strtol(text, &end, 10);
+    if (*end || count < 1 || count > 10000) {
+        snprintf(error, size, "anisofem.soft: substeps: expected a whole number from 1 to "
+                 "10000, got '%s'", text);
+        return -1;
+    }
+    return (int)count;
+}
+
+/* What is wrong with the instance (its file, its body, its substeps), or "" where nothing. */
+static void check(const mjModel *m, int instance, char *error, size_t size) {
+    af_model *model = load(m, instance, error, size);
+    int b;
+    if (!model)
+        return;
+    b = carrier(m, instance);
+    if (b < 0)
+        snprintf(error, size, "anisofem.soft: no body carries the instance (add "
+                 "<plugin instance=\"...\"/> to a body)");
+    else if (af_kind(model) == AF_REDUCED && moves(m, b))
+        snprintf(error, size, "anisofem.soft: %s is a reduced model, which holds its vertices "
+                 "still, on body '%s', which moves: export it with --framed, or carry it on a "
+                 "body fixed to the world", mj_getPluginConfig(m, instance, "file"),
+                 mj_id2name(m, mjOBJ_BODY, b));
+    else if (substeps(m, instance, error, size) < 0)
+        ;
+    else
+        error[0] = '\0';
+    af_free(model);
+}
+
+static int nstate(const mjModel *m, int instance) {
+    char error[1024] = "";
+    af_model *model;
+    int size;
+    check(m, instance, error, sizeof error);
+    if (error[0]) {
+        mju_error("%s", error);
+        return 0;
+    }
+    model = load(m, instance, error, sizeof error);
+    size = HEADER + af_state_size(model);
+    af_free(model);
+    return size;
+}
+
+/* The body's pose (3 x 4, [R | p], row-major) in d. */
+static void pose(const mjModel *m, const mjData *d, int b, double *base) {
+    (void)m;
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++)
+            base[4 * i + j] = d->xmat[9 * b + 3 * i + j];
+        base[4 * i + 3] = d->xpos[3 * b + i];
+    }
+}
+
+/* The runtime's base: 3 x 3 rotation then translation (anisofem.h, af_step). */
+static void runtime_base(const double *pose34, double *base) {
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++)
+            base[3 * i + j] = pose34[4 * i + j];
+        base[9 + i] = pose34[4 * i + 3];
+    }
+}
+
+/* Gravity on the soft body, in the file's coordinates where its carrier is fixed (the body's
+ * rotation undone), in the world's where it moves (a framed model's positions are the
+ * world's). */
+static int set_gravity(const mjModel *m, const mjData *d, soft *s) {
+    int n = af_vertices(s->model);
+    const double *mass = af_masses(s->model);
+    double g[3], base[12];
+    double *force = malloc(3 * (size_t)n * sizeof(double));
+    int code;
+    if (!force)
+        return AF_NO_MEMORY;
+    mju_copy3(g, m->opt.gravity);
+    if (af_kind(s->model) == AF_REDUCED) {
+        pose(m, d, s->body, base);
+        for (int i = 0; i < 3; i++)
+            g[i] = base[i] * m->opt.gravity[0] + base[4 + i] * m->opt.gravity[1]
+                   + base[8 + i] * m->opt.gravity[2];
+    }
+    for (int i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++)
+            force[3 * i + k] = mass[i] * g[k];
+    code = af_set_constant_force(s->model, force);
+    free(force);
+    return code;
+}
+
+static int init(const mjModel *m, mjData *d, int instance) {
+    char error[1024] = "";
+    int count = substeps(m, instance, error, sizeof error);
+    soft *s = calloc(1, sizeof *s);
+    if (!s || count < 0) {
+        free(s);
+        return -1;
+    }
+    s->model = load(m, instance, error, sizeof error);
+    if (!s->model) {
+        mju_warning("%s", error);
+        free(s);
+        return -1;
+    }
+    s->body = carrier(m, instance);
+    s->substeps = count;
+    d->plugin_data[instance] = (uintptr_t)s;
+    return 0;
+}
+
+static void destroy(mjData *d, int instance) {
+    soft *s = (soft *)d->plugin_data[instance];
+    if (s) {
+        af_free(s->model);
+        free(s);
+    }
+    d->plugin_data[instance] = 0;
+}
+
+static void copy(mjData *dest, const mjModel *m, const mjData *src, int instance) {
+    (void)src;
+    destroy(dest, instance);
+    init(m, dest, instance);
+}
+
+static void reset(const mjModel *m, double *state, void *data, int instance) {
+    soft *s = (soft *)data;
+    (void)m;
+    (void)instance;
+    state[AT] = UNPLACED;
+    if (s)
+        af_rest_state(s->model, state + HEADER);
+}
+
+/* The soft body at rest where its body is (gravity set for where it is), at d's time. */
+static int place(const mjModel *m, mjData *d, soft *s, double *state, const double *base) {
+    int code = set_gravity(m, d, s);
+    if (code == AF_OK && af_kind(s->model) == AF_FRAMED)
+        code = af_carry_state(s->model, state + HEADER, base);
+    state[AT] = d->time;
+    return code;
+}
+
+static void compute(const mjModel *m, mjData *d, int instance, int capability) {
+    soft *s = (soft *)d->plugin_data[instance];
+    double *state = d->plugin_state + m->plugin_stateadr[instance];
+    double at[12], base[12], dt = d->time - state[AT];
+    if (!(capability & mjPLUGIN_PASSIVE) || !s)
+        return;
+    pose(m, d, s->body, at);
+    runtime_base(at, base);
+    if (state[AT] == UNPLACED) {
+        if (place(m, d, s, state, base) != AF_OK)
+            mju_warning("anisofem.soft: %s", af_error(s->model));
+        return;
+    }
+    if (dt <= 0.5 * m->opt.timestep)
+        return;
+    for (int k = 0; k < s->substeps; k++) {
+        if (af_step(s->model, state + HEADER, NULL,
+                    af_kind(s->model) == AF_FRAMED ? base : NULL,
+                    dt / s->substeps) != AF_OK) {
+            mju_warning("anisofem.soft: at t = %g s: %s", d->time, af_error(s->model));
+            return;
+        }
+    }
+    state[AT] = d->time;
+}
+
+mjPLUGIN_LIB_INIT(anisofem_soft) {
+    mjpPlugin plugin;
+    mjp_defaultPlugin(&plugin);
+    plugin.name = "anisofem.soft";
+    plugin.capabilityflags = mjPLUGIN_PASSIVE;
+    plugin.nattribute = sizeof attributes / sizeof attributes[0];
+    plugin.attributes = attributes;
+    plugin.nstate = nstate;
+    plugin.init = init;
+    plugin.destroy = destroy;
+    plugin.copy = copy;
+    plugin.reset = reset;
+    plugin.compute = compute;
+    mjp_registerPlugin(&plugin);
+}

@@ -1,0 +1,149 @@
+"""The soft body as a MuJoCo plugin (export/mujoco.py, export/c/mujoco_plugin.c): it steps a
+model file as the C runtime does, rides the body that carries it, and bad input fails MuJoCo's
+compilation with one line naming the file and the problem."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import anisofem as af
+from anisofem.reduced import FramedModel, ReducedModel
+from export import native
+from export.writers import reduced as writer
+
+mujoco = pytest.importorskip("mujoco")
+pytestmark = pytest.mark.skipif(native.compiler() is None, reason="no C compiler")
+
+from export import mujoco as plugin  # noqa: E402
+
+GRAVITY = np.array([0.0, 0.0, -9.81])
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """A 0.1 m beam held at x = 0, its reduced and its framed model written, the plugin
+    built and registered: (reduced path, framed path)."""
+    folder = tmp_path_factory.mktemp("mujoco")
+    plugin.load_plugin(str(folder / "lib"))
+    mesh = af.box_beam(size=(0.1, 0.02, 0.02), cells=(8, 2, 2))
+    scene = af.Scene(mesh, af.Material(1e5, 0.45, 1000.0),
+                     fixed=af.metrics.end_vertices(mesh, 0, "min"), gravity=GRAVITY)
+    reduced, framed = str(folder / "beam"), str(folder / "beam_framed")
+    writer.write(ReducedModel(scene, modes=4, snapshots=8, validate=False), reduced)
+    writer.write_framed(FramedModel(scene, validate=False), framed)
+    return reduced, framed
+
+
+def compiled(xml, dt):
+    model = mujoco.MjModel.from_xml_string(xml)
+    model.opt.gravity[:] = GRAVITY
+    model.opt.timestep = dt
+    return model, mujoco.MjData(model)
+
+
+def test_the_plugin_steps_like_the_c_runtime(files):
+    """The beam under gravity, its body fixed: after 501 MuJoCo steps of 0.02 s its state (500
+    soft steps: the first computes at t = 0) equals the C runtime's stepped alone, to 1e-9."""
+    path, _ = files
+    model, data = compiled(plugin.mjcf(path), 0.02)
+    for _ in range(501):
+        mujoco.mj_step(model, data)
+    alone = native.CModel(path)
+    state = np.zeros(alone.state_size)
+    alone._c.af_rest_state(alone._handle, native._pointer(state))
+    alone.set_constant_force(alone.masses[:, None] * GRAVITY)
+    for _ in range(500):
+        alone.advance(state, None, 0.02)
+    soft = data.plugin_state[1:]
+    assert data.plugin_state[0] == pytest.approx(10.0)
+    x, x_alone = alone._positions(soft), alone._positions(state)
+    assert (x_alone - alone.rest_positions)[:, 2].min() < -1e-3, "the beam sags"
+    assert np.abs(x - x_alone).max() < 1e-9
+
+
+def test_a_framed_model_rides_its_body(files):
+    """The framed beam on a body 0.5 m up spun about z at 2 rad/s: placed where the body
+    starts, its held vertices are where the body carries them at the soft state's time (1e-12
+    m), its free end swings behind."""
+    _, path = files
+    xml = plugin.mjcf(path, pos=(0.1, 0.2, 0.5)).replace(
+        '<plugin instance="soft"/>', '<joint type="hinge" axis="0 0 1"/>'
+        '<geom type="box" size="0.01 0.01 0.01" mass="0.5"/><plugin instance="soft"/>')
+    model, data = compiled(xml, 0.01)
+    data.qvel[0] = 2.0
+    for _ in range(50):
+        mujoco.mj_step(model, data)
+    body = model.body("soft").id
+    R, p = data.xmat[body].reshape(3, 3), data.xpos[body]   # at the soft state's time
+    alone = native.CModel(path)
+    x = alone._positions(data.plugin_state[1:])
+    held = alone.held.all(axis=1)
+    assert np.abs(x[held] - (alone.rest_positions[held] @ R.T + p)).max() < 1e-12
+    carried = alone.rest_positions @ R.T + p
+    assert 1e-4 < np.abs(x - carried).max() < 0.05
+
+
+@pytest.mark.parametrize("change, says", [
+    (lambda xml, path: xml.replace(path, path + "_missing"), "_missing.json"),
+    (lambda xml, path: xml.replace('value="1"', 'value="0"'),
+     "substeps: expected a whole number from 1 to 10000, got '0'"),
+    (lambda xml, path: xml.replace('<plugin instance="soft"/>',
+                                   '<freejoint/><geom size="0.01"/><plugin instance="soft"/>'),
+     "is a reduced model, which holds its vertices still, on body 'soft', which moves"),
+    (lambda xml, path: xml.replace('<plugin instance="soft"/>', ''),
+     "no body carries the instance")])
+def test_bad_input_fails_compilation_in_one_line(files, change, says):
+    path, _ = files
+    with pytest.raises(ValueError, match="anisofem.soft: ") as error:
+        mujoco.MjModel.from_xml_string(change(plugin.mjcf(path), path))
+    assert says in str(error.value) and "\n" not in str(error.value)
+
+
+def test_a_corrupt_file_fails_compilation_naming_it(files, tmp_path):
+    path, _ = files
+    (tmp_path / "broken.json").write_text("{not json")
+    with pytest.raises(ValueError, match="broken.json: not complete JSON"):
+        mujoco.MjModel.from_xml_string(plugin.mjcf(str(tmp_path / "broken")))
+    with open(path + ".json") as f:
+        header = f.read()
+    (tmp_path / "short.json").write_text(header.replace('"beam.bin"', '"short.bin"'))
+    (tmp_path / "short.bin").write_bytes(b"\0" * 10)
+    with pytest.raises(ValueError, match=r"anisofem.soft: .*short.json: array \w+ .* runs "
+                                         r"past the end of the 10-byte .bin file"):
+        mujoco.MjModel.from_xml_string(plugin.mjcf(str(tmp_path / "short")))
+
+
+def test_the_command_prints_mjcf_that_compiles(files):
+    path, _ = files
+    run = [sys.executable, "-m", "export", "mujoco"]
+    done = subprocess.run(run + [path, "--body", "hand"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert '<body name="hand"' in done.stdout
+    mujoco.MjModel.from_xml_string(done.stdout)
+    done = subprocess.run(run + [path + "_missing"], capture_output=True, text=True)
+    assert done.returncode == 2 and "_missing.json" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+
+
+def test_a_framed_state_is_carried_rigidly(files):
+    """af_carry_state moves a framed rest state's every vertex by the base (1e-12 m); a reduced
+    model takes the identity only, and a base that is not rigid is refused."""
+    reduced, framed = files
+    c = native.CModel(framed)
+    state = np.zeros(c.state_size)
+    c._c.af_rest_state(c._handle, native._pointer(state))
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    shift = np.array([0.1, 0.2, 0.5])
+    base = np.concatenate([turn.ravel(), shift])
+    assert c._c.af_carry_state(c._handle, native._pointer(state), native._pointer(base)) == 0
+    assert np.abs(c._positions(state) - (c.rest_positions @ turn.T + shift)).max() < 1e-12
+    bent = base.copy()
+    bent[0] = 1.5
+    assert c._c.af_carry_state(c._handle, native._pointer(state), native._pointer(bent)) < 0
+    assert b"not a rigid motion" in c._c.af_error(c._handle)
+    r = native.CModel(reduced)
+    flat = np.zeros(r.state_size)
+    assert r._c.af_carry_state(r._handle, native._pointer(flat), native._pointer(base)) < 0
+    assert b"only a framed model is carried" in r._c.af_error(r._handle)
+
