@@ -19,6 +19,10 @@ from . import native
 PLUGIN = os.path.join(native.FOLDER, "mujoco_plugin.c")
 #: The plugin's name in MJCF (<plugin plugin="...">).
 NAME = "anisofem.soft"
+#: An instance's plugin state (mjData.plugin_state from model.plugin_stateadr): the time its
+#: soft state is at, the soft body's pull on its carrier over the last step (a force, N, its
+#: moment about the world's origin, N m), then HEADER on the runtime's state (af_state_size).
+HEADER = 7
 _LOADED = {}
 
 

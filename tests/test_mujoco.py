@@ -55,7 +55,7 @@ def test_the_plugin_steps_like_the_c_runtime(files):
     alone.set_constant_force(alone.masses[:, None] * GRAVITY)
     for _ in range(500):
         alone.advance(state, None, 0.02)
-    soft = data.plugin_state[1:]
+    soft = data.plugin_state[plugin.HEADER:]
     assert data.plugin_state[0] == pytest.approx(10.0)
     x, x_alone = alone._positions(soft), alone._positions(state)
     assert (x_alone - alone.rest_positions)[:, 2].min() < -1e-3, "the beam sags"
@@ -77,7 +77,7 @@ def test_a_framed_model_rides_its_body(files):
     body = model.body("soft").id
     R, p = data.xmat[body].reshape(3, 3), data.xpos[body]   # at the soft state's time
     alone = native.CModel(path)
-    x = alone._positions(data.plugin_state[1:])
+    x = alone._positions(data.plugin_state[plugin.HEADER:])
     held = alone.held.all(axis=1)
     assert np.abs(x[held] - (alone.rest_positions[held] @ R.T + p)).max() < 1e-12
     carried = alone.rest_positions @ R.T + p
@@ -147,3 +147,51 @@ def test_a_framed_state_is_carried_rigidly(files):
     assert r._c.af_carry_state(r._handle, native._pointer(flat), native._pointer(base)) < 0
     assert b"only a framed model is carried" in r._c.af_error(r._handle)
 
+
+
+@pytest.mark.parametrize("integrator", ["Euler", "implicitfast"])
+def test_a_free_body_and_its_soft_body_keep_their_momentum(files, integrator):
+    """No gravity: a free sphere carrying the framed beam, pushed and spun. The soft body pulls
+    its carrier by the carrier's impulse on it (its momentum's change), so the two together
+    keep their linear and angular momentum (about the origin) to 1e-6 over 1,000 steps, while
+    the soft body carries a quarter of the one and most of the other."""
+    _, path = files
+    xml = plugin.mjcf(path).replace(
+        '<plugin instance="soft"/>', '<freejoint/><geom type="sphere" size="0.02" mass="0.2"/>'
+        '<plugin instance="soft"/>').replace(
+        "<worldbody>", f'<option integrator="{integrator}" gravity="0 0 0"/><worldbody>')
+    model = mujoco.MjModel.from_xml_string(xml)
+    model.opt.timestep = 0.005
+    data = mujoco.MjData(model)
+    data.qvel[:] = [0.05, -0.02, 0.01, 0.5, 1.0, 2.0]
+    body, alone = model.body("soft").id, native.CModel(path)
+    half = alone.state_size // 2
+
+    def momenta():   # the rigid body's at its time, the soft body's a step before (its state)
+        R = data.xmat[body].reshape(3, 3)
+        inertia = R @ np.diag(model.body_inertia[body]) @ R.T
+        v, w = data.qvel[:3], R @ data.qvel[3:6]
+        state = data.plugin_state[plugin.HEADER:]
+        x = alone._positions(state)
+        u = (x - alone._positions(state[half:])) / model.opt.timestep
+        mu = alone.masses[:, None] * u
+        rigid = np.concatenate([model.body_mass[body] * v, model.body_mass[body]
+                                * np.cross(data.qpos[:3], v) + inertia @ w])
+        return rigid, np.concatenate([mu.sum(axis=0), np.cross(x, mu).sum(axis=0)])
+
+    mujoco.mj_step(model, data)
+    start = sum(momenta())
+    for _ in range(1000):
+        mujoco.mj_step(model, data)
+    rigid, soft = momenta()
+    for part in (slice(0, 3), slice(3, 6)):
+        assert np.linalg.norm((rigid + soft - start)[part]) <= 1e-6 * np.linalg.norm(start[part])
+    assert np.linalg.norm(soft[:3]) > 0.2 * np.linalg.norm(start[:3])
+    assert np.linalg.norm(soft[3:]) > 0.5 * np.linalg.norm(start[3:])
+
+
+def test_rk4_is_refused(files):
+    path, _ = files
+    xml = plugin.mjcf(path).replace("<worldbody>", '<option integrator="RK4"/><worldbody>')
+    with pytest.raises(ValueError, match="anisofem.soft: the RK4 integrator"):
+        mujoco.MjModel.from_xml_string(xml)

@@ -32,14 +32,17 @@
 #include "anisofem.h"
 
 /* The plugin state: the time the soft state is at (UNPLACED until the first passive forces
- * place it where its body is), then the runtime's state. */
-enum { AT = 0, HEADER = 1 };
+ * place it where its body is), the soft body's pull on its carrier over the last step (a
+ * force, N, and its moment about the world's origin, N m), then the runtime's state. */
+enum { AT = 0, PULL = 1, HEADER = 7 };
 #define UNPLACED (-1.0)
 
 typedef struct {
     af_model *model;
     int body;      /* the body that carries it */
     int substeps;
+    int n;
+    double *x, *v; /* the vertices' positions (m) and velocities (m/s) at the state's time */
 } soft;
 
 static const char *attributes[] = {"file", "substeps"};
@@ -108,6 +111,10 @@ static void check(const mjModel *m, int instance, char *error, size_t size) {
                  mj_id2name(m, mjOBJ_BODY, b));
     else if (substeps(m, instance, error, size) < 0)
         ;
+    else if (m->opt.integrator == mjINT_RK4)
+        snprintf(error, size, "anisofem.soft: the RK4 integrator computes forces at times "
+                 "within a step, where the soft body cannot be stepped back; use Euler, "
+                 "implicit or implicitfast");
     else
         error[0] = '\0';
     af_free(model);
@@ -147,6 +154,28 @@ static void runtime_base(const double *pose34, double *base) {
     }
 }
 
+/* The soft body's vertices (n x 3), m, in the world: a reduced model's file coordinates are
+ * its fixed body's. */
+static void world_positions(const mjModel *m, const mjData *d, const soft *s,
+                            const double *state, double *x) {
+    af_positions(s->model, state + HEADER, x);
+    if (af_kind(s->model) == AF_REDUCED) {
+        double at[12], y[3];
+        pose(m, d, s->body, at);
+        for (int i = 0; i < s->n; i++) {
+            for (int a = 0; a < 3; a++)
+                y[a] = at[4 * a] * x[3 * i] + at[4 * a + 1] * x[3 * i + 1]
+                       + at[4 * a + 2] * x[3 * i + 2] + at[4 * a + 3];
+            mju_copy3(x + 3 * i, y);
+        }
+    }
+}
+
+/* Whether the instance's state in d has been placed where its body is. */
+static int state_placed(const mjModel *m, const mjData *d, int instance) {
+    return d->plugin_state[m->plugin_stateadr[instance] + AT] != UNPLACED;
+}
+
 /* Gravity on the soft body, in the file's coordinates where its carrier is fixed (the body's
  * rotation undone), in the world's where it moves (a framed model's positions are the
  * world's). */
@@ -175,12 +204,17 @@ static int set_gravity(const mjModel *m, const mjData *d, soft *s) {
 
 static int init(const mjModel *m, mjData *d, int instance) {
     char error[1024] = "";
-    int count = substeps(m, instance, error, sizeof error);
-    soft *s = calloc(1, sizeof *s);
-    if (!s || count < 0) {
-        free(s);
+    int count;
+    soft *s;
+    check(m, instance, error, sizeof error);
+    if (error[0]) {
+        mju_warning("%s", error);
         return -1;
     }
+    count = substeps(m, instance, error, sizeof error);
+    s = calloc(1, sizeof *s);
+    if (!s)
+        return -1;
     s->model = load(m, instance, error, sizeof error);
     if (!s->model) {
         mju_warning("%s", error);
@@ -189,7 +223,14 @@ static int init(const mjModel *m, mjData *d, int instance) {
     }
     s->body = carrier(m, instance);
     s->substeps = count;
+    s->n = af_vertices(s->model);
+    s->x = calloc(3 * (size_t)s->n, sizeof(double));
+    s->v = calloc(3 * (size_t)s->n, sizeof(double));
     d->plugin_data[instance] = (uintptr_t)s;
+    if (!s->x || !s->v) {
+        mju_warning("anisofem.soft: out of memory");
+        return -1;
+    }
     return 0;
 }
 
@@ -197,21 +238,31 @@ static void destroy(mjData *d, int instance) {
     soft *s = (soft *)d->plugin_data[instance];
     if (s) {
         af_free(s->model);
+        free(s->x);
+        free(s->v);
         free(s);
     }
     d->plugin_data[instance] = 0;
 }
 
 static void copy(mjData *dest, const mjModel *m, const mjData *src, int instance) {
-    (void)src;
+    const soft *from = (const soft *)src->plugin_data[instance];
+    soft *to;
     destroy(dest, instance);
-    init(m, dest, instance);
+    if (init(m, dest, instance) != 0 || !from)
+        return;
+    to = (soft *)dest->plugin_data[instance];
+    memcpy(to->x, from->x, 3 * (size_t)from->n * sizeof(double));
+    memcpy(to->v, from->v, 3 * (size_t)from->n * sizeof(double));
+    if (state_placed(m, dest, instance))
+        set_gravity(m, dest, to);
 }
 
 static void reset(const mjModel *m, double *state, void *data, int instance) {
     soft *s = (soft *)data;
     (void)m;
     (void)instance;
+    memset(state, 0, HEADER * sizeof(double));
     state[AT] = UNPLACED;
     if (s)
         af_rest_state(s->model, state + HEADER);
@@ -222,8 +273,60 @@ static int place(const mjModel *m, mjData *d, soft *s, double *state, const doub
     int code = set_gravity(m, d, s);
     if (code == AF_OK && af_kind(s->model) == AF_FRAMED)
         code = af_carry_state(s->model, state + HEADER, base);
+    world_positions(m, d, s, state, s->x);
+    memset(s->v, 0, 3 * (size_t)s->n * sizeof(double));
     state[AT] = d->time;
     return code;
+}
+
+/* One soft step of dt to base (NULL: held still): the positions and velocities kept, and
+ * the carrier's impulse on the soft body added to pull (6: momentum's change less gravity's
+ * impulse, linear then angular about the world's origin). */
+static int advance(const mjModel *m, mjData *d, soft *s, double *state, const double *base,
+                   double dt, double *pull) {
+    const double *mass = af_masses(s->model);
+    double *x1 = malloc(3 * (size_t)s->n * sizeof(double));
+    int code;
+    if (!x1)
+        return AF_NO_MEMORY;
+    code = af_step(s->model, state + HEADER, NULL, base, dt);
+    if (code == AF_OK) {
+        world_positions(m, d, s, state, x1);
+        for (int i = 0; i < s->n; i++) {
+            double *x = s->x + 3 * i, *v = s->v + 3 * i, v1[3], g[3], before[3], after[3];
+            for (int k = 0; k < 3; k++) {
+                v1[k] = (x1[3 * i + k] - x[k]) / dt;
+                g[k] = mass[i] * m->opt.gravity[k] * dt;
+            }
+            mju_cross(before, x, v);
+            mju_cross(after, x1 + 3 * i, v1);
+            for (int k = 0; k < 3; k++) {
+                pull[k] += mass[i] * (v1[k] - v[k]) - g[k];
+                pull[3 + k] += mass[i] * (after[k] - before[k]);
+            }
+            mju_cross(after, x1 + 3 * i, g);
+            for (int k = 0; k < 3; k++) {
+                pull[3 + k] -= after[k];
+                x[k] = x1[3 * i + k];
+                v[k] = v1[k];
+            }
+        }
+    }
+    free(x1);
+    return code;
+}
+
+/* The soft body's pull (the force and moment the carrier gave it, reversed) on the carrier,
+ * into the passive forces. */
+static void apply_pull(const mjModel *m, mjData *d, const soft *s, const double *pull) {
+    double force[3], moment[3], at[3];
+    const double *point = d->xipos + 3 * s->body;
+    mju_scl3(force, pull, -1.0);
+    mju_cross(at, point, force);
+    for (int k = 0; k < 3; k++)
+        moment[k] = -pull[3 + k] - at[k];
+    if (s->body > 0)
+        mj_applyFT(m, d, force, moment, point, s->body, d->qfrc_passive);
 }
 
 static void compute(const mjModel *m, mjData *d, int instance, int capability) {
@@ -239,17 +342,20 @@ static void compute(const mjModel *m, mjData *d, int instance, int capability) {
             mju_warning("anisofem.soft: %s", af_error(s->model));
         return;
     }
-    if (dt <= 0.5 * m->opt.timestep)
-        return;
-    for (int k = 0; k < s->substeps; k++) {
-        if (af_step(s->model, state + HEADER, NULL,
-                    af_kind(s->model) == AF_FRAMED ? base : NULL,
-                    dt / s->substeps) != AF_OK) {
-            mju_warning("anisofem.soft: at t = %g s: %s", d->time, af_error(s->model));
-            return;
+    if (dt > 0.5 * m->opt.timestep) {
+        double impulse[6] = {0, 0, 0, 0, 0, 0};
+        for (int k = 0; k < s->substeps; k++) {
+            if (advance(m, d, s, state, af_kind(s->model) == AF_FRAMED ? base : NULL,
+                        dt / s->substeps, impulse) != AF_OK) {
+                mju_warning("anisofem.soft: at t = %g s: %s", d->time, af_error(s->model));
+                return;
+            }
         }
+        for (int k = 0; k < 6; k++)
+            state[PULL + k] = impulse[k] / dt;
+        state[AT] = d->time;
     }
-    state[AT] = d->time;
+    apply_pull(m, d, s, state + PULL);
 }
 
 mjPLUGIN_LIB_INIT(anisofem_soft) {
