@@ -195,3 +195,44 @@ def test_rk4_is_refused(files):
     xml = plugin.mjcf(path).replace("<worldbody>", '<option integrator="RK4"/><worldbody>')
     with pytest.raises(ValueError, match="anisofem.soft: the RK4 integrator"):
         mujoco.MjModel.from_xml_string(xml)
+
+
+def actuated(path, names):
+    """The MJCF of the file on a fixed body, with a plugin actuator named for each control."""
+    actuators = "".join(f'<plugin name="{name}" instance="soft" site="here"/>' for name in names)
+    return plugin.mjcf(path).replace(
+        '<plugin instance="soft"/>', '<site name="here"/><plugin instance="soft"/>').replace(
+        "</worldbody>", f"</worldbody><actuator>{actuators}</actuator>")
+
+
+@pytest.fixture(scope="module")
+def finger_file(tmp_path_factory):
+    """The pneumatic finger of test_controls (controls push, curl, squeeze), its reduced model
+    written."""
+    from test_controls import finger
+    path = str(tmp_path_factory.mktemp("finger") / "finger")
+    writer.write(ReducedModel(finger(), modes=4, validate=False), path)
+    return path
+
+
+def test_the_controls_are_mujoco_actuators(files, finger_file):
+    """The finger's three controls as plugin actuators, set every step from a curve (ctrl):
+    500 soft steps equal the C runtime's under the same controls, to 1e-9 m."""
+    from test_controls import controls_at
+    model, data = compiled(actuated(finger_file, ("push", "curl", "squeeze")), 0.01)
+    for k in range(501):
+        data.ctrl[:] = controls_at(k)
+        mujoco.mj_step(model, data)
+    alone = native.CModel(finger_file)
+    state = np.zeros(alone.state_size)
+    alone._c.af_rest_state(alone._handle, native._pointer(state))
+    alone.set_constant_force(alone.masses[:, None] * GRAVITY)
+    for k in range(1, 501):
+        alone.set_controls(controls_at(k))
+        alone.advance(state, None, 0.01)
+    x, x_alone = alone._positions(data.plugin_state[plugin.HEADER:]), alone._positions(state)
+    assert np.abs(x_alone - alone.rest_positions).max() > 1e-3, "the controls move the finger"
+    assert np.abs(x - x_alone).max() < 1e-9
+    with pytest.raises(ValueError, match="actuator 'pull' names no control of .*finger .*its "
+                                         "controls: push curl squeeze"):
+        mujoco.MjModel.from_xml_string(actuated(finger_file, ("push", "pull")))

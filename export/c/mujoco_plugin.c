@@ -94,6 +94,52 @@ static int substeps(const mjModel *m, int instance, char *error, size_t size) {
     return (int)count;
 }
 
+/* The model's control named by actuator a of the instance, or -1. */
+static int control_of(const mjModel *m, int a, const af_model *model) {
+    const char *name = mj_id2name(m, mjOBJ_ACTUATOR, a);
+    for (int i = 0; name && i < af_controls(model); i++)
+        if (!strcmp(name, af_control_name(model, i)))
+            return i;
+    return -1;
+}
+
+/* Whether every actuator of the instance is named as one of the model's controls; else 0
+ * with error saying which is not and what the controls are. */
+static int controls_named(const mjModel *m, int instance, const af_model *model, char *error,
+                          size_t size) {
+    for (int a = 0; a < m->nu; a++) {
+        if (m->actuator_plugin[a] != instance || control_of(m, a, model) >= 0)
+            continue;
+        int at = snprintf(error, size, "anisofem.soft: actuator '%s' names no control of %s "
+                          "(an actuator of the plugin is named as the control it sets; its "
+                          "controls:", mj_id2name(m, mjOBJ_ACTUATOR, a) ?
+                          mj_id2name(m, mjOBJ_ACTUATOR, a) : "",
+                          mj_getPluginConfig(m, instance, "file"));
+        for (int i = 0; i < af_controls(model) && at > 0 && (size_t)at < size; i++)
+            at += snprintf(error + at, size - at, " %s", af_control_name(model, i));
+        if (at > 0 && (size_t)at < size)
+            snprintf(error + at, size - at, "%s)", af_controls(model) ? "" : " none");
+        return 0;
+    }
+    return 1;
+}
+
+/* The controls of the instance's actuators (their ctrl), set for the next steps. */
+static int set_controls(const mjModel *m, const mjData *d, int instance, soft *s) {
+    int k = af_controls(s->model), any = 0;
+    double values[64];
+    if (k == 0 || k > 64)
+        return AF_OK;
+    for (int i = 0; i < k; i++)
+        values[i] = af_control_value(s->model, i);
+    for (int a = 0; a < m->nu; a++)
+        if (m->actuator_plugin[a] == instance) {
+            values[control_of(m, a, s->model)] = d->ctrl[a];
+            any = 1;
+        }
+    return any ? af_set_controls(s->model, values) : AF_OK;
+}
+
 /* What is wrong with the instance (its file, its body, its substeps), or "" where nothing. */
 static void check(const mjModel *m, int instance, char *error, size_t size) {
     af_model *model = load(m, instance, error, size);
@@ -110,6 +156,8 @@ static void check(const mjModel *m, int instance, char *error, size_t size) {
                  "body fixed to the world", mj_getPluginConfig(m, instance, "file"),
                  mj_id2name(m, mjOBJ_BODY, b));
     else if (substeps(m, instance, error, size) < 0)
+        ;
+    else if (!controls_named(m, instance, model, error, size))
         ;
     else if (m->opt.integrator == mjINT_RK4)
         snprintf(error, size, "anisofem.soft: the RK4 integrator computes forces at times "
@@ -333,6 +381,11 @@ static void compute(const mjModel *m, mjData *d, int instance, int capability) {
     soft *s = (soft *)d->plugin_data[instance];
     double *state = d->plugin_state + m->plugin_stateadr[instance];
     double at[12], base[12], dt = d->time - state[AT];
+    if (capability & mjPLUGIN_ACTUATOR) {   /* its actuators set controls, push nothing */
+        for (int a = 0; a < m->nu; a++)
+            if (m->actuator_plugin[a] == instance)
+                d->actuator_force[a] = 0.0;
+    }
     if (!(capability & mjPLUGIN_PASSIVE) || !s)
         return;
     pose(m, d, s->body, at);
@@ -344,6 +397,10 @@ static void compute(const mjModel *m, mjData *d, int instance, int capability) {
     }
     if (dt > 0.5 * m->opt.timestep) {
         double impulse[6] = {0, 0, 0, 0, 0, 0};
+        if (set_controls(m, d, instance, s) != AF_OK) {
+            mju_warning("anisofem.soft: at t = %g s: %s", d->time, af_error(s->model));
+            return;
+        }
         for (int k = 0; k < s->substeps; k++) {
             if (advance(m, d, s, state, af_kind(s->model) == AF_FRAMED ? base : NULL,
                         dt / s->substeps, impulse) != AF_OK) {
@@ -362,7 +419,7 @@ mjPLUGIN_LIB_INIT(anisofem_soft) {
     mjpPlugin plugin;
     mjp_defaultPlugin(&plugin);
     plugin.name = "anisofem.soft";
-    plugin.capabilityflags = mjPLUGIN_PASSIVE;
+    plugin.capabilityflags = mjPLUGIN_PASSIVE | mjPLUGIN_ACTUATOR;
     plugin.nattribute = sizeof attributes / sizeof attributes[0];
     plugin.attributes = attributes;
     plugin.nstate = nstate;
