@@ -42,6 +42,7 @@ typedef struct {
     int body;      /* the body that carries it */
     int substeps;
     int n;
+    int free;      /* whether the carrier moves: only then does the soft body pull it */
     double *x, *v; /* the vertices' positions (m) and velocities (m/s) at the state's time */
 } soft;
 
@@ -134,8 +135,9 @@ static int set_controls(const mjModel *m, const mjData *d, int instance, soft *s
         values[i] = af_control_value(s->model, i);
     for (int a = 0; a < m->nu; a++)
         if (m->actuator_plugin[a] == instance) {
-            values[control_of(m, a, s->model)] = d->ctrl[a];
-            any = 1;
+            int i = control_of(m, a, s->model);
+            any |= values[i] != d->ctrl[a];   /* forming the energy costs r^2 to r^3 */
+            values[i] = d->ctrl[a];
         }
     return any ? af_set_controls(s->model, values) : AF_OK;
 }
@@ -270,6 +272,7 @@ static int init(const mjModel *m, mjData *d, int instance) {
         return -1;
     }
     s->body = carrier(m, instance);
+    s->free = moves(m, s->body);
     s->substeps = count;
     s->n = af_vertices(s->model);
     s->x = calloc(3 * (size_t)s->n, sizeof(double));
@@ -321,15 +324,16 @@ static int place(const mjModel *m, mjData *d, soft *s, double *state, const doub
     int code = set_gravity(m, d, s);
     if (code == AF_OK && af_kind(s->model) == AF_FRAMED)
         code = af_carry_state(s->model, state + HEADER, base);
-    world_positions(m, d, s, state, s->x);
+    if (s->free)
+        world_positions(m, d, s, state, s->x);
     memset(s->v, 0, 3 * (size_t)s->n * sizeof(double));
     state[AT] = d->time;
     return code;
 }
 
-/* One soft step of dt to base (NULL: held still): the positions and velocities kept, and
- * the carrier's impulse on the soft body added to pull (6: momentum's change less gravity's
- * impulse, linear then angular about the world's origin). */
+/* One soft step of dt to base (NULL: held still); where the carrier moves, the positions and
+ * velocities kept and the carrier's impulse on the soft body added to pull (6: momentum's
+ * change less gravity's impulse, linear then angular about the world's origin). */
 static int advance(const mjModel *m, mjData *d, soft *s, double *state, const double *base,
                    double dt, double *pull) {
     const double *mass = af_masses(s->model);
@@ -338,7 +342,7 @@ static int advance(const mjModel *m, mjData *d, soft *s, double *state, const do
     if (!x1)
         return AF_NO_MEMORY;
     code = af_step(s->model, state + HEADER, NULL, base, dt);
-    if (code == AF_OK) {
+    if (code == AF_OK && s->free) {
         world_positions(m, d, s, state, x1);
         for (int i = 0; i < s->n; i++) {
             double *x = s->x + 3 * i, *v = s->v + 3 * i, v1[3], g[3], before[3], after[3];
