@@ -236,3 +236,24 @@ def test_the_controls_are_mujoco_actuators(files, finger_file):
     with pytest.raises(ValueError, match="actuator 'pull' names no control of .*finger .*its "
                                          "controls: push curl squeeze"):
         mujoco.MjModel.from_xml_string(actuated(finger_file, ("push", "pull")))
+
+
+def test_the_soft_surface_is_drawn_in_mujocos_scene(files):
+    """mjv_updateScene adds the soft surface's edges as lines (each once), at the soft body's
+    positions."""
+    path, _ = files
+    model, data = compiled(plugin.mjcf(path, pos=(0.0, 0.0, 0.3)), 0.02)
+    for _ in range(20):
+        mujoco.mj_step(model, data)
+    scene = mujoco.MjvScene(model, maxgeom=5000)
+    mujoco.mjv_updateScene(model, data, mujoco.MjvOption(), None, mujoco.MjvCamera(),
+                           mujoco.mjtCatBit.mjCAT_ALL, scene)
+    lines = [scene.geoms[i] for i in range(scene.ngeom)
+             if scene.geoms[i].type == mujoco.mjtGeom.mjGEOM_LINE]
+    alone = native.CModel(path)
+    edges = {tuple(sorted(pair)) for tri in alone.surface
+             for pair in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0]))}
+    assert len(lines) == len(edges)
+    x = alone._positions(data.plugin_state[plugin.HEADER:]) + [0.0, 0.0, 0.3]
+    starts = np.array([g.pos for g in lines])
+    assert np.abs(starts[:, None, :] - x[None]).sum(axis=2).min(axis=1).max() < 1e-6

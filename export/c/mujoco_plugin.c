@@ -44,6 +44,8 @@ typedef struct {
     int n;
     int free;      /* whether the carrier moves: only then does the soft body pull it */
     double *x, *v; /* the vertices' positions (m) and velocities (m/s) at the state's time */
+    int nedge;     /* the surface's edges, drawn in MuJoCo's scene */
+    int *edges;
 } soft;
 
 static const char *attributes[] = {"file", "substeps"};
@@ -252,6 +254,36 @@ static int set_gravity(const mjModel *m, const mjData *d, soft *s) {
     return code;
 }
 
+static int by_pair(const void *a, const void *b) {
+    const int *p = a, *q = b;
+    return p[0] != q[0] ? (p[0] > q[0]) - (p[0] < q[0]) : (p[1] > q[1]) - (p[1] < q[1]);
+}
+
+/* The surface triangles' edges, each once (s->edges, s->nedge); 0 where out of memory. */
+static int surface_edges(soft *s) {
+    int count, kept = 0;
+    const int *tri = af_surface(s->model, &count);
+    int *e = malloc(6 * (size_t)count * sizeof(int));
+    if (!e)
+        return 0;
+    for (int t = 0; t < count; t++)
+        for (int k = 0; k < 3; k++) {
+            int a = tri[3 * t + k], b = tri[3 * t + (k + 1) % 3];
+            e[6 * t + 2 * k] = a < b ? a : b;
+            e[6 * t + 2 * k + 1] = a < b ? b : a;
+        }
+    qsort(e, 3 * (size_t)count, 2 * sizeof(int), by_pair);
+    for (int i = 0; i < 3 * count; i++)
+        if (i == 0 || by_pair(e + 2 * i, e + 2 * (kept - 1)) != 0) {
+            e[2 * kept] = e[2 * i];
+            e[2 * kept + 1] = e[2 * i + 1];
+            kept++;
+        }
+    s->edges = e;
+    s->nedge = kept;
+    return 1;
+}
+
 static int init(const mjModel *m, mjData *d, int instance) {
     char error[1024] = "";
     int count;
@@ -278,7 +310,7 @@ static int init(const mjModel *m, mjData *d, int instance) {
     s->x = calloc(3 * (size_t)s->n, sizeof(double));
     s->v = calloc(3 * (size_t)s->n, sizeof(double));
     d->plugin_data[instance] = (uintptr_t)s;
-    if (!s->x || !s->v) {
+    if (!s->x || !s->v || !surface_edges(s)) {
         mju_warning("anisofem.soft: out of memory");
         return -1;
     }
@@ -291,6 +323,7 @@ static void destroy(mjData *d, int instance) {
         af_free(s->model);
         free(s->x);
         free(s->v);
+        free(s->edges);
         free(s);
     }
     d->plugin_data[instance] = 0;
@@ -419,6 +452,27 @@ static void compute(const mjModel *m, mjData *d, int instance, int capability) {
     apply_pull(m, d, s, state + PULL);
 }
 
+/* The soft body's surface edges as lines in MuJoCo's scene (as far as it has room). */
+static void visualize(const mjModel *m, mjData *d, const mjvOption *opt, mjvScene *scn,
+                      int instance) {
+    soft *s = (soft *)d->plugin_data[instance];
+    const double *state = d->plugin_state + m->plugin_stateadr[instance];
+    static const float rgba[4] = {0.2f, 0.5f, 0.9f, 1.0f};
+    double *x;
+    (void)opt;
+    if (!s || !(x = malloc(3 * (size_t)s->n * sizeof(double))))
+        return;
+    world_positions(m, d, s, state, x);
+    for (int e = 0; e < s->nedge && scn->ngeom < scn->maxgeom; e++) {
+        mjvGeom *g = scn->geoms + scn->ngeom++;
+        mjv_initGeom(g, mjGEOM_NONE, NULL, NULL, NULL, rgba);
+        mjv_connector(g, mjGEOM_LINE, 2.0, x + 3 * s->edges[2 * e],
+                      x + 3 * s->edges[2 * e + 1]);
+        g->category = mjCAT_DECOR;
+    }
+    free(x);
+}
+
 mjPLUGIN_LIB_INIT(anisofem_soft) {
     mjpPlugin plugin;
     mjp_defaultPlugin(&plugin);
@@ -432,5 +486,6 @@ mjPLUGIN_LIB_INIT(anisofem_soft) {
     plugin.copy = copy;
     plugin.reset = reset;
     plugin.compute = compute;
+    plugin.visualize = visualize;
     mjp_registerPlugin(&plugin);
 }
