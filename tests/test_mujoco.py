@@ -20,12 +20,17 @@ from export import mujoco as plugin  # noqa: E402
 GRAVITY = np.array([0.0, 0.0, -9.81])
 
 
+@pytest.fixture(scope="module", autouse=True)
+def registered(tmp_path_factory):
+    """The plugin built in a folder of its own and registered with MuJoCo."""
+    return plugin.load_plugin(str(tmp_path_factory.mktemp("plugin")))
+
+
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
-    """A 0.1 m beam held at x = 0, its reduced and its framed model written, the plugin
-    built and registered: (reduced path, framed path)."""
+    """A 0.1 m beam held at x = 0, its reduced and its framed model written: (reduced path,
+    framed path)."""
     folder = tmp_path_factory.mktemp("mujoco")
-    plugin.load_plugin(str(folder / "lib"))
     mesh = af.box_beam(size=(0.1, 0.02, 0.02), cells=(8, 2, 2))
     scene = af.Scene(mesh, af.Material(1e5, 0.45, 1000.0),
                      fixed=af.metrics.end_vertices(mesh, 0, "min"), gravity=GRAVITY)
@@ -257,3 +262,40 @@ def test_the_soft_surface_is_drawn_in_mujocos_scene(files):
     x = alone._positions(data.plugin_state[plugin.HEADER:]) + [0.0, 0.0, 0.3]
     starts = np.array([g.pos for g in lines])
     assert np.abs(starts[:, None, :] - x[None]).sum(axis=2).min(axis=1).max() < 1e-6
+
+
+def test_a_geom_moves_the_obstacle_it_is_named_for(tmp_path):
+    """The beam 1 cm over the ground with a ball under its tip (the file's obstacles "ground"
+    and "ball"); in MuJoCo a mocap geom named "ball" rises 2 mm over 0.4 s: the ball follows
+    it, pushes the tip up, and the soft body equals the C runtime's with the ball moved alike
+    (af_move_obstacle), to 1e-9 m."""
+    beam = af.box_beam(size=(0.2, 0.02, 0.02), cells=(20, 2, 2))
+    mesh = af.TetMesh(beam.vertices + [0, 0, 0.01 - beam.vertices[:, 2].min()], beam.tets)
+    ball = af.Sphere((0.19, 0.0, 0.0015), 0.008, name="ball")
+    scene = af.Scene(mesh, af.Material(1e5, 0.45, 1000.0), gravity=GRAVITY,
+                     fixed=beam.vertices[:, 0] <= 1e-9,
+                     contact=af.Contact([af.Plane(name="ground"), ball], friction=0.3))
+    path = str(tmp_path / "beam")
+    writer.write(ReducedModel(scene, modes=4, snapshots=6, validate=False), path)
+    xml = plugin.mjcf(path, world='<body name="mover" mocap="true" pos="0.19 0 0.0015">'
+                                  '<geom name="ball" type="sphere" size="0.008" '
+                                  'contype="0" conaffinity="0"/></body>')
+    model, data = compiled(xml, 0.02)
+    rise = [np.array([0.19, 0.0, 0.0015 + 1e-4 * min(k, 20)]) for k in range(41)]
+    for k in range(41):
+        data.mocap_pos[0] = rise[k]
+        mujoco.mj_step(model, data)
+    alone = native.CModel(path)
+    state = np.zeros(alone.state_size)
+    alone._c.af_rest_state(alone._handle, native._pointer(state))
+    alone.set_constant_force(alone.masses[:, None] * GRAVITY)
+    at = np.zeros(3)
+    for k in range(1, 41):
+        assert alone._c.af_move_obstacle(alone._handle, 1, native._pointer(rise[k])) == 0
+        alone.advance(state, None, 0.02)
+    x, x_alone = alone._positions(data.plugin_state[plugin.HEADER:]), alone._positions(state)
+    assert np.abs(x - x_alone).max() < 1e-9
+    alone._c.af_obstacle_position(alone._handle, 1, native._pointer(at))
+    assert np.allclose(at, rise[40])
+    tip = beam.vertices[:, 0] >= 0.2 - 1e-9
+    assert (x[tip, 2] - alone.rest_positions[tip, 2]).mean() > 5e-4, "the ball lifts the tip"

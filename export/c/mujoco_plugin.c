@@ -46,6 +46,9 @@ typedef struct {
     double *x, *v; /* the vertices' positions (m) and velocities (m/s) at the state's time */
     int nedge;     /* the surface's edges, drawn in MuJoCo's scene */
     int *edges;
+    int *geom;     /* per obstacle of the file, the geom named as it (-1: none) */
+    double *from;  /* per obstacle: where it was, in the file, and its geom in the world,
+                      when the soft body was placed (6 each) */
 } soft;
 
 static const char *attributes[] = {"file", "substeps"};
@@ -309,8 +312,12 @@ static int init(const mjModel *m, mjData *d, int instance) {
     s->n = af_vertices(s->model);
     s->x = calloc(3 * (size_t)s->n, sizeof(double));
     s->v = calloc(3 * (size_t)s->n, sizeof(double));
+    s->geom = malloc(((size_t)af_obstacles(s->model) + 1) * sizeof(int));
+    s->from = malloc((6 * (size_t)af_obstacles(s->model) + 1) * sizeof(double));
+    for (int i = 0; s->geom && i < af_obstacles(s->model); i++)
+        s->geom[i] = mj_name2id(m, mjOBJ_GEOM, af_obstacle_name(s->model, i));
     d->plugin_data[instance] = (uintptr_t)s;
-    if (!s->x || !s->v || !surface_edges(s)) {
+    if (!s->x || !s->v || !s->geom || !s->from || !surface_edges(s)) {
         mju_warning("anisofem.soft: out of memory");
         return -1;
     }
@@ -324,6 +331,8 @@ static void destroy(mjData *d, int instance) {
         free(s->x);
         free(s->v);
         free(s->edges);
+        free(s->geom);
+        free(s->from);
         free(s);
     }
     d->plugin_data[instance] = 0;
@@ -338,6 +347,7 @@ static void copy(mjData *dest, const mjModel *m, const mjData *src, int instance
     to = (soft *)dest->plugin_data[instance];
     memcpy(to->x, from->x, 3 * (size_t)from->n * sizeof(double));
     memcpy(to->v, from->v, 3 * (size_t)from->n * sizeof(double));
+    memcpy(to->from, from->from, 6 * (size_t)af_obstacles(from->model) * sizeof(double));
     if (state_placed(m, dest, instance))
         set_gravity(m, dest, to);
 }
@@ -360,8 +370,34 @@ static int place(const mjModel *m, mjData *d, soft *s, double *state, const doub
     if (s->free)
         world_positions(m, d, s, state, s->x);
     memset(s->v, 0, 3 * (size_t)s->n * sizeof(double));
+    for (int i = 0; i < af_obstacles(s->model); i++) {
+        af_obstacle_position(s->model, i, s->from + 6 * i);
+        if (s->geom[i] >= 0)
+            mju_copy3(s->from + 6 * i + 3, d->geom_xpos + 3 * s->geom[i]);
+    }
     state[AT] = d->time;
     return code;
+}
+
+/* Each obstacle of the file a geom is named for, moved by the geom's translation since the
+ * soft body was placed (into the file's coordinates: a reduced model's carrier is fixed). */
+static int move_obstacles(const mjModel *m, const mjData *d, soft *s) {
+    double at[12];
+    pose(m, d, s->body, at);
+    for (int i = 0; i < af_obstacles(s->model); i++) {
+        double shift[3], target[3];
+        if (s->geom[i] < 0)
+            continue;
+        for (int k = 0; k < 3; k++)
+            shift[k] = d->geom_xpos[3 * s->geom[i] + k] - s->from[6 * i + 3 + k];
+        for (int k = 0; k < 3; k++)
+            target[k] = s->from[6 * i + k] + (af_kind(s->model) == AF_REDUCED
+                        ? at[k] * shift[0] + at[4 + k] * shift[1] + at[8 + k] * shift[2]
+                        : shift[k]);
+        if (af_move_obstacle(s->model, i, target) != AF_OK)
+            return AF_BAD_INPUT;
+    }
+    return AF_OK;
 }
 
 /* One soft step of dt to base (NULL: held still); where the carrier moves, the positions and
@@ -434,7 +470,7 @@ static void compute(const mjModel *m, mjData *d, int instance, int capability) {
     }
     if (dt > 0.5 * m->opt.timestep) {
         double impulse[6] = {0, 0, 0, 0, 0, 0};
-        if (set_controls(m, d, instance, s) != AF_OK) {
+        if (set_controls(m, d, instance, s) != AF_OK || move_obstacles(m, d, s) != AF_OK) {
             mju_warning("anisofem.soft: at t = %g s: %s", d->time, af_error(s->model));
             return;
         }
