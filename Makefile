@@ -9,7 +9,8 @@ PY := $(VENV)/bin/python
 PYTEST_ARGS ?=
 TEST_WORKERS ?= 2
 
-.PHONY: demo test bench pretrained clean web web-assets test-web install-mpi test-mpi install-csharp
+.PHONY: demo test bench pretrained clean web web-assets test-web install-mpi test-mpi install-csharp \
+	mujoco
 
 $(VENV)/.fem: setup.cfg setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -42,6 +43,11 @@ install-mpi: $(VENV)/.mpi
 
 test-mpi: $(VENV)/.mpi
 	$(PY) -m pytest -q $(PYTEST_ARGS) tests/mpi
+
+# The MuJoCo plugin (export/mujoco.py): compiled against the installed mujoco wheel into the
+# cache folder it is loaded from (it is also built on first use).
+mujoco: $(VENV)/.installed
+	$(PY) -c "from export import mujoco; print(mujoco.build_plugin())"
 
 # Mono's C# compiler and runtime from the distribution's packages (about 25 MB), so that the
 # test of the C runtime's C# example runs (it skips itself without them).

@@ -299,3 +299,9 @@ def test_a_geom_moves_the_obstacle_it_is_named_for(tmp_path):
     assert np.allclose(at, rise[40])
     tip = beam.vertices[:, 0] >= 0.2 - 1e-9
     assert (x[tip, 2] - alone.rest_positions[tip, 2]).mean() > 5e-4, "the ball lifts the tip"
+
+
+def test_without_mujoco_the_plugin_says_how_to_install_it(monkeypatch):
+    monkeypatch.setitem(sys.modules, "mujoco", None)
+    with pytest.raises(ImportError, match="pip install mujoco"):
+        plugin.build_plugin()
