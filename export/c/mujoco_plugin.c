@@ -1,6 +1,7 @@
-/* anisofem's soft body as a MuJoCo engine plugin ("anisofem.soft", passive): a model file
- * written by `python -m export reduced [--framed]`, stepped by this runtime (anisofem.h) as
- * MuJoCo steps, carried by the body that names the plugin's instance.
+/* anisofem's soft body as a MuJoCo engine plugin ("anisofem.soft"): a model file written by
+ * `python -m export reduced [--framed]`, stepped by this runtime (anisofem.h) as MuJoCo
+ * steps, carried by the body that names the plugin's instance (export/README.md, "In
+ * MuJoCo"; export/mujoco.py builds and registers it).
  *
  *   <extension>
  *     <plugin plugin="anisofem.soft">
@@ -11,16 +12,20 @@
  *     </plugin>
  *   </extension>
  *   <worldbody> <body name="hand" pos="0 0 0.5"> <plugin instance="finger"/> </body> </worldbody>
+ *   <actuator> <plugin name="push" instance="finger" site="..."/> </actuator>  <!-- a control -->
  *
  * The file's coordinates are the carrying body's: its held vertices sit where the body puts
  * them, x = R_body x0 + p_body. A reduced (linear) model holds them still, so its body must
  * not move (fixed to the world); a framed model's move with the body. Gravity is MuJoCo's.
  *
- * The soft state lives in MuJoCo's plugin state (mjData.plugin_state, saved and reset with
- * it): [the time it is at, the runtime's state (af_state_size doubles)]. The first passive
- * forces after a reset place it at rest where its body is; each later time they are computed
- * past the soft state's (once per mj_step), the soft body steps there in `substeps`
- * backward-Euler steps, the held vertices where the body is then.
+ * Passive: the soft state lives in MuJoCo's plugin state (mjData.plugin_state, saved and reset
+ * with it). The first passive forces after a reset place it at rest where its body is; each
+ * later time they are computed past the soft state's (once per mj_step), the soft body steps
+ * there in `substeps` backward-Euler steps, the held vertices where the body is then, with the
+ * controls its actuators' ctrl and each obstacle of the file a geom is named for moved with
+ * the geom; where the body moves, the soft body pulls it back by the impulse the body gave it.
+ * Actuator: the plugin's actuators only carry controls (they push nothing). Visualize: the
+ * surface's edges as lines.
  */
 #include <stdint.h>
 #include <stdio.h>
@@ -132,10 +137,12 @@ static int controls_named(const mjModel *m, int instance, const af_model *model,
 
 /* The controls of the instance's actuators (their ctrl), set for the next steps. */
 static int set_controls(const mjModel *m, const mjData *d, int instance, soft *s) {
-    int k = af_controls(s->model), any = 0;
-    double values[64];
-    if (k == 0 || k > 64)
+    int k = af_controls(s->model), any = 0, code;
+    double *values;
+    if (k == 0)
         return AF_OK;
+    if (!(values = malloc((size_t)k * sizeof(double))))
+        return AF_NO_MEMORY;
     for (int i = 0; i < k; i++)
         values[i] = af_control_value(s->model, i);
     for (int a = 0; a < m->nu; a++)
@@ -144,7 +151,9 @@ static int set_controls(const mjModel *m, const mjData *d, int instance, soft *s
             any |= values[i] != d->ctrl[a];   /* forming the energy costs r^2 to r^3 */
             values[i] = d->ctrl[a];
         }
-    return any ? af_set_controls(s->model, values) : AF_OK;
+    code = any ? af_set_controls(s->model, values) : AF_OK;
+    free(values);
+    return code;
 }
 
 /* What is wrong with the instance (its file, its body, its substeps), or "" where nothing. */
