@@ -363,10 +363,13 @@ def _mujoco(argv):
     parser.add_argument("--body", default="soft", help="the carrying body's name "
                         "(default %(default)s)")
     parser.add_argument("--substeps", type=int, default=1,
-                        help="soft steps per MuJoCo step (default %(default)s)")
+                        help="each soft step divided in this many (default %(default)s)")
+    parser.add_argument("--timestep", type=float, default=None,
+                        help="the soft time step, s (default: MuJoCo's)")
     args = parser.parse_args(argv)
     try:
-        text = plugin.mjcf(args.file, body=args.body, substeps=args.substeps)
+        text = plugin.mjcf(args.file, body=args.body, substeps=args.substeps,
+                           timestep=args.timestep)
         plugin.load_plugin()
         plugin.mujoco_module().MjModel.from_xml_string(text)
     except (RuntimeError,) + BAD_INPUT as err:

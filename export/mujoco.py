@@ -9,7 +9,7 @@ headers and library, and the MJCF that places a model file on a body.
     data = mujoco.MjData(model)
     mujoco.mj_step(model, data)
 
-    python -m export mujoco models/finger [--body hand] [--substeps 1]   # prints the MJCF
+    python -m export mujoco models/finger [--body hand] [--substeps 1] [--timestep 0.01]
 """
 import os
 from xml.sax.saxutils import quoteattr
@@ -65,20 +65,25 @@ def load_plugin(folder=None):
     return path
 
 
-def mjcf(file, body="soft", substeps=1, pos=(0.0, 0.0, 0.0), name="soft", world=""):
+def mjcf(file, body="soft", substeps=1, pos=(0.0, 0.0, 0.0), name="soft", world="",
+         timestep=None):
     """An MJCF model that places the model file `file` (path without extension) on a body
     named `body` at pos (3,), m, fixed to the world: its <extension> declares the instance
-    `name` with its file and substeps, the body names it. world: more MJCF for the worldbody
-    (other bodies, lights, a floor)."""
+    `name` with its file, substeps and soft time step (timestep, s; None: MuJoCo's), the body
+    names it. world: more MJCF for the worldbody (other bodies, lights, a floor)."""
     if not isinstance(substeps, int) or substeps < 1:
         raise ValueError(f"substeps: expected a whole number >= 1, got {substeps!r}")
+    if timestep is not None and not (isinstance(timestep, (int, float)) and timestep > 0):
+        raise ValueError(f"timestep: expected a time step > 0 s, got {timestep!r}")
+    step = ("" if timestep is None else
+            f'\n        <config key="timestep" value="{float(timestep):.17g}"/>')
     where = " ".join(f"{float(v):.17g}" for v in pos)
     return f"""<mujoco model={quoteattr(name)}>
   <extension>
     <plugin plugin="{NAME}">
       <instance name={quoteattr(name)}>
         <config key="file" value={quoteattr(os.fspath(file))}/>
-        <config key="substeps" value="{substeps}"/>
+        <config key="substeps" value="{substeps}"/>{step}
       </instance>
     </plugin>
   </extension>

@@ -67,6 +67,28 @@ def test_the_plugin_steps_like_the_c_runtime(files):
     assert np.abs(x - x_alone).max() < 1e-9
 
 
+def test_the_soft_body_steps_at_its_own_time_step(files):
+    """MuJoCo at 0.002 s, the soft body at 0.01 s (config timestep): it steps every fifth
+    MuJoCo step, as the C runtime alone at 0.01 s (1e-9 m after 100 soft steps)."""
+    path, _ = files
+    model, data = compiled(plugin.mjcf(path, timestep=0.01), 0.002)
+    for _ in range(501):
+        mujoco.mj_step(model, data)
+    alone = native.CModel(path)
+    state = np.zeros(alone.state_size)
+    alone._c.af_rest_state(alone._handle, native._pointer(state))
+    alone.set_constant_force(alone.masses[:, None] * GRAVITY)
+    for _ in range(100):
+        alone.advance(state, None, 0.01)
+    assert data.plugin_state[0] == pytest.approx(1.0)
+    assert np.abs(alone._positions(data.plugin_state[plugin.HEADER:])
+                  - alone._positions(state)).max() < 1e-9
+    with pytest.raises(ValueError, match="timestep: expected a time step > 0 s, got '-1'"):
+        mujoco.MjModel.from_xml_string(plugin.mjcf(path).replace(
+            '<config key="substeps" value="1"/>',
+            '<config key="substeps" value="1"/><config key="timestep" value="-1"/>'))
+
+
 def test_a_framed_model_rides_its_body(files):
     """The framed beam on a body 0.5 m up spun about z at 2 rad/s: placed where the body
     starts, its held vertices are where the body carries them at the soft state's time (1e-12
@@ -154,14 +176,16 @@ def test_a_framed_state_is_carried_rigidly(files):
 
 
 
-@pytest.mark.parametrize("integrator", ["Euler", "implicitfast"])
-def test_a_free_body_and_its_soft_body_keep_their_momentum(files, integrator):
+@pytest.mark.parametrize("integrator, every", [("Euler", 1), ("implicitfast", 1),
+                                               ("implicitfast", 4)])
+def test_a_free_body_and_its_soft_body_keep_their_momentum(files, integrator, every):
     """No gravity: a free sphere carrying the framed beam, pushed and spun. The soft body pulls
     its carrier by the carrier's impulse on it (its momentum's change), so the two together
     keep their linear and angular momentum (about the origin) to 1e-6 over 1,000 steps, while
-    the soft body carries a quarter of the one and most of the other."""
+    the soft body carries a quarter of the one and most of the other; also where the soft body
+    steps every fourth MuJoCo step (its pull spread over the four)."""
     _, path = files
-    xml = plugin.mjcf(path).replace(
+    xml = plugin.mjcf(path, timestep=0.005 * every).replace(
         '<plugin instance="soft"/>', '<freejoint/><geom type="sphere" size="0.02" mass="0.2"/>'
         '<plugin instance="soft"/>').replace(
         "<worldbody>", f'<option integrator="{integrator}" gravity="0 0 0"/><worldbody>')
@@ -178,7 +202,7 @@ def test_a_free_body_and_its_soft_body_keep_their_momentum(files, integrator):
         v, w = data.qvel[:3], R @ data.qvel[3:6]
         state = data.plugin_state[plugin.HEADER:]
         x = alone._positions(state)
-        u = (x - alone._positions(state[half:])) / model.opt.timestep
+        u = (x - alone._positions(state[half:])) / (0.005 * every)
         mu = alone.masses[:, None] * u
         rigid = np.concatenate([model.body_mass[body] * v, model.body_mass[body]
                                 * np.cross(data.qpos[:3], v) + inertia @ w])
@@ -186,7 +210,7 @@ def test_a_free_body_and_its_soft_body_keep_their_momentum(files, integrator):
 
     mujoco.mj_step(model, data)
     start = sum(momenta())
-    for _ in range(1000):
+    for _ in range(1000 + every - 1):   # to where the last soft step's pull is all applied
         mujoco.mj_step(model, data)
     rigid, soft = momenta()
     for part in (slice(0, 3), slice(3, 6)):

@@ -7,7 +7,8 @@
  *     <plugin plugin="anisofem.soft">
  *       <instance name="finger">
  *         <config key="file" value="models/finger"/>   <!-- path without extension -->
- *         <config key="substeps" value="1"/>            <!-- soft steps per MuJoCo step -->
+ *         <config key="timestep" value="0.01"/>         <!-- the soft step, s (MuJoCo's) -->
+ *         <config key="substeps" value="1"/>            <!-- each divided in this many -->
  *       </instance>
  *     </plugin>
  *   </extension>
@@ -20,8 +21,9 @@
  *
  * Passive: the soft state lives in MuJoCo's plugin state (mjData.plugin_state, saved and reset
  * with it). The first passive forces after a reset place it at rest where its body is; each
- * later time they are computed past the soft state's (once per mj_step), the soft body steps
- * there in `substeps` backward-Euler steps, the held vertices where the body is then, with the
+ * later time they are computed a `timestep` past the soft state's (default: once per mj_step),
+ * the soft body steps there in `substeps` backward-Euler steps, the held vertices where the
+ * body is then, with the
  * controls its actuators' ctrl and each obstacle of the file a geom is named for moved with
  * the geom; where the body moves, the soft body pulls it back by the impulse the body gave it.
  * Actuator: the plugin's actuators only carry controls (they push nothing). Visualize: the
@@ -46,6 +48,7 @@ typedef struct {
     af_model *model;
     int body;      /* the body that carries it */
     int substeps;
+    double timestep; /* the soft step, s; 0: MuJoCo's */
     int n;
     int free;      /* whether the carrier moves: only then does the soft body pull it */
     double *x, *v; /* the vertices' positions (m) and velocities (m/s) at the state's time */
@@ -56,7 +59,7 @@ typedef struct {
                       when the soft body was placed (6 each) */
 } soft;
 
-static const char *attributes[] = {"file", "substeps"};
+static const char *attributes[] = {"file", "substeps", "timestep"};
 
 /* The model file the instance names, loaded; NULL with the reason in error. */
 static af_model *load(const mjModel *m, int instance, char *error, size_t size) {
@@ -103,6 +106,22 @@ static int substeps(const mjModel *m, int instance, char *error, size_t size) {
         return -1;
     }
     return (int)count;
+}
+
+/* The soft step the instance asks for, s (0: MuJoCo's), or -1 with error saying why not. */
+static double timestep(const mjModel *m, int instance, char *error, size_t size) {
+    const char *text = mj_getPluginConfig(m, instance, "timestep");
+    char *end;
+    double dt;
+    if (!text || !*text)
+        return 0.0;
+    dt = strtod(text, &end);
+    if (*end || !(dt > 0.0) || !(dt < 1e3)) {
+        snprintf(error, size, "anisofem.soft: timestep: expected a time step > 0 s, got '%s'",
+                 text);
+        return -1.0;
+    }
+    return dt;
 }
 
 /* The model's control named by actuator a of the instance, or -1. */
@@ -171,7 +190,7 @@ static void check(const mjModel *m, int instance, char *error, size_t size) {
                  "still, on body '%s', which moves: export it with --framed, or carry it on a "
                  "body fixed to the world", mj_getPluginConfig(m, instance, "file"),
                  mj_id2name(m, mjOBJ_BODY, b));
-    else if (substeps(m, instance, error, size) < 0)
+    else if (substeps(m, instance, error, size) < 0 || timestep(m, instance, error, size) < 0)
         ;
     else if (!controls_named(m, instance, model, error, size))
         ;
@@ -318,6 +337,7 @@ static int init(const mjModel *m, mjData *d, int instance) {
     s->body = carrier(m, instance);
     s->free = moves(m, s->body);
     s->substeps = count;
+    s->timestep = timestep(m, instance, error, sizeof error);
     s->n = af_vertices(s->model);
     s->x = calloc(3 * (size_t)s->n, sizeof(double));
     s->v = calloc(3 * (size_t)s->n, sizeof(double));
@@ -477,7 +497,7 @@ static void compute(const mjModel *m, mjData *d, int instance, int capability) {
             mju_warning("anisofem.soft: %s", af_error(s->model));
         return;
     }
-    if (dt > 0.5 * m->opt.timestep) {
+    if (dt > (s->timestep > 0.0 ? s->timestep : m->opt.timestep) - 0.5 * m->opt.timestep) {
         double impulse[6] = {0, 0, 0, 0, 0, 0};
         if (set_controls(m, d, instance, s) != AF_OK || move_obstacles(m, d, s) != AF_OK) {
             mju_warning("anisofem.soft: at t = %g s: %s", d->time, af_error(s->model));
