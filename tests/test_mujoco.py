@@ -47,6 +47,20 @@ def compiled(xml, dt):
     return model, mujoco.MjData(model)
 
 
+def alone(path, steps, dt, before_each=None):
+    """The C runtime's (CModel, state) after `steps` steps of dt s from rest under gravity,
+    stepping the file by itself; before_each(model, k) for k = 1 .. steps sets its inputs."""
+    c = native.CModel(path)
+    state = np.zeros(c.state_size)
+    c._c.af_rest_state(c._handle, native._pointer(state))
+    c.set_constant_force(c.masses[:, None] * GRAVITY)
+    for k in range(1, steps + 1):
+        if before_each is not None:
+            before_each(c, k)
+        c.advance(state, None, dt)
+    return c, state
+
+
 def test_the_plugin_steps_like_the_c_runtime(files):
     """The beam under gravity, its body fixed: after 501 MuJoCo steps of 0.02 s its state (500
     soft steps: the first computes at t = 0) equals the C runtime's stepped alone, to 1e-9."""
@@ -54,16 +68,11 @@ def test_the_plugin_steps_like_the_c_runtime(files):
     model, data = compiled(plugin.mjcf(path), 0.02)
     for _ in range(501):
         mujoco.mj_step(model, data)
-    alone = native.CModel(path)
-    state = np.zeros(alone.state_size)
-    alone._c.af_rest_state(alone._handle, native._pointer(state))
-    alone.set_constant_force(alone.masses[:, None] * GRAVITY)
-    for _ in range(500):
-        alone.advance(state, None, 0.02)
+    c, state = alone(path, 500, 0.02)
     soft = data.plugin_state[plugin.HEADER:]
     assert data.plugin_state[0] == pytest.approx(10.0)
-    x, x_alone = alone._positions(soft), alone._positions(state)
-    assert (x_alone - alone.rest_positions)[:, 2].min() < -1e-3, "the beam sags"
+    x, x_alone = c._positions(soft), c._positions(state)
+    assert (x_alone - c.rest_positions)[:, 2].min() < -1e-3, "the beam sags"
     assert np.abs(x - x_alone).max() < 1e-9
 
 
@@ -74,15 +83,10 @@ def test_the_soft_body_steps_at_its_own_time_step(files):
     model, data = compiled(plugin.mjcf(path, timestep=0.01), 0.002)
     for _ in range(501):
         mujoco.mj_step(model, data)
-    alone = native.CModel(path)
-    state = np.zeros(alone.state_size)
-    alone._c.af_rest_state(alone._handle, native._pointer(state))
-    alone.set_constant_force(alone.masses[:, None] * GRAVITY)
-    for _ in range(100):
-        alone.advance(state, None, 0.01)
+    c, state = alone(path, 100, 0.01)
     assert data.plugin_state[0] == pytest.approx(1.0)
-    assert np.abs(alone._positions(data.plugin_state[plugin.HEADER:])
-                  - alone._positions(state)).max() < 1e-9
+    assert np.abs(c._positions(data.plugin_state[plugin.HEADER:])
+                  - c._positions(state)).max() < 1e-9
     with pytest.raises(ValueError, match="timestep: expected a time step > 0 s, got '-1'"):
         mujoco.MjModel.from_xml_string(plugin.mjcf(path).replace(
             '<config key="substeps" value="1"/>',
@@ -103,11 +107,11 @@ def test_a_framed_model_rides_its_body(files):
         mujoco.mj_step(model, data)
     body = model.body("soft").id
     R, p = data.xmat[body].reshape(3, 3), data.xpos[body]   # at the soft state's time
-    alone = native.CModel(path)
-    x = alone._positions(data.plugin_state[plugin.HEADER:])
-    held = alone.held.all(axis=1)
-    assert np.abs(x[held] - (alone.rest_positions[held] @ R.T + p)).max() < 1e-12
-    carried = alone.rest_positions @ R.T + p
+    runtime = native.CModel(path)
+    x = runtime._positions(data.plugin_state[plugin.HEADER:])
+    held = runtime.held.all(axis=1)
+    assert np.abs(x[held] - (runtime.rest_positions[held] @ R.T + p)).max() < 1e-12
+    carried = runtime.rest_positions @ R.T + p
     assert 1e-4 < np.abs(x - carried).max() < 0.05
 
 
@@ -193,17 +197,17 @@ def test_a_free_body_and_its_soft_body_keep_their_momentum(files, integrator, ev
     model.opt.timestep = 0.005
     data = mujoco.MjData(model)
     data.qvel[:] = [0.05, -0.02, 0.01, 0.5, 1.0, 2.0]
-    body, alone = model.body("soft").id, native.CModel(path)
-    half = alone.state_size // 2
+    body, runtime = model.body("soft").id, native.CModel(path)
+    half = runtime.state_size // 2
 
     def momenta():   # the rigid body's at its time, the soft body's a step before (its state)
         R = data.xmat[body].reshape(3, 3)
         inertia = R @ np.diag(model.body_inertia[body]) @ R.T
         v, w = data.qvel[:3], R @ data.qvel[3:6]
         state = data.plugin_state[plugin.HEADER:]
-        x = alone._positions(state)
-        u = (x - alone._positions(state[half:])) / (0.005 * every)
-        mu = alone.masses[:, None] * u
+        x = runtime._positions(state)
+        u = (x - runtime._positions(state[half:])) / (0.005 * every)
+        mu = runtime.masses[:, None] * u
         rigid = np.concatenate([model.body_mass[body] * v, model.body_mass[body]
                                 * np.cross(data.qpos[:3], v) + inertia @ w])
         return rigid, np.concatenate([mu.sum(axis=0), np.cross(x, mu).sum(axis=0)])
@@ -252,15 +256,9 @@ def test_the_controls_are_mujoco_actuators(files, finger_file):
     for k in range(501):
         data.ctrl[:] = controls_at(k)
         mujoco.mj_step(model, data)
-    alone = native.CModel(finger_file)
-    state = np.zeros(alone.state_size)
-    alone._c.af_rest_state(alone._handle, native._pointer(state))
-    alone.set_constant_force(alone.masses[:, None] * GRAVITY)
-    for k in range(1, 501):
-        alone.set_controls(controls_at(k))
-        alone.advance(state, None, 0.01)
-    x, x_alone = alone._positions(data.plugin_state[plugin.HEADER:]), alone._positions(state)
-    assert np.abs(x_alone - alone.rest_positions).max() > 1e-3, "the controls move the finger"
+    c, state = alone(finger_file, 500, 0.01, lambda c, k: c.set_controls(controls_at(k)))
+    x, x_alone = c._positions(data.plugin_state[plugin.HEADER:]), c._positions(state)
+    assert np.abs(x_alone - c.rest_positions).max() > 1e-3, "the controls move the finger"
     assert np.abs(x - x_alone).max() < 1e-9
     with pytest.raises(ValueError, match="actuator 'pull' names no control of .*finger .*its "
                                          "controls: push curl squeeze"):
@@ -279,11 +277,11 @@ def test_the_soft_surface_is_drawn_in_mujocos_scene(files):
                            mujoco.mjtCatBit.mjCAT_ALL, scene)
     lines = [scene.geoms[i] for i in range(scene.ngeom)
              if scene.geoms[i].type == mujoco.mjtGeom.mjGEOM_LINE]
-    alone = native.CModel(path)
-    edges = {tuple(sorted(pair)) for tri in alone.surface
+    runtime = native.CModel(path)
+    edges = {tuple(sorted(pair)) for tri in runtime.surface
              for pair in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0]))}
     assert len(lines) == len(edges)
-    x = alone._positions(data.plugin_state[plugin.HEADER:]) + [0.0, 0.0, 0.3]
+    x = runtime._positions(data.plugin_state[plugin.HEADER:]) + [0.0, 0.0, 0.3]
     starts = np.array([g.pos for g in lines])
     assert np.abs(starts[:, None, :] - x[None]).sum(axis=2).min(axis=1).max() < 1e-6
 
@@ -309,20 +307,16 @@ def test_a_geom_moves_the_obstacle_it_is_named_for(tmp_path):
     for k in range(41):
         data.mocap_pos[0] = rise[k]
         mujoco.mj_step(model, data)
-    alone = native.CModel(path)
-    state = np.zeros(alone.state_size)
-    alone._c.af_rest_state(alone._handle, native._pointer(state))
-    alone.set_constant_force(alone.masses[:, None] * GRAVITY)
-    at = np.zeros(3)
-    for k in range(1, 41):
-        assert alone._c.af_move_obstacle(alone._handle, 1, native._pointer(rise[k])) == 0
-        alone.advance(state, None, 0.02)
-    x, x_alone = alone._positions(data.plugin_state[plugin.HEADER:]), alone._positions(state)
+    def move_ball(c, k):
+        assert c._c.af_move_obstacle(c._handle, 1, native._pointer(rise[k])) == 0
+    c, state = alone(path, 40, 0.02, move_ball)
+    x, x_alone = c._positions(data.plugin_state[plugin.HEADER:]), c._positions(state)
     assert np.abs(x - x_alone).max() < 1e-9
-    alone._c.af_obstacle_position(alone._handle, 1, native._pointer(at))
+    at = np.zeros(3)
+    c._c.af_obstacle_position(c._handle, 1, native._pointer(at))
     assert np.allclose(at, rise[40])
     tip = beam.vertices[:, 0] >= 0.2 - 1e-9
-    assert (x[tip, 2] - alone.rest_positions[tip, 2]).mean() > 5e-4, "the ball lifts the tip"
+    assert (x[tip, 2] - c.rest_positions[tip, 2]).mean() > 5e-4, "the ball lifts the tip"
 
 
 def test_without_mujoco_the_plugin_says_how_to_install_it(monkeypatch):

@@ -64,7 +64,7 @@ class SelfContact:
                  itself=True, near=None):
         ipctk = self.ipctk = ipctk_module()
         self.surfaces = tuple(surfaces)
-        self.mesh, owner = collision_mesh(mesh, self.surfaces, itself)
+        self.mesh, owner, _ = collision_mesh(mesh, self.surfaces, itself)
         self.dhat = dhat
         self.near = near
         self.barrier = ipctk.BarrierPotential(dhat, kappa * SCALE / dhat ** 2)
@@ -328,7 +328,7 @@ def surface_share(mesh, surface, x, delta):
     """The largest share in (0, 1] of a move delta (3,) m of the Surface `surface`, the body
     of `mesh` held at x (n, 3), along which it comes no nearer to the body than a tenth of
     their nearest distance now (only what is nearer than the move can be met)."""
-    cm, _ = collision_mesh(mesh, (surface,), itself=False)
+    cm = collision_mesh(mesh, (surface,), itself=False)[0]
     V0, V1 = (cm.vertices(np.asfortranarray(np.vstack([x, surface.vertices + d])))
               for d in (0.0, delta))
     return free_share(cm, V0, V1, float(np.linalg.norm(delta)))
@@ -338,8 +338,9 @@ def collision_mesh(mesh, surfaces=(), itself=True):
     """(ipctk's CollisionMesh of the mesh's boundary triangles and the surfaces' (their
     vertices after the mesh's, in order), whose pairs are the body's with itself (itself) and
     with each surface, never a surface's with itself or another; (v,) int the owner of each of
-    its vertices, 0 the body, k the k-th surface). Built once per mesh and set of surfaces
-    (every step reads it)."""
+    its vertices, 0 the body, k the k-th surface; (v,) int the index of each among the mesh's
+    vertices then the surfaces'). Built once per mesh and set of surfaces (every step reads
+    it)."""
     ipctk = ipctk_module()
     key = (itself,) + tuple(id(o.triangles) for o in surfaces)
     built = _COLLISION_MESHES.setdefault(mesh, {})
@@ -353,8 +354,9 @@ def collision_mesh(mesh, surfaces=(), itself=True):
         rest = np.vstack([mesh.vertices] + [o.vertices for o in surfaces])
         cm = ipctk.CollisionMesh.build_from_full_mesh(np.asfortranarray(rest),
                                                       ipctk.edges(faces), faces)
-        full = cm.vertices(np.asfortranarray(np.repeat(np.arange(len(rest), dtype=float)[:, None],
-                                                       3, axis=1)))[:, 0]   # its full ids
+        ids = np.repeat(np.arange(len(rest), dtype=float)[:, None], 3, axis=1)
+        # its full ids (ipctk maps them by a sparse product: 7.9999999 for 8)
+        full = np.rint(cm.vertices(np.asfortranarray(ids))[:, 0]).astype(int)
         ends = np.cumsum([mesh.n_vertices] + [len(o.vertices) for o in surfaces])
         owner = np.searchsorted(ends, full, side="right")
         if surfaces:   # ipctk keeps the full mesh's order: the body's vertices come first
@@ -364,7 +366,7 @@ def collision_mesh(mesh, surfaces=(), itself=True):
                                    "of the surfaces' pairs needs the body's first")
             cm.can_collide = (ipctk.make_static_obstacle_filter(int((~fixed).sum())) if itself
                               else ipctk.make_vertex_patches_filter(fixed.astype(np.int32)))
-        built[key] = ([o.triangles for o in surfaces], cm, owner)
+        built[key] = ([o.triangles for o in surfaces], cm, owner, full)
     return built[key][1:]
 
 

@@ -127,11 +127,12 @@ SHIFT_SHARE = 1e-6
 class HeldFactor:
     """K^-1 over the unknowns outside the free bodies (`kept`, indices among N free unknowns),
     the free bodies' left at 0: the held part's static responses (a free body's K is
-    singular). solve(b) (N,) -> (N,)."""
+    singular). K: that part of K (CSC); solve(b) (N,) -> (N,)."""
 
     def __init__(self, K, kept, size):
         self.kept, self.size = kept, size
-        self.lu = spla.splu(K[kept][:, kept].tocsc())
+        self.K = K[kept][:, kept].tocsc()
+        self.lu = spla.splu(self.K)
 
     def solve(self, b):
         out = np.zeros(self.size)

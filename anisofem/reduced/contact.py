@@ -53,13 +53,11 @@ class ReducedContact:
         self.U = np.ascontiguousarray(self.basis[nodes])
         self.U2 = self.U.reshape(-1, r)
         self.x0 = x0[nodes]
+        self.nodes_carried = carrying[nodes, None].astype(float)
         self.rest, self.carrying, self.mesh, self.near = x0, carrying, scene.mesh, None
         if scene.contact.self_contact:
-            cm = collision_mesh(scene.mesh)[0]
+            cm, _, full = collision_mesh(scene.mesh)
             self.near = NearPairs(cm, self.term.dhat, MARGIN_SHARE * self.term.dhat)
-            ids = np.repeat(np.arange(len(x0), dtype=float)[:, None], 3, axis=1)
-            full = cm.vertices(np.asfortranarray(ids))[:, 0]
-            full = np.rint(full).astype(int)
             self.surface_rest, self.surface_carried = x0[full], carrying[full]
             self.surface_basis = np.ascontiguousarray(self.basis[full].reshape(-1, r))
 
@@ -67,7 +65,7 @@ class ReducedContact:
         """(k, 3) the surface nodes at coordinates q (r,), the carried ones moved by shift
         (3,), m."""
         x = self.x0 + (self.U2 @ q).reshape(-1, 3)
-        return x if shift is None else x + self.carrying[self.term.nodes, None] * shift
+        return x if shift is None else x + self.nodes_carried * shift
 
     def surface(self, q, shift=None):
         """(v, 3) the collision mesh's vertices at coordinates q, the carried ones moved by
@@ -118,8 +116,8 @@ class Touching:
         return self._x if at is not None and np.array_equal(at, q) else self.where(q)
 
     def energy(self, q):
-        """The barrier's and friction's energy at q, J (inf where a node reached an
-        obstacle)."""
+        """The contact's energy at q, J (inf where a node reached an obstacle, or the surface
+        met itself)."""
         return self.term.surface_energy(self.where(q))[0]
 
     def gradient(self, q):
@@ -174,38 +172,29 @@ class Touching:
 
 class TouchingPairs(Touching):
     """Self-contact's part of one reduced solve: term a SelfContact (ipctk's pairs, with the
-    solve's lagged friction) over the collision mesh's vertices at x0_c + U_c q."""
+    solve's lagged friction) over the collision mesh's vertices at x0_c + U_c q (where)."""
 
     def where(self, q):
         """(v, 3) the collision mesh's vertices at coordinates q, m."""
         return self.contact.surface(q, self.shift)
 
-    def placed(self, q):
-        """where(q), from the last gradient's when q is its q."""
-        at = self._at[0]
-        return self._x[0] if at is not None and np.array_equal(at, q) else self.where(q)
-
-    def energy(self, q):
-        """The pairs' barrier and friction at q, J (inf where the surface meets itself)."""
-        return self.term.surface_energy(self.where(q))[0]
-
     def gradient(self, q):
         """dE/dq (r,), N, at q (its pairs kept for hessian at the same q)."""
         V = self.where(q)
-        pairs = self.term.collisions(V)
-        energy, g = self.term.surface_energy(V, pairs)
+        self._pairs = self.term.collisions(V)
+        energy, g = self.term.surface_energy(V, self._pairs)
         slope = self.contact.surface_basis.T @ g
         self._at = (q.copy(), energy, slope)
-        self._x = (V, pairs)
+        self._x = V
         return slope
 
     def hessian(self, q):
         """(d2E/dq2 (r, r) N/m, the gradient's round-off floor N) at q, the q of the last
         gradient: the pairs' Hessian projected on the basis rows of the nodes they join."""
-        V, pairs = self._x
+        V = self._x
         B = self.contact.surface_basis
         H = np.zeros((B.shape[1], B.shape[1]))
-        for part in self.term.hessian_parts(V, pairs):   # over its entries (CSC)
+        for part in self.term.hessian_parts(V, self._pairs):   # over its entries (CSC)
             col = np.repeat(np.arange(part.shape[1]), np.diff(part.indptr))
             H += B[part.indices].T @ (part.data[:, None] * B[col])
         return H, _floor(V, H)

@@ -176,9 +176,12 @@ class ReducedModel:
         at[free] = np.arange(free.size)
         body_dofs = [d[d >= 0] for d in (at[(3 * v[:, None] + np.arange(3)).ravel()]
                                          for v in self.free_bodies)]
-        kept = np.setdiff1d(np.arange(free.size), np.concatenate([[]] + body_dofs).astype(int))
+        held = np.ones(free.size, bool)
+        for dofs in body_dofs:
+            held[dofs] = False
+        kept = np.flatnonzero(held)
         factor = _basis.HeldFactor(K, kept, free.size)
-        omega2, phi = _basis.vibration_modes(K[kept][:, kept], factor.lu, mass[kept], modes)
+        omega2, phi = _basis.vibration_modes(factor.K, factor.lu, mass[kept], modes)
         self.frequencies = np.sqrt(np.maximum(omega2, 0.0)) / (2.0 * math.pi)
         columns = [np.zeros((free.size, modes)), control_responses(scene, self.x0, factor,
                                                                    free)]

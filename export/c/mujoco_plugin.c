@@ -57,6 +57,7 @@ typedef struct {
     int *geom;     /* per obstacle of the file, the geom named as it (-1: none) */
     double *from;  /* per obstacle: where it was, in the file, and its geom in the world,
                       when the soft body was placed (6 each) */
+    double *scratch, *values; /* room for n positions, and for the controls */
 } soft;
 
 static const char *attributes[] = {"file", "substeps", "timestep"};
@@ -156,12 +157,8 @@ static int controls_named(const mjModel *m, int instance, const af_model *model,
 
 /* The controls of the instance's actuators (their ctrl), set for the next steps. */
 static int set_controls(const mjModel *m, const mjData *d, int instance, soft *s) {
-    int k = af_controls(s->model), any = 0, code;
-    double *values;
-    if (k == 0)
-        return AF_OK;
-    if (!(values = malloc((size_t)k * sizeof(double))))
-        return AF_NO_MEMORY;
+    int k = af_controls(s->model), any = 0;
+    double *values = s->values;
     for (int i = 0; i < k; i++)
         values[i] = af_control_value(s->model, i);
     for (int a = 0; a < m->nu; a++)
@@ -170,9 +167,7 @@ static int set_controls(const mjModel *m, const mjData *d, int instance, soft *s
             any |= values[i] != d->ctrl[a];   /* forming the energy costs r^2 to r^3 */
             values[i] = d->ctrl[a];
         }
-    code = any ? af_set_controls(s->model, values) : AF_OK;
-    free(values);
-    return code;
+    return any ? af_set_controls(s->model, values) : AF_OK;
 }
 
 /* What is wrong with the instance (its file, its body, its substeps), or "" where nothing. */
@@ -263,13 +258,8 @@ static int state_placed(const mjModel *m, const mjData *d, int instance) {
  * rotation undone), in the world's where it moves (a framed model's positions are the
  * world's). */
 static int set_gravity(const mjModel *m, const mjData *d, soft *s) {
-    int n = af_vertices(s->model);
     const double *mass = af_masses(s->model);
-    double g[3], base[12];
-    double *force = malloc(3 * (size_t)n * sizeof(double));
-    int code;
-    if (!force)
-        return AF_NO_MEMORY;
+    double g[3], base[12], *force = s->scratch;
     mju_copy3(g, m->opt.gravity);
     if (af_kind(s->model) == AF_REDUCED) {
         pose(m, d, s->body, base);
@@ -277,12 +267,10 @@ static int set_gravity(const mjModel *m, const mjData *d, soft *s) {
             g[i] = base[i] * m->opt.gravity[0] + base[4 + i] * m->opt.gravity[1]
                    + base[8 + i] * m->opt.gravity[2];
     }
-    for (int i = 0; i < n; i++)
+    for (int i = 0; i < s->n; i++)
         for (int k = 0; k < 3; k++)
             force[3 * i + k] = mass[i] * g[k];
-    code = af_set_constant_force(s->model, force);
-    free(force);
-    return code;
+    return af_set_constant_force(s->model, force);
 }
 
 static int by_pair(const void *a, const void *b) {
@@ -343,10 +331,13 @@ static int init(const mjModel *m, mjData *d, int instance) {
     s->v = calloc(3 * (size_t)s->n, sizeof(double));
     s->geom = malloc(((size_t)af_obstacles(s->model) + 1) * sizeof(int));
     s->from = malloc((6 * (size_t)af_obstacles(s->model) + 1) * sizeof(double));
+    s->scratch = malloc(3 * (size_t)s->n * sizeof(double));
+    s->values = malloc(((size_t)af_controls(s->model) + 1) * sizeof(double));
     for (int i = 0; s->geom && i < af_obstacles(s->model); i++)
         s->geom[i] = mj_name2id(m, mjOBJ_GEOM, af_obstacle_name(s->model, i));
     d->plugin_data[instance] = (uintptr_t)s;
-    if (!s->x || !s->v || !s->geom || !s->from || !surface_edges(s)) {
+    if (!s->x || !s->v || !s->geom || !s->from || !s->scratch || !s->values
+        || !surface_edges(s)) {
         mju_warning("anisofem.soft: out of memory");
         return -1;
     }
@@ -362,6 +353,8 @@ static void destroy(mjData *d, int instance) {
         free(s->edges);
         free(s->geom);
         free(s->from);
+        free(s->scratch);
+        free(s->values);
         free(s);
     }
     d->plugin_data[instance] = 0;
@@ -435,11 +428,8 @@ static int move_obstacles(const mjModel *m, const mjData *d, soft *s) {
 static int advance(const mjModel *m, mjData *d, soft *s, double *state, const double *base,
                    double dt, double *pull) {
     const double *mass = af_masses(s->model);
-    double *x1 = malloc(3 * (size_t)s->n * sizeof(double));
-    int code;
-    if (!x1)
-        return AF_NO_MEMORY;
-    code = af_step(s->model, state + HEADER, NULL, base, dt);
+    double *x1 = s->scratch;
+    int code = af_step(s->model, state + HEADER, NULL, base, dt);
     if (code == AF_OK && s->free) {
         world_positions(m, d, s, state, x1);
         for (int i = 0; i < s->n; i++) {
@@ -462,7 +452,6 @@ static int advance(const mjModel *m, mjData *d, soft *s, double *state, const do
             }
         }
     }
-    free(x1);
     return code;
 }
 
@@ -525,9 +514,9 @@ static void visualize(const mjModel *m, mjData *d, const mjvOption *opt, mjvScen
     static const float rgba[4] = {0.2f, 0.5f, 0.9f, 1.0f};
     double *x;
     (void)opt;
-    if (!s || !(x = malloc(3 * (size_t)s->n * sizeof(double))))
+    if (!s)
         return;
-    world_positions(m, d, s, state, x);
+    world_positions(m, d, s, state, x = s->scratch);
     for (int e = 0; e < s->nedge && scn->ngeom < scn->maxgeom; e++) {
         mjvGeom *g = scn->geoms + scn->ngeom++;
         mjv_initGeom(g, mjGEOM_NONE, NULL, NULL, NULL, rgba);
@@ -535,7 +524,6 @@ static void visualize(const mjModel *m, mjData *d, const mjvOption *opt, mjvScen
                       x + 3 * s->edges[2 * e + 1]);
         g->category = mjCAT_DECOR;
     }
-    free(x);
 }
 
 mjPLUGIN_LIB_INIT(anisofem_soft) {
