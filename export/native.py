@@ -137,6 +137,9 @@ def library(lib=None):
             "af_obstacle_name": (char_p, [handle, ctypes.c_int]),
             "af_obstacle_position": (ctypes.c_int, [handle, ctypes.c_int, _DOUBLE_P]),
             "af_move_obstacle": (ctypes.c_int, [handle, ctypes.c_int, _DOUBLE_P]),
+            "af_obstacle_motion": (ctypes.c_int, [handle, ctypes.c_int, ctypes.c_double,
+                                                  _DOUBLE_P, _DOUBLE_P]),
+            "af_obstacle_wrench": (ctypes.c_int, [handle, ctypes.c_int, _DOUBLE_P]),
             "af_reach": (ctypes.c_int, [handle, ctypes.POINTER(ctypes.c_int), _DOUBLE_P,
                                         ctypes.c_int, _DOUBLE_P, _DOUBLE_P, _DOUBLE_P,
                                         ctypes.c_double, _DOUBLE_P, _DOUBLE_P]),
@@ -300,6 +303,21 @@ class CReducedSimulator(CModel):
         at = np.ascontiguousarray(position, dtype=np.float64)
         self._check(self._c.af_move_obstacle(self._handle, self._obstacle(which), _pointer(at)),
                     "af_move_obstacle")
+
+    def set_obstacle_motion(self, which, mass, velocity, acceleration):
+        """af_obstacle_motion: obstacle `which` free, of `mass` kg (0: moved only by
+        move_obstacle), from velocity (3,), m/s, under acceleration (3,), m/s^2."""
+        v, a = (np.ascontiguousarray(u, dtype=np.float64) for u in (velocity, acceleration))
+        self._check(self._c.af_obstacle_motion(self._handle, self._obstacle(which), float(mass),
+                                               _pointer(v), _pointer(a)), "af_obstacle_motion")
+
+    def obstacle_wrench(self, which):
+        """(6,) the force on obstacle `which` at the last step's end, N, and its moment about
+        its position, N m."""
+        out = np.zeros(6)
+        self._check(self._c.af_obstacle_wrench(self._handle, self._obstacle(which),
+                                               _pointer(out)), "af_obstacle_wrench")
+        return out
 
     def _obstacle(self, which):
         names = self.obstacles

@@ -106,17 +106,33 @@ void af_contact_move(af_contact *c, int i, const double *position);
 /* A solve from q: the obstacles moved toward their targets, and with dt > 0 friction lagged
  * at q for a step of dt s. */
 void af_contact_start(af_contact *c, const double *q, double dt);
-/* The barrier's and friction's energy at q (inf where a node reached an obstacle), their
- * reduced gradient (*g, r) and exact Hessian (*H, r x r) in the contact's scratch, and
+/* The functions below take z: q (r) then the free obstacles' moves (af_contact_unknowns).
+ * The barrier's and friction's energy at z (inf where a node reached an obstacle), the free
+ * obstacles' inertia, their gradient (*g, n) and exact Hessian (*H, n x n) in the contact's
+ * scratch, n = r + af_contact_unknowns, and
  * the floor R |H| (R the largest coordinate) of their round-off over eps. */
-double af_contact_terms(af_contact *c, const double *q, const double **g, const double **H,
+double af_contact_terms(af_contact *c, const double *z, const double **g, const double **H,
                         double *floor);
-double af_contact_energy(af_contact *c, const double *q);
-/* E(q + step) - E(q) (energy: E(q), after af_contact_terms at q), its first-order part
+double af_contact_energy(af_contact *c, const double *z);
+/* E(z + step) - E(z) (energy: E(z), after af_contact_terms at z), its first-order part
  * where the two differ by round-off. */
-double af_contact_change(af_contact *c, const double *q, const double *step, double energy);
-/* The largest share in (0, 1] of the step p (r) from q keeping every node clear. */
-double af_contact_limit(af_contact *c, const double *q, const double *p);
+double af_contact_change(af_contact *c, const double *z, const double *step, double energy);
+/* The largest share in (0, 1] of the step p (n) from z keeping every node clear. */
+double af_contact_limit(af_contact *c, const double *z, const double *p);
+
+/* Obstacle i free (mass > 0, kg) or moved only by af_contact_move (0): its velocity (3, m/s)
+ * at the next step's start and the acceleration all else gives it (3, m/s^2). */
+void af_contact_motion(af_contact *c, int i, double mass, const double *velocity,
+                       const double *acceleration);
+/* The unknowns a step takes beside q since af_contact_start (3 per free obstacle), and their
+ * predicted values dt v + dt^2 a into y (that many). */
+long af_contact_unknowns(const af_contact *c);
+void af_contact_predicted(const af_contact *c, double *y);
+/* After a solve ends at z: the free obstacles moved by their part of z (their velocity its
+ * share of dt; dt 0: a static solve), and each obstacle's wrench (force on it, N, and moment
+ * about its position, N m) there. */
+void af_contact_finish(af_contact *c, const double *z, double dt);
+const double *af_contact_wrench(const af_contact *c, int i);
 
 af_contact *af_reduced_contact(const af_reduced *m);
 

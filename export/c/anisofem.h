@@ -127,6 +127,18 @@ AF_API int af_obstacles(const af_model *model);
 AF_API const char *af_obstacle_name(const af_model *model, int i);
 AF_API int af_obstacle_position(const af_model *model, int i, double *position);
 AF_API int af_move_obstacle(af_model *model, int i, const double *position);
+/* Obstacle i as a free body of `mass` kg (a box the body picks up; 0: moved only by
+ * af_move_obstacle, the default): each later step solves its translation with the body's,
+ * from its velocity (3, m/s) and under the acceleration everything but the body gives it (3,
+ * m/s^2: gravity, its other contacts); it does not turn. A step sets its velocity to the
+ * step's; call again to set them (an engine that moves it: every step). AF_BAD_INPUT for an
+ * index out of range, a mass < 0 or a number that is not finite. */
+AF_API int af_obstacle_motion(af_model *model, int i, double mass, const double *velocity,
+                              const double *acceleration);
+/* The force the body put on obstacle i at the last step's end (3, N) and its moment about the
+ * obstacle's position (3, N m): barrier and friction; what an engine applies to the body the
+ * obstacle stands for. */
+AF_API int af_obstacle_wrench(const af_model *model, int i, double *wrench);
 AF_API int af_iterations(const af_model *model);
 /* Why the last af_step or af_set_* failed, "" if it did not. */
 AF_API const char *af_error(const af_model *model);

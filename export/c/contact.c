@@ -5,7 +5,12 @@
  * step that keeps every node at KEEP of its distance from every obstacle (Newton on the convex
  * distance along the move, which never passes its first root). Obstacles: a plane, and a
  * sphere, box or capsule as a convex core grown by a radius; af_contact_move sets where one
- * is to be, reached as far as the body lets it at the next step's start. */
+ * is to be, reached as far as the body lets it at the next step's start.
+ *
+ * A free obstacle (af_contact_motion: a mass, its velocity and the acceleration all else
+ * gives it) translates with the body: a step's unknowns are z = (q, y), y (3 each) the free
+ * obstacles' moves over the step, their inertia m |y - y_hat|^2 / (2 dt^2) (y_hat = dt v +
+ * dt^2 a) a term here, and every distance taken from the node to the obstacle moved by y. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -21,7 +26,7 @@
 enum { PLANE, SPHERE, BOX, CAPSULE };
 
 typedef struct {
-    int node;                    /* the surface node (row of contact_rest) */
+    int node, obstacle;          /* the surface node (row of contact_rest), the obstacle */
     double weight, T[9], start[3];
 } lag_t;
 
@@ -38,15 +43,32 @@ struct af_contact {
     lag_t *lags;
     long lagged;
     char *names;                 /* the obstacles' names, each ended by a NUL */
-    double *xs, *gs, *ds;        /* scratch (k, 3) each */
-    double *g, *H, *qt;          /* the terms' gradient (r), Hessian (r, r); a point (r) */
+    double *mass;                /* (count,) kg of a free obstacle, 0 for a moved one */
+    double *velocity, *push;     /* (count, 3) its velocity, m/s, and acceleration, m/s^2 */
+    int *slot;                   /* (count,) a free obstacle's first unknown in z, else -1 */
+    long extra;                  /* this solve's unknowns beside q: 3 per free obstacle */
+    double inertia;              /* this step's 1 / dt^2 */
+    double *hat;                 /* (count, 3) a free obstacle's y_hat */
+    double *wrench;              /* (count, 6) force on each, N, and its moment about its
+                                    position, N m, at the last step's end */
+    double *xs, *gs, *ds, *dy;   /* scratch (k, 3) each, (count, 3) */
+    double *blocks;              /* scratch (count, 9): a node's Hessian from each obstacle */
+    double *g, *H, *qt;          /* the terms' gradient (n), Hessian (n, n); a point (n),
+                                    n = r + 3 count at most */
 };
+
+/* The move y (3) of obstacle o in z, or zeros where it is not free. */
+static const double *moved(const af_contact *c, const double *z, int o) {
+    static const double still[3] = {0.0, 0.0, 0.0};
+    return c->slot[o] >= 0 && c->extra ? z + c->slot[o] : still;
+}
 
 void af_contact_close(af_contact *c) {
     if (!c) return;
     free(c->rest); free(c->U); free(c->area); free(c->kinds); free(c->geometry);
     free(c->friction); free(c->target); free(c->shift); free(c->moving); free(c->lags);
-    free(c->xs);
+    free(c->xs); free(c->mass); free(c->velocity); free(c->push); free(c->slot);
+    free(c->hat); free(c->wrench); free(c->dy); free(c->blocks);
     free(c->gs); free(c->ds); free(c->names); free(c->g); free(c->H); free(c->qt);
     free(c);
 }
@@ -108,11 +130,24 @@ af_contact *af_contact_open(const af_file *f, int r, int *failed) {
     c->xs = (double *)malloc((size_t)k * 3 * sizeof(double) + 1);
     c->gs = (double *)malloc((size_t)k * 3 * sizeof(double) + 1);
     c->ds = (double *)malloc((size_t)k * 3 * sizeof(double) + 1);
-    c->g = (double *)malloc(((size_t)r + 1) * sizeof(double));
-    c->H = (double *)malloc(((size_t)r * (size_t)r + 1) * sizeof(double));
-    c->qt = (double *)malloc(((size_t)r + 1) * sizeof(double));
+    {
+        size_t n = (size_t)r + 3 * (size_t)count;
+        c->g = (double *)malloc((n + 1) * sizeof(double));
+        c->H = (double *)malloc((n * n + 1) * sizeof(double));
+        c->qt = (double *)malloc((n + 1) * sizeof(double));
+    }
+    c->mass = (double *)calloc((size_t)count + 1, sizeof(double));
+    c->velocity = (double *)calloc((size_t)count * 3 + 1, sizeof(double));
+    c->push = (double *)calloc((size_t)count * 3 + 1, sizeof(double));
+    c->hat = (double *)calloc((size_t)count * 3 + 1, sizeof(double));
+    c->dy = (double *)calloc((size_t)count * 3 + 1, sizeof(double));
+    c->blocks = (double *)calloc((size_t)count * 9 + 1, sizeof(double));
+    c->wrench = (double *)calloc((size_t)count * 6 + 1, sizeof(double));
+    c->slot = (int *)malloc(((size_t)count + 1) * sizeof(int));
+    for (i = 0; c->slot && i < count; i++) c->slot[i] = -1;
     if (!c->target || !c->shift || !c->moving || !c->lags || !c->xs || !c->gs || !c->ds ||
-        !c->g || !c->H || !c->qt) {
+        !c->g || !c->H || !c->qt || !c->mass || !c->velocity || !c->push || !c->hat ||
+        !c->dy || !c->blocks || !c->wrench || !c->slot) {
         af_say(f->error, f->error_size, "no memory for a model's contact");
         goto fail;
     }
@@ -146,6 +181,23 @@ void af_contact_position(const af_contact *c, int i, double *position) {
 void af_contact_move(af_contact *c, int i, const double *position) {
     memcpy(c->target + 3 * i, position, 3 * sizeof(double));
     c->moving[i] = 1;
+}
+
+void af_contact_motion(af_contact *c, int i, double mass, const double *velocity,
+                       const double *acceleration) {
+    c->mass[i] = mass;
+    memcpy(c->velocity + 3 * i, velocity, 3 * sizeof(double));
+    memcpy(c->push + 3 * i, acceleration, 3 * sizeof(double));
+}
+
+const double *af_contact_wrench(const af_contact *c, int i) { return c->wrench + 6 * i; }
+
+long af_contact_unknowns(const af_contact *c) { return c ? c->extra : 0; }
+
+void af_contact_predicted(const af_contact *c, double *y) {
+    int o;
+    for (o = 0; o < c->count; o++)
+        if (c->slot[o] >= 0) memcpy(y + c->slot[o] - c->r, c->hat + 3 * o, 3 * sizeof(double));
 }
 
 /* d, normal n (3) and, where H is not NULL, the Hessian of d (9) at x from obstacle o. */
@@ -247,12 +299,19 @@ static double friction_slope(double y, double eps) {
     return y < eps ? -y / (eps * eps) + 2.0 / eps : 1.0 / (y > 1e-300 ? y : 1e-300);
 }
 
-/* The surface nodes at q into c->xs. */
-static void place(af_contact *c, const double *q) {
+/* The surface nodes at z's q into c->xs. */
+static void place(af_contact *c, const double *z) {
     long i, a, r = c->r;
     for (i = 0; i < c->k; i++)
         for (a = 0; a < 3; a++)
-            c->xs[3 * i + a] = c->rest[3 * i + a] + af_dot(c->U + (3 * i + a) * r, q, r);
+            c->xs[3 * i + a] = c->rest[3 * i + a] + af_dot(c->U + (3 * i + a) * r, z, r);
+}
+
+/* Node i (placed) seen from obstacle o moved by its y in z: x - y (3) into x. */
+static void relative(const af_contact *c, const double *z, int o, long i, double *x) {
+    const double *y = moved(c, z, o);
+    int a;
+    for (a = 0; a < 3; a++) x[a] = c->xs[3 * i + a] - y[a];
 }
 
 /* The largest s in [0, 1] keeping x + s dx above floor from obstacle o (x starts above). */
@@ -273,17 +332,20 @@ static double first_touch(const af_contact *c, int o, const double *x, const dou
     return s;
 }
 
-/* The share of the moves ds (k, 3) from xs keeping every node at KEEP of its distance. */
-static double share_of(const af_contact *c, const double *xs, const double *ds) {
-    double share = 1.0, n[3];
+/* The share of the moves ds (k, 3) of the placed nodes and dy (count, 3) of the obstacles
+ * from z keeping every node at KEEP of its distance. */
+static double share_of(const af_contact *c, const double *z, const double *ds,
+                       const double *dy) {
+    double share = 1.0, n[3], x[3], d3[3];
     long i;
-    int o;
+    int o, a;
     for (o = 0; o < c->count; o++)
         for (i = 0; i < c->k; i++) {
-            const double *d3 = ds + 3 * i;
             double s;
+            for (a = 0; a < 3; a++) d3[a] = ds[3 * i + a] - dy[3 * o + a];
             if (d3[0] * d3[0] + d3[1] * d3[1] + d3[2] * d3[2] <= 0.0) continue;
-            s = first_touch(c, o, xs + 3 * i, d3, KEEP * distance(c, o, xs + 3 * i, n, NULL));
+            relative(c, z, o, i, x);
+            s = first_touch(c, o, x, d3, KEEP * distance(c, o, x, n, NULL));
             if (s < share) share = s;
         }
     return share;
@@ -293,9 +355,11 @@ void af_contact_start(af_contact *c, const double *q, double dt) {
     long i;
     int o, a;
     double n[3];
+    c->extra = 0;
     place(c, q);
     for (o = 0; o < c->count; o++) {   /* obstacles toward their targets, the body held */
         double *G = c->geometry + o * GEOMETRY, delta[3], share;
+        c->slot[o] = -1;
         for (a = 0; a < 3; a++) c->shift[3 * o + a] = 0.0;
         if (!c->moving[o]) continue;
         for (a = 0; a < 3; a++) delta[a] = c->target[3 * o + a] - G[a];
@@ -316,7 +380,15 @@ void af_contact_start(af_contact *c, const double *q, double dt) {
     }
     c->lagged = 0;
     c->eps = c->smoothing * dt;
+    c->inertia = dt > 0.0 ? 1.0 / (dt * dt) : 0.0;
     if (!(dt > 0.0)) return;
+    for (o = 0; o < c->count; o++)       /* the free obstacles' unknowns and predictions */
+        if (c->mass[o] > 0.0) {
+            c->slot[o] = (int)(c->r + c->extra);
+            c->extra += 3;
+            for (a = 0; a < 3; a++)
+                c->hat[3 * o + a] = dt * c->velocity[3 * o + a] + dt * dt * c->push[3 * o + a];
+        }
     for (o = 0; o < c->count; o++) {
         double mu = c->friction[o] < 0.0 ? c->mu : c->friction[o];
         if (mu <= 0.0) continue;
@@ -326,6 +398,7 @@ void af_contact_start(af_contact *c, const double *q, double dt) {
             int b;
             if (!(d > 0.0 && d < c->dhat)) continue;
             l->node = (int)i;
+            l->obstacle = o;
             l->weight = mu * -c->kappa * c->area[i] * barrier_slope(d, c->dhat);
             for (a = 0; a < 3; a++) {
                 l->start[a] = c->xs[3 * i + a] + c->shift[3 * o + a];
@@ -336,55 +409,122 @@ void af_contact_start(af_contact *c, const double *q, double dt) {
     }
 }
 
-/* The energy at the nodes c->xs, their gradient into c->gs where grad; inf where one reached
- * an obstacle. */
-static double surface_energy(af_contact *c, int grad) {
-    double total = 0.0, n[3];
+/* Lag l's tangential slip u (3) at z (nodes placed), returning its length. */
+static double slip(const af_contact *c, const lag_t *l, const double *z, double *u) {
+    double x[3], y = 0.0;
+    int a, b;
+    relative(c, z, l->obstacle, l->node, x);
+    for (a = 0; a < 3; a++) {
+        u[a] = 0.0;
+        for (b = 0; b < 3; b++) u[a] += l->T[3 * a + b] * (x[b] - l->start[b]);
+        y += u[a] * u[a];
+    }
+    return sqrt(y);
+}
+
+/* The energy at z (nodes placed), inf where a node reached an obstacle; with grad, its
+ * gradient in the nodes into c->gs and in the free obstacles' moves into c->g[r:]. */
+static double surface_energy(af_contact *c, const double *z, int grad) {
+    double total = 0.0, n[3], x[3];
     long i, j;
-    int o, a, b;
-    if (grad) memset(c->gs, 0, (size_t)c->k * 3 * sizeof(double));
-    for (o = 0; o < c->count; o++)
+    int o, a;
+    if (grad) {
+        memset(c->gs, 0, (size_t)c->k * 3 * sizeof(double));
+        memset(c->g + c->r, 0, (size_t)c->extra * sizeof(double));
+    }
+    for (o = 0; o < c->count; o++) {
+        double *gy = grad && c->slot[o] >= 0 ? c->g + c->slot[o] : NULL;
         for (i = 0; i < c->k; i++) {
-            double d = distance(c, o, c->xs + 3 * i, n, NULL), s;
+            double d, s;
+            relative(c, z, o, i, x);
+            d = distance(c, o, x, n, NULL);
             if (d <= 0.0) return INFINITY;
             if (d >= c->dhat) continue;
             total += c->kappa * c->area[i] * barrier(d, c->dhat);
             s = c->kappa * c->area[i] * barrier_slope(d, c->dhat);
             if (grad)
                 for (a = 0; a < 3; a++) c->gs[3 * i + a] += s * n[a];
+            if (gy)
+                for (a = 0; a < 3; a++) gy[a] -= s * n[a];
         }
+    }
     for (j = 0; j < c->lagged; j++) {
         const lag_t *l = c->lags + j;
-        double u[3], y = 0.0, e = c->eps;
-        for (a = 0; a < 3; a++) {
-            u[a] = 0.0;
-            for (b = 0; b < 3; b++)
-                u[a] += l->T[3 * a + b] * (c->xs[3 * l->node + b] - l->start[b]);
-            y += u[a] * u[a];
-        }
-        y = sqrt(y);
+        double u[3], e = c->eps, y = slip(c, l, z, u), f;
+        double *gy = grad && c->slot[l->obstacle] >= 0 ? c->g + c->slot[l->obstacle] : NULL;
         total += l->weight * (y < e ? -y * y * y / (3 * e * e) + y * y / e + e / 3.0 : y);
+        f = l->weight * friction_slope(y, e);
         if (grad)
-            for (a = 0; a < 3; a++)
-                c->gs[3 * l->node + a] += l->weight * friction_slope(y, e) * u[a];
+            for (a = 0; a < 3; a++) c->gs[3 * l->node + a] += f * u[a];
+        if (gy)
+            for (a = 0; a < 3; a++) gy[a] -= f * u[a];
     }
+    for (o = 0; o < c->count; o++)          /* the free obstacles' inertia */
+        if (c->slot[o] >= 0 && c->extra) {
+            const double *y = z + c->slot[o];
+            double w = c->mass[o] * c->inertia;
+            for (a = 0; a < 3; a++) {
+                double diff = y[a] - c->hat[3 * o + a];
+                total += 0.5 * w * diff * diff;
+                if (grad) c->g[c->slot[o] + a] += w * diff;
+            }
+        }
     return total;
 }
 
-double af_contact_energy(af_contact *c, const double *q) {
-    place(c, q);
-    return surface_energy(c, 0);
+double af_contact_energy(af_contact *c, const double *z) {
+    place(c, z);
+    return surface_energy(c, z, 0);
 }
 
-double af_contact_terms(af_contact *c, const double *q, const double **g, const double **H,
+/* Node i's Hessian from each obstacle (barrier and friction) into c->blocks (count, 9) and
+ * their sum into B (9); 0 where no term touches it. */
+static int node_blocks(af_contact *c, const double *z, long i, double *B) {
+    double n[3], curvature[9], x[3];
+    long j;
+    int o, a, b, live = 0;
+    memset(c->blocks, 0, (size_t)c->count * 9 * sizeof(double));
+    for (o = 0; o < c->count; o++) {
+        double d, b1, b2, ka, *Bo = c->blocks + 9 * o;
+        relative(c, z, o, i, x);
+        d = distance(c, o, x, n, curvature);
+        if (!(d > 0.0 && d < c->dhat)) continue;
+        b1 = barrier_slope(d, c->dhat);
+        b2 = barrier_curvature(d, c->dhat);
+        ka = c->kappa * c->area[i];
+        for (a = 0; a < 3; a++)
+            for (b = 0; b < 3; b++)
+                Bo[3 * a + b] += ka * (b2 * n[a] * n[b] + b1 * curvature[3 * a + b]);
+        live = 1;
+    }
+    for (j = 0; j < c->lagged; j++) {
+        const lag_t *l = c->lags + j;
+        double u[3], unit[3], y, e = c->eps, along, f1, *Bo = c->blocks + 9 * l->obstacle;
+        if (l->node != i) continue;
+        y = slip(c, l, z, u);
+        for (a = 0; a < 3; a++) unit[a] = u[a] / (y > 1e-300 ? y : 1e-300);
+        along = y < e ? -y / (e * e) : -1.0 / (y > 1e-300 ? y : 1e-300);
+        f1 = friction_slope(y, e);
+        for (a = 0; a < 3; a++)
+            for (b = 0; b < 3; b++)
+                Bo[3 * a + b] += l->weight * (f1 * l->T[3 * a + b] + along * unit[a] * unit[b]);
+        live = 1;
+    }
+    memset(B, 0, 9 * sizeof(double));
+    for (o = 0; live && o < c->count; o++)
+        for (a = 0; a < 9; a++) B[a] += c->blocks[9 * o + a];
+    return live;
+}
+
+double af_contact_terms(af_contact *c, const double *z, const double **g, const double **H,
                         double *floor) {
-    long i, j, r = c->r, s, t;
+    long i, r = c->r, n = r + c->extra, s, t;
     int o, a, b;
-    double energy, n[3], curvature[9], largest = 0.0, size = 0.0, *cg = c->g, *cH = c->H;
-    place(c, q);
-    energy = surface_energy(c, 1);
+    double energy, largest = 0.0, size = 0.0, *cg = c->g, *cH = c->H;
+    place(c, z);
+    energy = surface_energy(c, z, 1);     /* writes the free obstacles' part of g */
     memset(cg, 0, (size_t)r * sizeof(double));
-    memset(cH, 0, (size_t)(r * r) * sizeof(double));
+    memset(cH, 0, (size_t)(n * n) * sizeof(double));
     for (i = 0; i < c->k; i++)
         for (a = 0; a < 3; a++) {
             const double *row = c->U + (3 * i + a) * r;
@@ -394,41 +534,9 @@ double af_contact_terms(af_contact *c, const double *q, const double **g, const 
                 for (s = 0; s < r; s++) cg[s] += v * row[s];
         }
     for (i = 0; i < c->k; i++) {
-        double B[9] = {0}, W[3 * 64], *w;
+        double B[9], W[3 * 64], *w;
         const double *U = c->U + 3 * i * r;
-        int live = 0;
-        for (o = 0; o < c->count; o++) {
-            double d = distance(c, o, c->xs + 3 * i, n, curvature), b1, b2, ka;
-            if (!(d > 0.0 && d < c->dhat)) continue;
-            b1 = barrier_slope(d, c->dhat);
-            b2 = barrier_curvature(d, c->dhat);
-            ka = c->kappa * c->area[i];
-            for (a = 0; a < 3; a++)
-                for (b = 0; b < 3; b++)
-                    B[3 * a + b] += ka * (b2 * n[a] * n[b] + b1 * curvature[3 * a + b]);
-            live = 1;
-        }
-        for (j = 0; j < c->lagged; j++) {
-            const lag_t *l = c->lags + j;
-            double u[3], unit[3], y = 0.0, e = c->eps, along, f1;
-            if (l->node != i) continue;
-            for (a = 0; a < 3; a++) {
-                u[a] = 0.0;
-                for (b = 0; b < 3; b++)
-                    u[a] += l->T[3 * a + b] * (c->xs[3 * i + b] - l->start[b]);
-                y += u[a] * u[a];
-            }
-            y = sqrt(y);
-            for (a = 0; a < 3; a++) unit[a] = u[a] / (y > 1e-300 ? y : 1e-300);
-            along = y < e ? -y / (e * e) : -1.0 / (y > 1e-300 ? y : 1e-300);
-            f1 = friction_slope(y, e);
-            for (a = 0; a < 3; a++)
-                for (b = 0; b < 3; b++)
-                    B[3 * a + b] += l->weight * (f1 * l->T[3 * a + b]
-                                                 + along * unit[a] * unit[b]);
-            live = 1;
-        }
-        if (!live) continue;
+        if (!node_blocks(c, z, i, B)) continue;
         w = r <= 64 ? W : (double *)malloc((size_t)(3 * r) * sizeof(double));
         if (!w) continue;
         for (a = 0; a < 3; a++)                   /* w = B U_i (3 x r) */
@@ -437,29 +545,98 @@ double af_contact_terms(af_contact *c, const double *q, const double **g, const 
                                + B[3 * a + 2] * U[2 * r + s];
         for (s = 0; s < r; s++)                   /* H += U_i^T w */
             for (t = 0; t < r; t++)
-                cH[s * r + t] += U[s] * w[t] + U[r + s] * w[r + t] + U[2 * r + s] * w[2 * r + t];
+                cH[s * n + t] += U[s] * w[t] + U[r + s] * w[r + t] + U[2 * r + s] * w[2 * r + t];
         if (w != W) free(w);
+        for (o = 0; o < c->count; o++) {          /* a free obstacle's: -U_i^T B_o, B_o */
+            const double *Bo = c->blocks + 9 * o;
+            long y = c->slot[o];
+            if (y < 0) continue;
+            for (a = 0; a < 3; a++) {
+                for (s = 0; s < r; s++) {
+                    double v = -(U[s] * Bo[a] + U[r + s] * Bo[3 + a] + U[2 * r + s] * Bo[6 + a]);
+                    cH[s * n + y + a] += v;
+                    cH[(y + a) * n + s] += v;
+                }
+                for (b = 0; b < 3; b++) cH[(y + a) * n + y + b] += Bo[3 * a + b];
+            }
+        }
     }
-    for (s = 0; s < r * r; s++) size += cH[s] * cH[s];
+    for (o = 0; o < c->count; o++)
+        if (c->slot[o] >= 0)
+            for (a = 0; a < 3; a++)
+                cH[(c->slot[o] + a) * (n + 1)] += c->mass[o] * c->inertia;
+    for (s = 0; s < n * n; s++) size += cH[s] * cH[s];
     *floor = largest * sqrt(size);
     *g = cg;
     *H = cH;
     return energy;
 }
 
-double af_contact_change(af_contact *c, const double *q, const double *step, double energy) {
-    long i, r = c->r;
-    double after, linear = af_dot(c->g, step, r), big;
-    for (i = 0; i < r; i++) c->qt[i] = q[i] + step[i];
+double af_contact_change(af_contact *c, const double *z, const double *step, double energy) {
+    long i, n = c->r + c->extra;
+    double after, linear = af_dot(c->g, step, n), big;
+    for (i = 0; i < n; i++) c->qt[i] = z[i] + step[i];
     after = af_contact_energy(c, c->qt);
     big = fabs(after) > fabs(energy) ? fabs(after) : fabs(energy);
     return fabs(after - energy - linear) <= NOISE * big ? linear : after - energy;
 }
 
-double af_contact_limit(af_contact *c, const double *q, const double *p) {
+double af_contact_limit(af_contact *c, const double *z, const double *p) {
     long i, a, r = c->r;
-    place(c, q);
+    int o;
+    place(c, z);
     for (i = 0; i < c->k; i++)
         for (a = 0; a < 3; a++) c->ds[3 * i + a] = af_dot(c->U + (3 * i + a) * r, p, r);
-    return share_of(c, c->xs, c->ds);
+    for (o = 0; o < c->count; o++) {
+        const double *y = moved(c, p, o);
+        for (a = 0; a < 3; a++) c->dy[3 * o + a] = y[a];
+    }
+    return share_of(c, z, c->ds, c->dy);
+}
+
+/* wrench (6) += the force f (3) at arm (3) from the point it is taken about. */
+static void add_wrench(double *wrench, const double *arm, const double *f) {
+    wrench[0] += f[0]; wrench[1] += f[1]; wrench[2] += f[2];
+    wrench[3] += arm[1] * f[2] - arm[2] * f[1];
+    wrench[4] += arm[2] * f[0] - arm[0] * f[2];
+    wrench[5] += arm[0] * f[1] - arm[1] * f[0];
+}
+
+void af_contact_finish(af_contact *c, const double *z, double dt) {
+    double n[3], x[3], arm[3];
+    long i, j;
+    int o, a;
+    place(c, z);
+    memset(c->wrench, 0, (size_t)c->count * 6 * sizeof(double));
+    for (o = 0; o < c->count; o++)         /* each one's push on the nodes, reversed */
+        for (i = 0; i < c->k; i++) {
+            double d, s, f[3];
+            relative(c, z, o, i, x);
+            d = distance(c, o, x, n, NULL);
+            if (!(d > 0.0 && d < c->dhat)) continue;
+            s = c->kappa * c->area[i] * barrier_slope(d, c->dhat);
+            for (a = 0; a < 3; a++) f[a] = s * n[a];
+            for (a = 0; a < 3; a++) arm[a] = x[a] - c->geometry[o * GEOMETRY + a];
+            add_wrench(c->wrench + 6 * o, arm, f);
+        }
+    for (j = 0; j < c->lagged; j++) {
+        const lag_t *l = c->lags + j;
+        double u[3], f[3], y = slip(c, l, z, u), w = l->weight * friction_slope(y, c->eps);
+        relative(c, z, l->obstacle, l->node, x);
+        for (a = 0; a < 3; a++) {
+            f[a] = w * u[a];
+            arm[a] = x[a] - c->geometry[l->obstacle * GEOMETRY + a];
+        }
+        add_wrench(c->wrench + 6 * l->obstacle, arm, f);
+    }
+    for (o = 0; o < c->count; o++) {     /* the free obstacles moved, at their new speed */
+        double *G = c->geometry + o * GEOMETRY;
+        const double *y = moved(c, z, o);
+        if (c->slot[o] < 0 || !c->extra) continue;
+        for (a = 0; a < 3; a++) {
+            G[a] += y[a];
+            if (c->kinds[o] == CAPSULE) G[3 + a] += y[a];
+            c->velocity[3 * o + a] = y[a] / dt;
+        }
+    }
 }

@@ -427,6 +427,36 @@ int af_move_obstacle(af_model *m, int i, const double *position) {
     return AF_OK;
 }
 
+int af_obstacle_motion(af_model *m, int i, double mass, const double *velocity,
+                       const double *acceleration) {
+    int a;
+    m->error[0] = '\0';
+    if (i < 0 || i >= af_obstacles(m)) {
+        af_say(m->error, ERROR_SIZE, "obstacle: %d is not one of the model's %d", i,
+               af_obstacles(m));
+        return AF_BAD_INPUT;
+    }
+    if (!(mass >= 0.0) || !isfinite(mass)) {
+        af_say(m->error, ERROR_SIZE, "obstacle '%s': mass must be a finite number >= 0 kg, got "
+               "%g", af_obstacle_name(m, i), mass);
+        return AF_BAD_INPUT;
+    }
+    for (a = 0; a < 3; a++)
+        if (!velocity || !acceleration || !isfinite(velocity[a]) || !isfinite(acceleration[a])) {
+            af_say(m->error, ERROR_SIZE, "obstacle '%s': its velocity and acceleration must be "
+                   "3 finite numbers each", af_obstacle_name(m, i));
+            return AF_BAD_INPUT;
+        }
+    af_contact_motion(af_reduced_contact(m->reduced), i, mass, velocity, acceleration);
+    return AF_OK;
+}
+
+int af_obstacle_wrench(const af_model *m, int i, double *wrench) {
+    if (i < 0 || i >= af_obstacles(m) || !wrench) return AF_BAD_INPUT;
+    memcpy(wrench, af_contact_wrench(af_reduced_contact(m->reduced), i), 6 * sizeof(double));
+    return AF_OK;
+}
+
 /* The default reach tolerance: this share of the rest shape's largest extent. */
 #define REACH_TOLERANCE 1e-4
 #define REACH_ITERATIONS 50

@@ -28,7 +28,12 @@ struct af_reduced {
     const double *rest;          /* (n, 3), the model's */
     double *basis, *c1, *C2, *S3, *W4;
     double *constant;            /* (r,) the projected constant force */
-    double *work;                /* scratch for a step */
+    double *work;                /* scratch for a step, cut into the named parts below */
+    double *A, *Ap;              /* (T,) W4 at the iterate and along the step */
+    double *X, *Y, *H;           /* (r, r): the quartic's and cubic's contractions, Hessian */
+    double *L, *V, *J, *cH;      /* (N, N), N = r + 3 obstacles: the whole Hessian's */
+    double *g, *p, *x, *t1, *cg, *ts, *load, *terms, *q_hat; /* (N,) */
+    double *lam;                 /* (2 N,) */
     int controls, pressures;     /* k controls, the first `pressures` of them pressures */
     int cables;                  /* the last `cables` controls are cables */
     unsigned char *kinds;        /* (k,) 0 a pressure, 1 an activation, 2 a cable */
@@ -171,6 +176,20 @@ int af_reduced_set_controls(af_reduced *m, const double *values, const char *nam
     return AF_OK;
 }
 
+/* m->work allocated and cut into its parts (N = r + 3 per obstacle: a step's unknowns at
+ * most); 0 where out of memory. */
+static int cut_work(af_reduced *m) {
+    long r = m->r, N = r + 3L * af_contact_count(m->contact), T = m->triples;
+    double *w = m->work = (double *)malloc((size_t)(2 * T + 3 * r * r + 4 * N * N + 12 * N + 1)
+                                           * sizeof(double));
+    if (!w) return 0;
+    m->A = w; m->Ap = w += T; m->X = w += T; m->Y = w += r * r; m->H = w += r * r;
+    m->L = w += r * r; m->V = w += N * N; m->J = w += N * N; m->cH = w += N * N;
+    m->g = w += N * N; m->p = w += N; m->x = w += N; m->t1 = w += N; m->cg = w += N;
+    m->ts = w += N; m->load = w += N; m->terms = w += N; m->q_hat = w += N; m->lam = w + N;
+    return 1;
+}
+
 af_reduced *af_reduced_open(const af_file *f, int n, const double *rest) {
     long shape[4], r;
     af_reduced *m = (af_reduced *)calloc(1, sizeof *m);
@@ -196,22 +215,19 @@ af_reduced *af_reduced_open(const af_file *f, int n, const double *rest) {
     if (shape[0] != r || shape[1] != r || shape[2] != r) goto shape;
     if (!(m->W4 = (double *)af_array(f, "W4", 1, "float64", 2, shape))) goto fail;
     if (shape[0] != m->triples || shape[1] != r) goto shape;
-    /* work: A, Ap (T each); X, Y, H, L, V, J (r^2 each); g, p, x, load, terms, t1, lam,
-       q_hat (r each); the cables' Hessian (r^2), gradient and step (r each) */
-    m->work = (double *)malloc((size_t)(2 * m->triples + 7 * r * r + 10 * r + 1)
-                               * sizeof(double));
     m->constant = (double *)calloc((size_t)r + 1, sizeof(double));
-    if (!m->work || !m->constant) {
-        af_say(f->error, f->error_size, "no memory for a model of r = %ld", r);
-        goto fail;
-    }
+    if (!m->constant) goto memory;
     if (!open_controls(m, f)) goto fail;
     {
         int failed;
         m->contact = af_contact_open(f, (int)r, &failed);
         if (failed) goto fail;
     }
+    if (!cut_work(m)) goto memory;
     return m;
+memory:
+    af_say(f->error, f->error_size, "no memory for a model of r = %ld", r);
+    goto fail;
 shape:
     af_say(f->error, f->error_size, "%s: the arrays c1, C2, S3 and W4%s do not fit a basis of "
            "r = %ld coordinates ((r,), (r, r), (r, r, r), (r (r + 1) (r + 2) / 6, r))", f->name,
@@ -391,33 +407,36 @@ static double cable_change(const af_reduced *m, const double *q, const double *s
     return total;
 }
 
-/* Minimize |x - q_hat|^2 inertia / 2 + V(x) - load.x from x (r,) in place to a reduced
+/* Minimize |x - q_hat|^2 inertia / 2 + V(x) - load.x from x in place to a reduced
  * gradient of tolerance + rtol |dV/dq(x0)| or the round-off floor: the iterations taken, or
- * AF_NOT_CONVERGED with a message. q_hat is read only where inertia > 0. */
+ * AF_NOT_CONVERGED with a message. q_hat is read only where inertia > 0. x holds q (r) and,
+ * in a step with free obstacles, their moves (the contact's unknowns) after it: n in all. */
 static int minimize(af_reduced *m, double *x, const double *q_hat, double inertia,
                     const double *load, double tolerance, double rtol, int max_iter,
                     char *error, size_t error_size) {
-    long r = m->r, rr = r * r, i, k, it;
-    double *A = m->work, *Ap = A + m->triples, *X = Ap + m->triples, *Y = X + rr,
-           *H = Y + rr, *L = H + rr, *V = L + rr, *J = V + rr, *g = J + rr, *p = g + r,
-           *terms = p + 3 * r, *t1 = terms + r, *lam = t1 + r, *cH = lam + 2 * r,
-           *cg = cH + rr, *ts = cg + r;
+    long r = m->r, n = r + af_contact_unknowns(m->contact), nn = n * n, i, k, it;
+    double *A = m->A, *Ap = m->Ap, *X = m->X, *Y = m->Y, *H = m->H, *g = m->g, *p = m->p,
+           *terms = m->terms, *cH = m->cH, *cg = m->cg, *ts = m->ts;
     double residual = 0.0, eps = 2.220446049250313e-16;
     w4_times(m, x, A);
     for (it = 0; it <= max_iter; it++) {
         double a1, a2, a3, pure, mixed, step = 1.0, floor_, pull = 0.0, touch = 0.0,
                reach = 0.0;
-        int pulled = m->cables && cable_terms(m, x, cg, cH), extra = pulled || m->contact;
-        if (m->contact) {    /* the contact's gradient and Hessian join the cables' */
+        /* the cables' gradient and Hessian (r, r) into scratch the direction reuses */
+        int pulled = m->cables && cable_terms(m, x, m->lam, m->L), extra = pulled || m->contact;
+        if (m->contact) {
             const double *tg, *tH;
-            if (!pulled) {
-                for (i = 0; i < r; i++) cg[i] = 0.0;
-                for (i = 0; i < rr; i++) cH[i] = 0.0;
-            }
             touch = af_contact_terms(m->contact, x, &tg, &tH, &reach);
-            for (i = 0; i < r; i++) cg[i] += tg[i];
-            for (i = 0; i < rr; i++) cH[i] += tH[i];
+            memcpy(cH, tH, (size_t)nn * sizeof(double));
+            memcpy(cg, tg, (size_t)n * sizeof(double));
             reach *= CONTACT_FLOOR * eps;
+        } else if (pulled) {
+            memset(cH, 0, (size_t)nn * sizeof(double));
+            memset(cg, 0, (size_t)n * sizeof(double));
+        }
+        for (i = 0; pulled && i < r; i++) {
+            cg[i] += m->lam[i];
+            for (k = 0; k < r; k++) cH[i * n + k] += m->L[i * r + k];
         }
         af_contract(A, x, X, r);
         s3_times(m, x, Y);
@@ -427,6 +446,7 @@ static int minimize(af_reduced *m, double *x, const double *q_hat, double inerti
                 s += (m->C2[i * r + k] + 3.0 * Y[i * r + k] + 4.0 * X[i * r + k]) * x[k];
             g[i] = extra ? s + cg[i] : s;
         }
+        for (i = r; i < n; i++) g[i] = cg[i];
         if (it == 0) tolerance += rtol * sqrt(af_dot(g, g, r));
         for (i = 0; i < r; i++) {
             g[i] += (inertia > 0.0 ? inertia * (x[i] - q_hat[i]) : 0.0) - load[i];
@@ -435,28 +455,29 @@ static int minimize(af_reduced *m, double *x, const double *q_hat, double inerti
                                + (i == k ? inertia : 0.0);
         }
         if (extra)       /* cH: the whole Hessian; H keeps the quartic's part for the search */
-            for (i = 0; i < rr; i++) cH[i] += H[i];
-        residual = sqrt(af_dot(g, g, r));
+            for (i = 0; i < r; i++)
+                for (k = 0; k < r; k++) cH[i * n + k] += H[i * r + k];
+        residual = sqrt(af_dot(g, g, n));
         if (!isfinite(residual)) {
             af_say(error, error_size, "step: the reduced force is not finite at iteration %ld",
                    it);
             return AF_NOT_CONVERGED;
         }
-        for (i = 0; i < r; i++) {
-            const double *row = extra ? cH + i * r : H + i * r;
+        for (i = 0; i < n; i++) {
+            const double *row = extra ? cH + i * n : H + i * r;
             double s = 0.0;
-            for (k = 0; k < r; k++) s += fabs(row[k]) * fabs(x[k]);
-            terms[i] = s + fabs(load[i]) + fabs(m->c1[i]);
+            for (k = 0; k < n; k++) s += fabs(row[k]) * fabs(x[k]);
+            terms[i] = s + (i < r ? fabs(load[i]) + fabs(m->c1[i]) : 0.0);
         }
-        floor_ = FLOOR * eps * (double)r * sqrt(af_dot(terms, terms, r));
+        floor_ = FLOOR * eps * (double)n * sqrt(af_dot(terms, terms, n));
         if (reach > floor_) floor_ = reach;
         if (residual <= (tolerance > floor_ ? tolerance : floor_)) return (int)it;
         if (it == max_iter) break;
-        af_newton_direction(extra ? cH : H, g, p, L, V, lam, J, t1, r, CLAMP, 0);
-        a1 = af_dot(g, p, r);
+        af_newton_direction(extra ? cH : H, g, p, m->L, m->V, m->lam, m->J, m->t1, n, CLAMP, 0);
+        a1 = af_dot(g, p, n);
         if (!(a1 < 0.0)) break;
         a2 = 0.5 * form(H, p, r);
-        if (extra) pull = af_dot(cg, p, r);
+        if (extra) pull = af_dot(cg, p, n);
         w4_times(m, p, Ap);
         cubic_forms(A, Ap, p, r, &mixed, &pure);
         s3_times(m, p, Y);
@@ -468,7 +489,7 @@ static int minimize(af_reduced *m, double *x, const double *q_hat, double inerti
         while (step >= SMALLEST_STEP) {
             double beside = 0.0;    /* the cables' and the contact's change, less its slope */
             if (extra) {
-                for (k = 0; k < r; k++) ts[k] = step * p[k];
+                for (k = 0; k < n; k++) ts[k] = step * p[k];
                 if (pulled) beside += cable_change(m, x, ts);
                 if (m->contact) beside += af_contact_change(m->contact, x, ts, touch);
                 beside = beside / step - pull;
@@ -478,7 +499,7 @@ static int minimize(af_reduced *m, double *x, const double *q_hat, double inerti
             step *= 0.5;
         }
         if (step < SMALLEST_STEP) break;
-        for (k = 0; k < r; k++) x[k] += step * p[k];
+        for (k = 0; k < n; k++) x[k] += step * p[k];
         for (k = 0; k < m->triples; k++) A[k] += step * Ap[k];
     }
     af_say(error, error_size, "step: Newton stopped at |g| = %.3g, its tolerance %.3g, after "
@@ -488,24 +509,30 @@ static int minimize(af_reduced *m, double *x, const double *q_hat, double inerti
 
 int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force, double dt,
                        double rtol, int max_iter, char *error, size_t error_size) {
-    long r = m->r, k;
-    double *base = m->work + 2 * m->triples + 6 * r * r, *x = base + 2 * r, *load = base + 3 * r,
-           *q_hat = base + 7 * r;
+    long r = m->r, n, k;
+    double *x = m->x, *load = m->load, *q_hat = m->q_hat;
     int result;
     for (k = 0; k < r; k++) load[k] = m->constant[k];
     if (force) project(m, force, load);
     for (k = 0; k < r; k++) x[k] = q_hat[k] = q[k] + dt * w[k];
     if (m->contact) {      /* friction lagged at q; the start clear of the obstacles */
-        double share;
+        double share, *z = m->ts;
         af_contact_start(m->contact, q, dt);
-        for (k = 0; k < r; k++) x[k] = q_hat[k] - q[k];
-        share = af_contact_limit(m->contact, q, x);
-        for (k = 0; k < r; k++) x[k] = q[k] + share * x[k];
+        n = r + af_contact_unknowns(m->contact);
+        for (k = 0; k < r; k++) {
+            z[k] = q[k];
+            x[k] = q_hat[k] - q[k];
+        }
+        for (k = r; k < n; k++) z[k] = 0.0;
+        af_contact_predicted(m->contact, x + r);
+        share = af_contact_limit(m->contact, z, x);
+        for (k = 0; k < n; k++) x[k] = z[k] + share * x[k];
     }
     result = minimize(m, x, q_hat, 1.0 / (dt * dt),
                       load, rtol * (sqrt(af_dot(load, load, r)) + sqrt(af_dot(w, w, r)) / dt),
                       rtol, max_iter, error, error_size);
     if (result < 0) return result;
+    if (m->contact) af_contact_finish(m->contact, x, dt);
     for (k = 0; k < r; k++) {
         w[k] = (x[k] - q[k]) / dt;
         q[k] = x[k];
@@ -516,17 +543,19 @@ int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force,
 int af_reduced_static(af_reduced *m, double *q, double rtol, int max_iter, char *error,
                       size_t error_size) {
     long r = m->r;
+    int result;
     if (m->contact) af_contact_start(m->contact, q, 0.0);
-    return minimize(m, q, NULL, 0.0, m->constant,
-                    rtol * sqrt(af_dot(m->constant, m->constant, r)), rtol, max_iter, error,
-                    error_size);
+    result = minimize(m, q, NULL, 0.0, m->constant,
+                      rtol * sqrt(af_dot(m->constant, m->constant, r)), rtol, max_iter, error,
+                      error_size);
+    if (result >= 0 && m->contact) af_contact_finish(m->contact, q, 0.0);
+    return result;
 }
 
 void af_reduced_control_slopes(af_reduced *m, const double *q, double *slopes) {
     long r = m->r, rr = r * r, i, k, c;
-    double *A = m->work, *X = A + 2 * m->triples, *Y = X + rr, *H = Y + rr, *L = H + rr,
-           *V = L + rr, *J = V + rr, *g = J + rr, *p = g + r, *t1 = g + 5 * r, *lam = g + 6 * r,
-           *cH = g + 8 * r, *cg = cH + rr;
+    double *A = m->A, *X = m->X, *Y = m->Y, *H = m->H, *g = m->g, *p = m->p, *cH = m->cH,
+           *cg = m->cg;
     int pulled = m->cables && cable_terms(m, q, cg, cH);
     w4_times(m, q, A);
     af_contract(A, q, X, r);
@@ -546,7 +575,7 @@ void af_reduced_control_slopes(af_reduced *m, const double *q, double *slopes) {
             }
             g[i] = slope * s;
         }
-        af_newton_direction(H, g, p, L, V, lam, J, t1, r, CLAMP, 0);   /* p = -H^-1 g */
+        af_newton_direction(H, g, p, m->L, m->V, m->lam, m->J, m->t1, r, CLAMP, 0);
         for (i = 0; i < r; i++) slopes[i * m->controls + c] = p[i];
     }
 }
