@@ -20,9 +20,11 @@ PLUGIN = os.path.join(native.FOLDER, "mujoco_plugin.c")
 #: The plugin's name in MJCF (<plugin plugin="...">).
 NAME = "anisofem.soft"
 #: An instance's plugin state (mjData.plugin_state from model.plugin_stateadr): the time its
-#: soft state is at, the soft body's pull on its carrier over the last step (a force, N, its
-#: moment about the world's origin, N m), then HEADER on the runtime's state (af_state_size).
-HEADER = 7
+#: soft state is at, its last step's length, the soft body's pull on its carrier (a force, N,
+#: its moment about the world's origin, N m), its carrier's place and velocity at the last
+#: step's start, the obstacles' impulse over it; from HEADER on the runtime's state
+#: (af_state_size), then 6 per obstacle (export/c/mujoco_plugin.c says what each holds).
+HEADER = 20
 _LOADED = {}
 
 

@@ -62,11 +62,12 @@ def alone(path, steps, dt, before_each=None):
 
 
 def test_the_plugin_steps_like_the_c_runtime(files):
-    """The beam under gravity, its body fixed: after 501 MuJoCo steps of 0.02 s its state (500
-    soft steps: the first computes at t = 0) equals the C runtime's stepped alone, to 1e-9."""
+    """The beam under gravity, its body fixed: after 500 MuJoCo steps of 0.02 s its state (500
+    soft steps, each ahead over the MuJoCo step whose forces it computes) equals the C
+    runtime's stepped alone, to 1e-9."""
     path, _ = files
     model, data = compiled(plugin.mjcf(path), 0.02)
-    for _ in range(501):
+    for _ in range(500):
         mujoco.mj_step(model, data)
     c, state = alone(path, 500, 0.02)
     soft = data.plugin_state[plugin.HEADER:]
@@ -81,7 +82,7 @@ def test_the_soft_body_steps_at_its_own_time_step(files):
     MuJoCo step, as the C runtime alone at 0.01 s (1e-9 m after 100 soft steps)."""
     path, _ = files
     model, data = compiled(plugin.mjcf(path, timestep=0.01), 0.002)
-    for _ in range(501):
+    for _ in range(496):     # the 100th soft step is taken at t = 0.99 s
         mujoco.mj_step(model, data)
     c, state = alone(path, 100, 0.01)
     assert data.plugin_state[0] == pytest.approx(1.0)
@@ -121,7 +122,8 @@ def test_a_framed_model_rides_its_body(files):
      "substeps: expected a whole number from 1 to 10000, got '0'"),
     (lambda xml, path: xml.replace('<plugin instance="soft"/>',
                                    '<freejoint/><geom size="0.01"/><plugin instance="soft"/>'),
-     "is a reduced model, which holds its vertices still, on body 'soft', which moves"),
+     "is a reduced model, which moves with its body only by translation, on body 'soft', "
+     "which can turn"),
     (lambda xml, path: xml.replace('<plugin instance="soft"/>', ''),
      "no body carries the instance")])
 def test_bad_input_fails_compilation_in_one_line(files, change, says):
@@ -289,8 +291,8 @@ def test_the_soft_surface_is_drawn_in_mujocos_scene(files):
 def test_a_geom_moves_the_obstacle_it_is_named_for(tmp_path):
     """The beam 1 cm over the ground with a ball under its tip (the file's obstacles "ground"
     and "ball"); in MuJoCo a mocap geom named "ball" rises 2 mm over 0.4 s: the ball follows
-    it, pushes the tip up, and the soft body equals the C runtime's with the ball moved alike
-    (af_move_obstacle), to 1e-9 m."""
+    it (where it is at each soft step's start), pushes the tip up, and the soft body equals
+    the C runtime's with the ball moved alike (af_move_obstacle), to 1e-9 m."""
     beam = af.box_beam(size=(0.2, 0.02, 0.02), cells=(20, 2, 2))
     mesh = af.TetMesh(beam.vertices + [0, 0, 0.01 - beam.vertices[:, 2].min()], beam.tets)
     ball = af.Sphere((0.19, 0.0, 0.0015), 0.008, name="ball")
@@ -307,9 +309,10 @@ def test_a_geom_moves_the_obstacle_it_is_named_for(tmp_path):
     for k in range(41):
         data.mocap_pos[0] = rise[k]
         mujoco.mj_step(model, data)
+
     def move_ball(c, k):
-        assert c._c.af_move_obstacle(c._handle, 1, native._pointer(rise[k])) == 0
-    c, state = alone(path, 40, 0.02, move_ball)
+        assert c._c.af_move_obstacle(c._handle, 1, native._pointer(rise[k - 1])) == 0
+    c, state = alone(path, 41, 0.02, move_ball)
     x, x_alone = c._positions(data.plugin_state[plugin.HEADER:]), c._positions(state)
     assert np.abs(x - x_alone).max() < 1e-9
     at = np.zeros(3)

@@ -1,6 +1,7 @@
 """Write the example scene files' meshes next to them, as Gmsh files with named physical groups
 (what Gmsh's own Python API would write): actuator.msh (anisofem.physics.meshgen.actuator),
-gripper.msh (two of those actuators hanging on either side of a box), tee.msh (the T of
+gripper.msh (two of those actuators hanging on either side of a box), fingers.msh (the two
+actuators alone), tee.msh (the T of
 anisofem.physics.meshgen.t_shape), part.msh (a 0.08 m beam in two halves, "left" and
 "right", with its ends named "base" and "end") and tentacle.msh (a 0.2 m cylinder in four bands around its axis, "up", "down",
 "left" and "right", with its ends named "base" and "tip").
@@ -55,26 +56,32 @@ BOX, LIFTED = (0.03, 0.03, 0.04), 5e-5
 GAP, TIP = 0.005, 0.012
 
 
-def gripper_mesh():
-    """(mesh, volumes, surfaces, names) of the gripper: two fingers (meshgen.actuator, 8 cm,
-    hanging down, their strain-limiting layers facing each other, so pressure in their
-    cavities bends them together) on either side of a box standing on the ground z = 0.
-    Groups: the fingers' bodies "left" (y < 0) and "right", their "layer"s, the "box"; the
-    fingers' "cavity" and "base" surfaces."""
+def fingers_mesh():
+    """(mesh, volumes, surfaces, names) of the gripper's fingers alone (meshgen.actuator, 8 cm,
+    hanging down, their strain-limiting layers facing each other across the gap the box
+    fills, so pressure in their cavities bends them together). Groups: the fingers' bodies
+    "left" (y < 0) and "right", their "layer"s, their "cavity" and "base" surfaces."""
     finger, volumes, surfaces, _ = actuator(cells=(8, 4, 12))
     X = finger.vertices * [1.0, -1.0, -1.0]      # turned about x: tip down, layer toward +y
     X += [0.0, -BOX[1] / 2 - GAP - X[:, 1].max(), TIP - X[:, 2].min()]
     turned = X * [-1.0, -1.0, 1.0]                 # the other finger: turned about z
+    n = finger.n_vertices
+    mesh = TetMesh(np.vstack([X, turned]), np.vstack([finger.tets, finger.tets + n]))
+    tags = np.concatenate([volumes, np.where(volumes == 1, 7, volumes)])
+    both = {g: np.vstack([surfaces[g], surfaces[g] + n]) for g in (3, 4)}
+    return mesh, tags, both, {"left": 1, "layer": 2, "right": 7, "cavity": 3, "base": 4}
+
+
+def gripper_mesh():
+    """(mesh, volumes, surfaces, names) of the gripper: the fingers of fingers_mesh on either
+    side of a box standing on the ground z = 0. Groups: fingers_mesh's and the "box"."""
+    fingers, tags, surfaces, names = fingers_mesh()
     box = box_beam(BOX, (3, 3, 4))
     B = box.vertices - box.vertices.min(axis=0) + [-BOX[0] / 2, -BOX[1] / 2, LIFTED]
-    n = finger.n_vertices
-    mesh = TetMesh(np.vstack([X, turned, B]),
-                   np.vstack([finger.tets, finger.tets + n, box.tets + 2 * n]))
-    tags = np.concatenate([volumes, np.where(volumes == 1, 7, volumes),
-                           np.full(box.n_tets, 6)])
-    both = {g: np.vstack([surfaces[g], surfaces[g] + n]) for g in (3, 4)}
-    return mesh, tags, both, {"left": 1, "layer": 2, "right": 7, "box": 6, "cavity": 3,
-                                "base": 4}
+    mesh = TetMesh(np.vstack([fingers.vertices, B]),
+                   np.vstack([fingers.tets, box.tets + fingers.n_vertices]))
+    return (mesh, np.concatenate([tags, np.full(box.n_tets, 6)]), surfaces,
+            dict(names, box=6))
 
 
 def tee_mesh():
@@ -84,8 +91,8 @@ def tee_mesh():
     return mesh, np.ones(mesh.n_tets, int), {}, {"tee": 1}
 
 
-MESHES = {"actuator.msh": actuator, "gripper.msh": gripper_mesh, "tee.msh": tee_mesh,
-          "part.msh": part_mesh, "tentacle.msh": tentacle_mesh}
+MESHES = {"actuator.msh": actuator, "gripper.msh": gripper_mesh, "fingers.msh": fingers_mesh,
+          "tee.msh": tee_mesh, "part.msh": part_mesh, "tentacle.msh": tentacle_mesh}
 
 if __name__ == "__main__":
     for name, make in MESHES.items():

@@ -124,10 +124,11 @@ double af_contact_limit(af_contact *c, const double *z, const double *p);
  * at the next step's start and the acceleration all else gives it (3, m/s^2). */
 void af_contact_motion(af_contact *c, int i, double mass, const double *velocity,
                        const double *acceleration);
-/* The unknowns a step takes beside q since af_contact_start (3 per free obstacle), and their
- * predicted values dt v + dt^2 a into y (that many). */
+/* The unknowns a step takes beside q since af_contact_start (3 per free obstacle), and where
+ * its Newton starts them into y (that many): the move at the obstacles' velocity, dt v (the
+ * push a is left to the solve: a box resting on the body has gravity's). */
 long af_contact_unknowns(const af_contact *c);
-void af_contact_predicted(const af_contact *c, double *y);
+void af_contact_guess(const af_contact *c, double *y);
 /* After a solve ends at z: the free obstacles moved by their part of z (their velocity its
  * share of dt; dt 0: a static solve), and each obstacle's wrench (force on it, N, and moment
  * about its position, N m) there. */

@@ -194,10 +194,11 @@ const double *af_contact_wrench(const af_contact *c, int i) { return c->wrench +
 
 long af_contact_unknowns(const af_contact *c) { return c ? c->extra : 0; }
 
-void af_contact_predicted(const af_contact *c, double *y) {
-    int o;
+void af_contact_guess(const af_contact *c, double *y) {
+    int o, a;
     for (o = 0; o < c->count; o++)
-        if (c->slot[o] >= 0) memcpy(y + c->slot[o] - c->r, c->hat + 3 * o, 3 * sizeof(double));
+        for (a = 0; c->slot[o] >= 0 && a < 3; a++)
+            y[c->slot[o] - c->r + a] = c->velocity[3 * o + a] / sqrt(c->inertia);
 }
 
 /* d, normal n (3) and, where H is not NULL, the Hessian of d (9) at x from obstacle o. */

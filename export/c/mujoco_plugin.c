@@ -16,19 +16,27 @@
  *   <actuator> <plugin name="push" instance="finger" site="..."/> </actuator>  <!-- a control -->
  *
  * The file's coordinates are the carrying body's: its held vertices sit where the body puts
- * them, x = R_body x0 + p_body. A reduced (linear) model holds them still, so its body must
- * not move (fixed to the world); a framed model's move with the body. Gravity is MuJoCo's.
+ * them, x = R_body x0 + p_body. A reduced (linear) model's move with a body that translates
+ * (slide joints only; its step is taken in the body's frame, the body's acceleration an
+ * inertial force); a framed model's with a body that moves in any way. Gravity is MuJoCo's.
  *
  * Passive: the soft state lives in MuJoCo's plugin state (mjData.plugin_state, saved and reset
- * with it). The first passive forces after a reset place it at rest where its body is; each
- * later time they are computed a `timestep` past the soft state's (default: once per mj_step),
- * the soft body steps there in `substeps` backward-Euler steps, the held vertices where the
- * body is then, with the
- * controls its actuators' ctrl and each obstacle of the file a geom is named for moved with
- * the geom; where the body moves, the soft body pulls it back by the impulse the body gave it.
- * Actuator: the plugin's actuators only carry controls (they push nothing). Visualize: the
- * surface's edges as lines.
+ * with it). The first passive forces after a reset place it at rest where its body is. A
+ * framed model steps to where its body has moved: each time the passive forces are computed
+ * a `timestep` past the soft state's (default: once per mj_step), in `substeps` backward-Euler
+ * steps, the held vertices where the body is then. A reduced model steps ahead over the next
+ * `timestep` whenever MuJoCo's time reaches its state's, so that the forces it puts on the
+ * bodies it touches act over the same MuJoCo steps. Its controls are its actuators' ctrl, and
+ * each obstacle of the file a geom is named for follows the geom: a geom on a free body (a
+ * free joint) is a free obstacle, its translation solved with the soft step from the body's
+ * velocity and what else pushed it over the last step, and the soft body's force on it
+ * applied through its centre of mass over the step (it does not turn it); any other geom moves
+ * its obstacle by the geom's translation. Where the carrier moves, the soft body pulls it
+ * back by the impulse the carrier gave it (the soft body's momentum change less gravity's and
+ * the obstacles' impulses). Actuator: the plugin's actuators only carry controls (they push
+ * nothing). Visualize: the surface's edges as lines.
  */
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -39,9 +47,15 @@
 #include "anisofem.h"
 
 /* The plugin state: the time the soft state is at (UNPLACED until the first passive forces
- * place it where its body is), the soft body's pull on its carrier over the last step (a
- * force, N, and its moment about the world's origin, N m), then the runtime's state. */
-enum { AT = 0, PULL = 1, HEADER = 7 };
+ * place it where its body is), the length of its last step, s, the soft body's pull on its
+ * carrier over the step before (a force, N, and its moment about the world's origin, N m),
+ * where the carrier was at the last step's start and its velocity there (m, m/s), the
+ * obstacles' impulse on the soft body over the last step (in the file's coordinates: N s, and
+ * its moment about the file's origin, N m s), then the runtime's state, then per obstacle its
+ * geom's velocity at the last step's start (m/s; NAN before one) and the soft body's force on
+ * it now (N). */
+enum { AT = 0, STEP = 1, PULL = 2, CARRIED = 8, TOUCHED = 14, HEADER = 20 };
+enum { OBSTACLE = 6 };
 #define UNPLACED (-1.0)
 
 typedef struct {
@@ -55,8 +69,10 @@ typedef struct {
     int nedge;     /* the surface's edges, drawn in MuJoCo's scene */
     int *edges;
     int *geom;     /* per obstacle of the file, the geom named as it (-1: none) */
+    int *owner;    /* per obstacle, the free body its geom is on (-1: none) */
     double *from;  /* per obstacle: where it was, in the file, and its geom in the world,
                       when the soft body was placed (6 each) */
+    double placed[3]; /* where the carrier was then */
     double *scratch, *values; /* room for n positions, and for the controls */
 } soft;
 
@@ -92,6 +108,26 @@ static int moves(const mjModel *m, int b) {
         if (m->body_jntnum[b] > 0 || m->body_mocapid[b] >= 0)
             return 1;
     return 0;
+}
+
+/* Whether body b can turn: a joint other than a slide on it or a body it hangs from, or a
+ * mocap body. */
+static int turns(const mjModel *m, int b) {
+    for (; b > 0; b = m->body_parentid[b]) {
+        if (m->body_mocapid[b] >= 0)
+            return 1;
+        for (int j = 0; j < m->body_jntnum[b]; j++)
+            if (m->jnt_type[m->body_jntadr[b] + j] != mjJNT_SLIDE)
+                return 1;
+    }
+    return 0;
+}
+
+/* The body geom g is on where that body hangs from the world by a free joint, else -1. */
+static int free_body(const mjModel *m, int g) {
+    int b = m->geom_bodyid[g];
+    return b > 0 && m->body_parentid[b] == 0 && m->body_jntnum[b] == 1
+           && m->jnt_type[m->body_jntadr[b]] == mjJNT_FREE ? b : -1;
 }
 
 static int substeps(const mjModel *m, int instance, char *error, size_t size) {
@@ -180,11 +216,11 @@ static void check(const mjModel *m, int instance, char *error, size_t size) {
     if (b < 0)
         snprintf(error, size, "anisofem.soft: no body carries the instance (add "
                  "<plugin instance=\"...\"/> to a body)");
-    else if (af_kind(model) == AF_REDUCED && moves(m, b))
-        snprintf(error, size, "anisofem.soft: %s is a reduced model, which holds its vertices "
-                 "still, on body '%s', which moves: export it with --framed, or carry it on a "
-                 "body fixed to the world", mj_getPluginConfig(m, instance, "file"),
-                 mj_id2name(m, mjOBJ_BODY, b));
+    else if (af_kind(model) == AF_REDUCED && turns(m, b))
+        snprintf(error, size, "anisofem.soft: %s is a reduced model, which moves with its body "
+                 "only by translation, on body '%s', which can turn (a joint other than a "
+                 "slide, or a mocap body): export it with --framed, or carry it on slide joints",
+                 mj_getPluginConfig(m, instance, "file"), mj_id2name(m, mjOBJ_BODY, b));
     else if (substeps(m, instance, error, size) < 0 || timestep(m, instance, error, size) < 0)
         ;
     else if (!controls_named(m, instance, model, error, size))
@@ -208,7 +244,7 @@ static int nstate(const mjModel *m, int instance) {
         return 0;
     }
     model = load(m, instance, error, sizeof error);
-    size = HEADER + af_state_size(model);
+    size = HEADER + af_state_size(model) + OBSTACLE * af_obstacles(model);
     af_free(model);
     return size;
 }
@@ -305,7 +341,7 @@ static int surface_edges(soft *s) {
 
 static int init(const mjModel *m, mjData *d, int instance) {
     char error[1024] = "";
-    int count;
+    int count, obstacles;
     soft *s;
     check(m, instance, error, sizeof error);
     if (error[0]) {
@@ -322,6 +358,7 @@ static int init(const mjModel *m, mjData *d, int instance) {
         free(s);
         return -1;
     }
+    obstacles = af_obstacles(s->model);
     s->body = carrier(m, instance);
     s->free = moves(m, s->body);
     s->substeps = count;
@@ -329,14 +366,17 @@ static int init(const mjModel *m, mjData *d, int instance) {
     s->n = af_vertices(s->model);
     s->x = calloc(3 * (size_t)s->n, sizeof(double));
     s->v = calloc(3 * (size_t)s->n, sizeof(double));
-    s->geom = malloc(((size_t)af_obstacles(s->model) + 1) * sizeof(int));
-    s->from = malloc((6 * (size_t)af_obstacles(s->model) + 1) * sizeof(double));
+    s->geom = malloc(((size_t)obstacles + 1) * sizeof(int));
+    s->owner = malloc(((size_t)obstacles + 1) * sizeof(int));
+    s->from = malloc((6 * (size_t)obstacles + 1) * sizeof(double));
     s->scratch = malloc(3 * (size_t)s->n * sizeof(double));
     s->values = malloc(((size_t)af_controls(s->model) + 1) * sizeof(double));
-    for (int i = 0; s->geom && i < af_obstacles(s->model); i++)
+    for (int i = 0; s->geom && s->owner && i < obstacles; i++) {
         s->geom[i] = mj_name2id(m, mjOBJ_GEOM, af_obstacle_name(s->model, i));
+        s->owner[i] = s->geom[i] >= 0 ? free_body(m, s->geom[i]) : -1;
+    }
     d->plugin_data[instance] = (uintptr_t)s;
-    if (!s->x || !s->v || !s->geom || !s->from || !s->scratch || !s->values
+    if (!s->x || !s->v || !s->geom || !s->owner || !s->from || !s->scratch || !s->values
         || !surface_edges(s)) {
         mju_warning("anisofem.soft: out of memory");
         return -1;
@@ -352,6 +392,7 @@ static void destroy(mjData *d, int instance) {
         free(s->v);
         free(s->edges);
         free(s->geom);
+        free(s->owner);
         free(s->from);
         free(s->scratch);
         free(s->values);
@@ -370,6 +411,7 @@ static void copy(mjData *dest, const mjModel *m, const mjData *src, int instance
     memcpy(to->x, from->x, 3 * (size_t)from->n * sizeof(double));
     memcpy(to->v, from->v, 3 * (size_t)from->n * sizeof(double));
     memcpy(to->from, from->from, 6 * (size_t)af_obstacles(from->model) * sizeof(double));
+    mju_copy3(to->placed, from->placed);
     if (state_placed(m, dest, instance))
         set_gravity(m, dest, to);
 }
@@ -384,9 +426,15 @@ static void reset(const mjModel *m, double *state, void *data, int instance) {
         af_rest_state(s->model, state + HEADER);
 }
 
+/* The instance's per-obstacle block (OBSTACLE doubles each) in its plugin state. */
+static double *obstacle_state(const soft *s, double *state) {
+    return state + HEADER + af_state_size(s->model);
+}
+
 /* The soft body at rest where its body is (gravity set for where it is), at d's time. */
 static int place(const mjModel *m, mjData *d, soft *s, double *state, const double *base) {
     int code = set_gravity(m, d, s);
+    double *blocks = obstacle_state(s, state);
     if (code == AF_OK && af_kind(s->model) == AF_FRAMED)
         code = af_carry_state(s->model, state + HEADER, base);
     if (s->free)
@@ -396,82 +444,203 @@ static int place(const mjModel *m, mjData *d, soft *s, double *state, const doub
         af_obstacle_position(s->model, i, s->from + 6 * i);
         if (s->geom[i] >= 0)
             mju_copy3(s->from + 6 * i + 3, d->geom_xpos + 3 * s->geom[i]);
+        mju_zero(blocks + OBSTACLE * i, OBSTACLE);
+        blocks[OBSTACLE * i] = NAN;
     }
+    mju_copy3(s->placed, d->xpos + 3 * s->body);
+    mju_zero(state + STEP, HEADER - STEP);
+    mju_copy3(state + CARRIED, d->xpos + 3 * s->body);
     state[AT] = d->time;
     return code;
 }
 
+/* a (3) in the world's axes into the file's: a reduced model's are its body's (the body
+ * turns not), a framed model's the world's. */
+static void into_file(const soft *s, const double *at, const double *a, double *out) {
+    if (af_kind(s->model) == AF_FRAMED) {
+        mju_copy3(out, a);
+        return;
+    }
+    for (int k = 0; k < 3; k++)
+        out[k] = at[k] * a[0] + at[4 + k] * a[1] + at[8 + k] * a[2];
+}
+
+/* The reverse of into_file. */
+static void into_world(const soft *s, const double *at, const double *a, double *out) {
+    if (af_kind(s->model) == AF_FRAMED) {
+        mju_copy3(out, a);
+        return;
+    }
+    for (int k = 0; k < 3; k++)
+        out[k] = at[4 * k] * a[0] + at[4 * k + 1] * a[1] + at[4 * k + 2] * a[2];
+}
+
 /* Each obstacle of the file a geom is named for, moved by the geom's translation since the
- * soft body was placed (into the file's coordinates: a reduced model's carrier is fixed). */
-static int move_obstacles(const mjModel *m, const mjData *d, soft *s) {
-    double at[12];
+ * soft body was placed, less its carrier's where that is a reduced model's (whose file
+ * coordinates are its body's); a free one's velocity and the acceleration all but the soft
+ * body gave it over the last step, relative to the carrier (carrier: its velocity and
+ * acceleration, m/s and m/s^2). */
+static int move_obstacles(const mjModel *m, const mjData *d, soft *s, double *state,
+                          const double *carrier) {
+    double at[12], *blocks = obstacle_state(s, state), h = state[STEP];
     pose(m, d, s->body, at);
     for (int i = 0; i < af_obstacles(s->model); i++) {
-        double shift[3], target[3];
+        double shift[3], target[3], velocity[6], push[3], *block = blocks + OBSTACLE * i;
+        int b = s->owner[i];
         if (s->geom[i] < 0)
             continue;
         for (int k = 0; k < 3; k++)
-            shift[k] = d->geom_xpos[3 * s->geom[i] + k] - s->from[6 * i + 3 + k];
+            shift[k] = d->geom_xpos[3 * s->geom[i] + k] - s->from[6 * i + 3 + k]
+                       - (af_kind(s->model) == AF_REDUCED ? at[4 * k + 3] - s->placed[k] : 0.0);
+        into_file(s, at, shift, target);
         for (int k = 0; k < 3; k++)
-            target[k] = s->from[6 * i + k] + (af_kind(s->model) == AF_REDUCED
-                        ? at[k] * shift[0] + at[4 + k] * shift[1] + at[8 + k] * shift[2]
-                        : shift[k]);
+            target[k] += s->from[6 * i + k];
         if (af_move_obstacle(s->model, i, target) != AF_OK)
+            return AF_BAD_INPUT;
+        if (b < 0)
+            continue;
+        mj_objectVelocity(m, d, mjOBJ_GEOM, s->geom[i], velocity, 0);
+        for (int k = 0; k < 3; k++) {
+            push[k] = isnan(block[0]) || !(h > 0.0) ? m->opt.gravity[k]
+                      : (velocity[3 + k] - block[k]) / h - block[3 + k] / m->body_subtreemass[b];
+            block[k] = velocity[3 + k];
+            velocity[3 + k] -= carrier[k];
+            push[k] -= carrier[3 + k];
+        }
+        into_file(s, at, velocity + 3, shift);
+        into_file(s, at, push, target);
+        if (af_obstacle_motion(s->model, i, m->body_subtreemass[b], shift, target) != AF_OK)
             return AF_BAD_INPUT;
     }
     return AF_OK;
 }
 
-/* One soft step of dt to base (NULL: held still); where the carrier moves, the positions and
- * velocities kept and the carrier's impulse on the soft body added to pull (6: momentum's
- * change less gravity's impulse, linear then angular about the world's origin). */
-static int advance(const mjModel *m, mjData *d, soft *s, double *state, const double *base,
-                   double dt, double *pull) {
+/* The soft body's world positions now into s->x, velocities over the last step (of h s)
+ * into s->v; where its carrier moves, the carrier's impulse on it over that step (its
+ * momentum's change less gravity's and the obstacles' impulses; linear then angular about
+ * the world's origin), over h, into the state's pull. */
+static void account(const mjModel *m, mjData *d, soft *s, double *state, double h) {
     const double *mass = af_masses(s->model);
-    double *x1 = s->scratch;
-    int code = af_step(s->model, state + HEADER, NULL, base, dt);
-    if (code == AF_OK && s->free) {
-        world_positions(m, d, s, state, x1);
-        for (int i = 0; i < s->n; i++) {
-            double *x = s->x + 3 * i, *v = s->v + 3 * i, v1[3], g[3], before[3], after[3];
+    double *x1 = s->scratch, pull[6], at[12], arm[3], touched[6];
+    if (!s->free)
+        return;
+    pose(m, d, s->body, at);
+    world_positions(m, d, s, state, x1);
+    into_world(s, at, state + TOUCHED, touched);   /* the obstacles' impulse, in the world */
+    into_world(s, at, state + TOUCHED + 3, touched + 3);
+    for (int k = 0; k < 3; k++)
+        arm[k] = af_kind(s->model) == AF_REDUCED ? at[4 * k + 3] : 0.0;
+    mju_cross(pull + 3, arm, touched);
+    for (int k = 0; k < 3; k++) {
+        pull[k] = -touched[k];
+        pull[3 + k] = -touched[3 + k] - pull[3 + k];
+    }
+    for (int i = 0; i < s->n; i++) {
+        double *x = s->x + 3 * i, *v = s->v + 3 * i, v1[3], g[3], before[3], after[3];
+        for (int k = 0; k < 3; k++) {
+            v1[k] = (x1[3 * i + k] - x[k]) / h;
+            g[k] = mass[i] * m->opt.gravity[k] * h;
+        }
+        mju_cross(before, x, v);
+        mju_cross(after, x1 + 3 * i, v1);
+        for (int k = 0; k < 3; k++) {
+            pull[k] += mass[i] * (v1[k] - v[k]) - g[k];
+            pull[3 + k] += mass[i] * (after[k] - before[k]);
+        }
+        mju_cross(after, x1 + 3 * i, g);
+        for (int k = 0; k < 3; k++) {
+            pull[3 + k] -= after[k];
+            x[k] = x1[3 * i + k];
+            v[k] = v1[k];
+        }
+    }
+    for (int k = 0; k < 6; k++)
+        state[PULL + k] = pull[k] / h;
+}
+
+/* Steps of h s in all from the state's: the carrier's velocity and acceleration over the
+ * last step estimated (a reduced model's step is in its frame, the acceleration an inertial
+ * force), the controls and obstacles set, `substeps` backward-Euler steps (to base: a framed
+ * model's held vertices there), and the obstacles' impulse and forces kept. */
+static int advance(const mjModel *m, mjData *d, int instance, soft *s, double *state,
+                   const double *base, double h) {
+    const double *mass = af_masses(s->model);
+    double at[12], carrier[6], inertial[3], *force = NULL, *blocks = obstacle_state(s, state);
+    double last = state[STEP] > 0.0 ? state[STEP] : h;
+    int code;
+    pose(m, d, s->body, at);
+    for (int k = 0; k < 3; k++) {   /* its velocity and acceleration over the last step */
+        carrier[k] = (at[4 * k + 3] - state[CARRIED + k]) / last;
+        carrier[3 + k] = (carrier[k] - state[CARRIED + 3 + k]) / last;
+        state[CARRIED + k] = at[4 * k + 3];
+        state[CARRIED + 3 + k] = carrier[k];
+    }
+    if (af_kind(s->model) == AF_FRAMED)
+        mju_zero(carrier, 6);
+    code = set_controls(m, d, instance, s);
+    if (code == AF_OK)
+        code = move_obstacles(m, d, s, state, carrier);
+    if (code != AF_OK)
+        return code;
+    into_file(s, at, carrier + 3, inertial);
+    if (inertial[0] != 0.0 || inertial[1] != 0.0 || inertial[2] != 0.0) {
+        force = s->scratch;
+        for (int i = 0; i < s->n; i++)
+            for (int k = 0; k < 3; k++)
+                force[3 * i + k] = -mass[i] * inertial[k];
+    }
+    mju_zero(state + TOUCHED, 6);
+    for (int i = 0; i < af_obstacles(s->model); i++)
+        mju_zero(blocks + OBSTACLE * i + 3, 3);
+    for (int j = 0; j < s->substeps; j++) {
+        if ((code = af_step(s->model, state + HEADER, force, base, h / s->substeps)) != AF_OK)
+            return code;
+        for (int i = 0; i < af_obstacles(s->model); i++) {   /* its impulse, about the origin */
+            double wrench[6], position[3], moment[3], *mean = blocks + OBSTACLE * i + 3;
+            af_obstacle_wrench(s->model, i, wrench);
+            af_obstacle_position(s->model, i, position);
+            mju_cross(moment, position, wrench);
             for (int k = 0; k < 3; k++) {
-                v1[k] = (x1[3 * i + k] - x[k]) / dt;
-                g[k] = mass[i] * m->opt.gravity[k] * dt;
-            }
-            mju_cross(before, x, v);
-            mju_cross(after, x1 + 3 * i, v1);
-            for (int k = 0; k < 3; k++) {
-                pull[k] += mass[i] * (v1[k] - v[k]) - g[k];
-                pull[3 + k] += mass[i] * (after[k] - before[k]);
-            }
-            mju_cross(after, x1 + 3 * i, g);
-            for (int k = 0; k < 3; k++) {
-                pull[3 + k] -= after[k];
-                x[k] = x1[3 * i + k];
-                v[k] = v1[k];
+                state[TOUCHED + k] += wrench[k] * h / s->substeps;
+                state[TOUCHED + 3 + k] += (moment[k] + wrench[3 + k]) * h / s->substeps;
+                mean[k] += wrench[k] / s->substeps;
             }
         }
     }
-    return code;
+    for (int i = 0; i < af_obstacles(s->model); i++) {   /* the step's mean force on each */
+        double mean[3];
+        mju_copy3(mean, blocks + OBSTACLE * i + 3);
+        into_world(s, at, mean, blocks + OBSTACLE * i + 3);
+    }
+    state[STEP] = h;
+    return AF_OK;
 }
 
-/* The soft body's pull (the force and moment the carrier gave it, reversed) on the carrier,
- * into the passive forces. */
-static void apply_pull(const mjModel *m, mjData *d, const soft *s, const double *pull) {
-    double force[3], moment[3], at[3];
+/* The soft body's pull on its carrier and its force on each free obstacle's body, into the
+ * passive forces. */
+static void apply(const mjModel *m, mjData *d, const soft *s, const double *state) {
+    const double *pull = state + PULL, *blocks = obstacle_state(s, (double *)state);
+    double force[3], moment[3], at[3], zero[3] = {0.0, 0.0, 0.0};
     const double *point = d->xipos + 3 * s->body;
     mju_scl3(force, pull, -1.0);
     mju_cross(at, point, force);
     for (int k = 0; k < 3; k++)
         moment[k] = -pull[3 + k] - at[k];
-    if (s->body > 0)
+    if (s->free && s->body > 0)
         mj_applyFT(m, d, force, moment, point, s->body, d->qfrc_passive);
+    for (int i = 0; i < af_obstacles(s->model); i++) {
+        int b = s->owner[i];
+        if (b >= 0)
+            mj_applyFT(m, d, blocks + OBSTACLE * i + 3, zero, d->xipos + 3 * b, b,
+                       d->qfrc_passive);
+    }
 }
 
 static void compute(const mjModel *m, mjData *d, int instance, int capability) {
     soft *s = (soft *)d->plugin_data[instance];
     double *state = d->plugin_state + m->plugin_stateadr[instance];
-    double at[12], base[12], dt = d->time - state[AT];
+    double at[12], base[12], h, half = 0.5 * m->opt.timestep;
+    int code = AF_OK;
     if (capability & mjPLUGIN_ACTUATOR) {   /* its actuators set controls, push nothing */
         for (int a = 0; a < m->nu; a++)
             if (m->actuator_plugin[a] == instance)
@@ -479,31 +648,37 @@ static void compute(const mjModel *m, mjData *d, int instance, int capability) {
     }
     if (!(capability & mjPLUGIN_PASSIVE) || !s)
         return;
+    h = s->timestep > 0.0 ? s->timestep : m->opt.timestep;
     pose(m, d, s->body, at);
     runtime_base(at, base);
     if (state[AT] == UNPLACED) {
-        if (place(m, d, s, state, base) != AF_OK)
+        if ((code = place(m, d, s, state, base)) != AF_OK) {
             mju_warning("anisofem.soft: %s", af_error(s->model));
-        return;
-    }
-    if (dt > (s->timestep > 0.0 ? s->timestep : m->opt.timestep) - 0.5 * m->opt.timestep) {
-        double impulse[6] = {0, 0, 0, 0, 0, 0};
-        if (set_controls(m, d, instance, s) != AF_OK || move_obstacles(m, d, s) != AF_OK) {
-            mju_warning("anisofem.soft: at t = %g s: %s", d->time, af_error(s->model));
             return;
         }
-        for (int k = 0; k < s->substeps; k++) {
-            if (advance(m, d, s, state, af_kind(s->model) == AF_FRAMED ? base : NULL,
-                        dt / s->substeps, impulse) != AF_OK) {
-                mju_warning("anisofem.soft: at t = %g s: %s", d->time, af_error(s->model));
-                return;
-            }
-        }
-        for (int k = 0; k < 6; k++)
-            state[PULL + k] = impulse[k] / dt;
-        state[AT] = d->time;
+        if (af_kind(s->model) == AF_FRAMED)
+            return;
+        state[AT] -= h;      /* a reduced model steps ahead from here at once */
     }
-    apply_pull(m, d, s, state + PULL);
+    if (af_kind(s->model) == AF_FRAMED && d->time - state[AT] > h - half) {
+        h = d->time - state[AT];              /* to where the body is now */
+        code = advance(m, d, instance, s, state, base, h);
+        if (code == AF_OK) {
+            account(m, d, s, state, h);
+            state[AT] = d->time;
+        }
+    } else if (af_kind(s->model) == AF_REDUCED && d->time > state[AT] - half) {
+        if (state[STEP] > 0.0)                 /* the step that ends now */
+            account(m, d, s, state, state[STEP]);
+        code = advance(m, d, instance, s, state, NULL, h);
+        if (code == AF_OK)
+            state[AT] = d->time + h;
+    }
+    if (code != AF_OK) {
+        mju_warning("anisofem.soft: at t = %g s: %s", d->time, af_error(s->model));
+        return;
+    }
+    apply(m, d, s, state);
 }
 
 /* The soft body's surface edges as lines in MuJoCo's scene (as far as it has room). */

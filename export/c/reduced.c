@@ -524,7 +524,7 @@ int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force,
             x[k] = q_hat[k] - q[k];
         }
         for (k = r; k < n; k++) z[k] = 0.0;
-        af_contact_predicted(m->contact, x + r);
+        af_contact_guess(m->contact, x + r);
         share = af_contact_limit(m->contact, z, x);
         for (k = 0; k < n; k++) x[k] = z[k] + share * x[k];
     }
