@@ -83,7 +83,9 @@ def controls(t):
 def lift(seconds=3.0, folder=None):
     """Run the grasp for `seconds` s. Returns a dict of arrays over the steps: t (s), box and
     hand heights (m), gap (the least distance of a finger surface node from the box, m), turn
-    (the box's turn from upright, rad), and the wall time, s."""
+    (the box's turn from upright, rad); the wall time, s; r; and "views": (t, the fingers'
+    surface nodes (k, 3) m, the box's center (3,) m) at rest, at the end of the squeeze and at
+    the end."""
     mujoco = plugin.mujoco_module()
     plugin.load_plugin()
     folder = folder or scratch_path("mujoco_gripper")
@@ -98,8 +100,8 @@ def lift(seconds=3.0, folder=None):
     surface = np.unique(runtime.surface)
     half = np.array([0.015, 0.015, 0.02])
     rows = {k: [] for k in ("t", "box", "hand", "gap", "turn")}
-    wall = 0.0
-    for _ in range(int(round(seconds / DT))):
+    wall, views, steps = 0.0, [], int(round(seconds / DT))
+    for step in range(steps):
         data.ctrl[grip], data.ctrl[servo] = controls(data.time)
         t0 = time.perf_counter()
         mujoco.mj_step(model, data)
@@ -113,8 +115,10 @@ def lift(seconds=3.0, folder=None):
         rows["hand"].append(data.xpos[hand, 2])
         rows["gap"].append(gap.min())
         rows["turn"].append(np.arccos(np.clip(R[2, 2], -1.0, 1.0)))
+        if step in (0, int(round(LIFT[0] / DT)) - 1, steps - 1):
+            views.append((data.time, x[surface], data.xpos[box].copy()))
     out = {k: np.array(v) for k, v in rows.items()}
-    out["wall"], out["r"] = wall, model_r.r
+    out["wall"], out["r"], out["views"] = wall, model_r.r, views
     return out
 
 
@@ -123,7 +127,8 @@ def main():
     parser.add_argument("--seconds", type=float, default=3.0)
     args = parser.parse_args()
     run = lift(args.seconds)
-    t, box, hand = run["t"], 1e3 * (run["box"] - run["box"][0]), 1e3 * run["hand"]
+    t, box, hand = (run["t"], 1e3 * (run["box"] - run["box"][0]),
+                    1e3 * (run["hand"] - run["hand"][0]))
     print(f"fingers: reduced model, r = {run['r']}; MuJoCo and soft step {DT} s")
     print(f"{'t (s)':>5} | {'grip (kPa)':>10} | {'hand up (mm)':>12} | {'box up (mm)':>11} | "
           f"{'gap (um)':>8}")
@@ -139,15 +144,22 @@ def main():
     print(f"least gap fingers-box {1e6 * run['gap'].min():.1f} um; box turned at most "
           f"{np.degrees(run['turn'].max()):.3f} deg; {len(t)} steps in {run['wall']:.2f} s: "
           f"{t[-1] / run['wall']:.0f}x real time")
-    figure, axes = plt.subplots(figsize=(6, 3.5))
+    figure, (axes, side) = plt.subplots(1, 2, figsize=(10, 4))
     axes.plot(t, hand, label="hand")
     axes.plot(t, box, label="box")
     axes.set(xlabel="t (s)", ylabel="up (mm)", title="a MuJoCo box lifted by soft fingers")
     axes.legend()
+    for (when, nodes, center), color in zip(run["views"], ("0.7", "tab:blue", "tab:red")):
+        side.scatter(1e3 * nodes[:, 1], 1e3 * nodes[:, 2], s=1, color=color,
+                     label=f"t = {when:.2f} s")
+        side.add_patch(plt.Rectangle((1e3 * (center[1] - 0.015), 1e3 * (center[2] - 0.02)),
+                                     30.0, 40.0, fill=False, color=color))
+    side.set(xlabel="y (mm)", ylabel="z (mm)", title="seen from the side", aspect="equal")
+    side.legend(markerscale=8)
     figure.tight_layout()
     path = scratch_path("mujoco_gripper.png")
     figure.savefig(path, dpi=120)
-    print(f"wrote {path}")
+    print(f"drew {path}")
 
 
 if __name__ == "__main__":

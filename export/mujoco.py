@@ -25,6 +25,9 @@ NAME = "anisofem.soft"
 #: step's start, the obstacles' impulse over it; from HEADER on the runtime's state
 #: (af_state_size), then 6 per obstacle (export/c/mujoco_plugin.c says what each holds).
 HEADER = 20
+#: Where in it the obstacles' impulse on the soft body over its last step is (3, N s, in the
+#: model file's axes), then its moment (3).
+TOUCHED = 14
 _LOADED = {}
 
 

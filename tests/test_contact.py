@@ -605,6 +605,52 @@ def test_the_runtimes_step_contact_like_the_library(contact_file):
         c.move_obstacle("wall", (0.0, 0.0, 0.0))
 
 
+def test_a_free_obstacle_falls_onto_the_body_and_rests_on_it(tmp_path):
+    """A 5 g box, free (af_obstacle_motion), dropped from 0.5 mm over the held beam's tip: every
+    step its momentum changes by the impulse of gravity and of the beam's push on it
+    (af_obstacle_wrench, summed from the nodes' barrier and friction) to 1e-9 N s, it never
+    enters the beam, and after 4 s it rests there, the beam pushing it up by its weight
+    (0.1%) and sagging under it."""
+    from anisofem.reduced import ReducedModel
+    from export import native
+    from export.writers.reduced import write
+    if native.compiler() is None:
+        pytest.skip("no C compiler")
+    g, dt, mass = np.array([0.0, 0.0, -9.81]), 0.01, 0.005
+    beam = af.box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
+    box = af.Box((0.09, 0.0, 0.0205), (0.01, 0.015, 0.01), name="box")
+    scene = af.Scene(beam, af.Material(1e5, 0.45, 1000.0), gravity=g,
+                     fixed=beam.vertices[:, 0] <= 1e-9, contact=af.Contact([box], friction=0.5))
+    path = str(tmp_path / "beam")
+    write(ReducedModel(scene, modes=6, snapshots=8, validate=False), path)
+    c = native.CReducedSimulator(path)
+    c.set_constant_force(c.masses[:, None] * g)
+    q, w = c.rest_state()
+    c.set_obstacle_motion("box", mass, (0.0, 0.0, 0.0), g)
+    term = ContactTerm(scene)
+    p, v = c.obstacle_position("box"), np.zeros(3)
+    for _ in range(400):
+        c.step(q, w, None, dt)
+        p1 = c.obstacle_position("box")
+        v1, push = (p1 - p) / dt, c.obstacle_wrench("box")
+        assert np.abs(mass * (v1 - v) - dt * (push[:3] + mass * g)).max() < 1e-9
+        moved = af.Box(p1, (0.01, 0.015, 0.01))
+        assert moved.distance(c.positions(q)[term.nodes])[0].min() > 0
+        p, v = p1, v1
+    assert np.abs(v).max() < 1e-4
+    assert push[2] == pytest.approx(mass * 9.81, rel=1e-3)
+    c.set_obstacle_motion("box", 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    q0, w0 = c.rest_state()
+    alone = native.CReducedSimulator(path)
+    alone.set_constant_force(alone.masses[:, None] * g)
+    for _ in range(400):
+        alone.step(q0, w0, None, dt)
+    tip = beam.vertices[:, 0] >= 0.1 - 1e-9
+    assert c.positions(q)[tip, 2].mean() < alone.positions(q0)[tip, 2].mean() - 1e-4
+    with pytest.raises(RuntimeError, match="obstacle 'box': mass must be a finite number >= 0"):
+        c.set_obstacle_motion("box", -1.0, (0.0, 0.0, 0.0), g)
+
+
 def test_under_the_sanitizers_a_file_with_obstacles_steps(contact_file, tmp_path):
     """The C runtime steps the file with its four obstacles, each moved every 10 steps, under
     AddressSanitizer and UndefinedBehaviorSanitizer."""

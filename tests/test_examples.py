@@ -32,6 +32,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ("gripper.py --friction 0.1 --seconds 0.8", "gripper.png", "drew out/gripper.png"),
     ("gripper_reduced.py --seconds 1.3", None, "reduced steps that intersected: 0, failed: 0"),
     ("mujoco_arm.py --seconds 2", "mujoco_arm.png", "drew out/mujoco_arm.png"),
+    ("mujoco_gripper.py", "mujoco_gripper.png", "drew out/mujoco_gripper.png"),
     ("identify.py", None, "stopped after")])
 def test_example_runs_and_draws(tmp_path, script, picture, says):
     script, *args = script.split()
@@ -74,6 +75,13 @@ def test_example_runs_and_draws(tmp_path, script, picture, says):
     if script == "mujoco_arm.py":  # the soft finger swings off where the hand carries it
         line = next(x for x in r.stdout.splitlines() if x.startswith("the finger's tip"))
         assert 2.0 < float(line.split("is up to ")[1].split()[0]) < 60.0, line
+    if script == "mujoco_gripper.py":  # the MuJoCo box lifted 3 cm, held 2 s, slipping < 1 mm
+        line = next(x for x in r.stdout.splitlines() if x.startswith("held from"))
+        assert line.startswith("held from 1.0 s to 3.00 s"), line
+        assert abs(float(line.split("the box ")[1].split()[0]) - 30.0) < 2.0, line
+        assert float(line.split("against the hand ")[1].split()[0]) < 1.0, line
+        line = next(x for x in r.stdout.splitlines() if x.startswith("least gap"))
+        assert float(line.split("fingers-box ")[1].split()[0]) > 0, line
     if script == "gripper_reduced.py":  # the reduced box lifted within 3% of the FEM's
         line = next(x for x in r.stdout.splitlines() if x.startswith("held from"))
         assert float(line.split("(reduced): ")[1].split("%")[0]) < 3.0, line

@@ -322,6 +322,83 @@ def test_a_geom_moves_the_obstacle_it_is_named_for(tmp_path):
     assert (x[tip, 2] - c.rest_positions[tip, 2]).mean() > 5e-4, "the ball lifts the tip"
 
 
+@pytest.fixture(scope="module")
+def box_file(tmp_path_factory):
+    """The 0.1 m beam held at x = 0 with a 2 x 3 x 2 cm box (the file's obstacle "box") 0.5 mm
+    over its tip, its reduced model written."""
+    beam = af.box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
+    box = af.Box((0.09, 0.0, 0.0205), (0.01, 0.015, 0.01), name="box")
+    scene = af.Scene(beam, af.Material(1e5, 0.45, 1000.0), gravity=GRAVITY,
+                     fixed=beam.vertices[:, 0] <= 1e-9, contact=af.Contact([box], friction=0.5))
+    path = str(tmp_path_factory.mktemp("box") / "beam")
+    writer.write(ReducedModel(scene, modes=6, snapshots=8, validate=False), path)
+    return path
+
+
+BOX_BODY = ('<body name="carton" pos="0.09 0 0.0205"><freejoint/><geom name="box" type="box" '
+            'size="0.01 0.015 0.01" mass="0.005" contype="0" conaffinity="0"/></body>')
+
+
+def test_a_free_body_geom_is_stepped_with_the_soft_body(box_file):
+    """A 5 g MuJoCo box (a free joint, its geom named as the file's obstacle) falls onto the
+    beam held on a fixed body: each soft step solves its translation with the beam's and
+    MuJoCo moves it by the soft body's force over the same step, so the beam and the box
+    follow the C runtime's free obstacle stepped alone (af_obstacle_motion) to 1e-9 m over
+    300 steps, the box coming to rest on the tip."""
+    model, data = compiled(plugin.mjcf(box_file, world=BOX_BODY), 0.01)
+    box = model.jnt_qposadr[model.body("carton").jntadr[0]]
+    c = native.CReducedSimulator(box_file)
+    c.set_constant_force(c.masses[:, None] * GRAVITY)
+    q, w = c.rest_state()
+    c.set_obstacle_motion("box", 0.005, (0.0, 0.0, 0.0), GRAVITY)
+    worst = 0.0
+    for _ in range(300):
+        mujoco.mj_step(model, data)
+        c.step(q, w, None, 0.01)
+        x = c._positions(data.plugin_state[plugin.HEADER:])
+        worst = max(worst, np.abs(x - c.positions(q)).max(),
+                    np.abs(data.qpos[box:box + 3] - c.obstacle_position("box")).max())
+    assert worst < 1e-9
+    assert data.qpos[box + 2] < 0.0205 - 1e-3, "the box pushed the tip down"
+    assert np.abs(data.qvel[:3]).max() < 1e-3
+    assert np.abs(c.obstacle_wrench("box")[2] - 0.005 * 9.81) < 0.05 * 0.005 * 9.81
+
+
+def test_a_carrier_the_soft_body_and_a_free_body_keep_their_momentum(box_file):
+    """No gravity: the reduced beam (40 g) on a 100 g body free to translate (three slides),
+    a 5 g box thrown down onto its tip at 0.3 m/s. The box's impulse bends the beam, the beam
+    pulls its carrier: the three keep their linear momentum to 1e-6 of the box's over 300
+    steps (the soft body counted at its state a step before, whose pull MuJoCo has applied,
+    less the box's impulse on it since), and the carrier ends up moving."""
+    slides = "".join(f'<joint name="{a}" type="slide" axis="{v}"/>'
+                     for a, v in (("x", "1 0 0"), ("y", "0 1 0"), ("z", "0 0 1")))
+    xml = plugin.mjcf(box_file, world=BOX_BODY).replace(
+        '<plugin instance="soft"/>', f'{slides}<geom type="sphere" size="0.01" mass="0.1" '
+        'contype="0" conaffinity="0"/><plugin instance="soft"/>').replace(
+        "<worldbody>", '<option gravity="0 0 0"/><worldbody>')
+    model = mujoco.MjModel.from_xml_string(xml)
+    model.opt.timestep = 0.01
+    data = mujoco.MjData(model)
+    data.qvel[5] = -0.3                       # the box's: slides 0-2, then its free joint
+    runtime = native.CModel(box_file)
+    half, m = runtime.state_size // 2, runtime.masses[:, None]
+    x0 = runtime.rest_positions
+    carrier = 0.1
+
+    def soft(state, u):      # the soft body's momentum: its carrier's velocity u and its own
+        return (m * (u + runtime._positions(state[half:]) - x0)).sum(axis=0)
+
+    start = 0.005 * data.qvel[3:6].copy()
+    before = (data.plugin_state[plugin.HEADER:].copy(), data.qvel[:3].copy())
+    for _ in range(300):
+        mujoco.mj_step(model, data)
+        last, before = before, (data.plugin_state[plugin.HEADER:].copy(), data.qvel[:3].copy())
+    touched = data.plugin_state[plugin.TOUCHED:plugin.TOUCHED + 3]
+    total = (carrier * data.qvel[:3] + 0.005 * data.qvel[3:6] + soft(*last) - touched)
+    assert np.abs(total - start).max() < 1e-6 * np.abs(start).max()
+    assert np.abs(data.qvel[:3]).max() > 1e-3
+
+
 def test_without_mujoco_the_plugin_says_how_to_install_it(monkeypatch):
     monkeypatch.setitem(sys.modules, "mujoco", None)
     with pytest.raises(ImportError, match="pip install mujoco"):

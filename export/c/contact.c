@@ -8,9 +8,10 @@
  * is to be, reached as far as the body lets it at the next step's start.
  *
  * A free obstacle (af_contact_motion: a mass, its velocity and the acceleration all else
- * gives it) translates with the body: a step's unknowns are z = (q, y), y (3 each) the free
- * obstacles' moves over the step, their inertia m |y - y_hat|^2 / (2 dt^2) (y_hat = dt v +
- * dt^2 a) a term here, and every distance taken from the node to the obstacle moved by y. */
+ * gives it) translates with the body: a step's unknowns are z = (q, sqrt(m) y), y (3 each) a
+ * free obstacle's move over the step (mass-weighted like the basis's coordinates), their
+ * inertia m |y - y_hat|^2 / (2 dt^2) (y_hat = dt v + dt^2 a) a term here, and every distance
+ * taken from the node to the obstacle moved by y. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -57,10 +58,12 @@ struct af_contact {
                                     n = r + 3 count at most */
 };
 
-/* The move y (3) of obstacle o in z, or zeros where it is not free. */
-static const double *moved(const af_contact *c, const double *z, int o) {
-    static const double still[3] = {0.0, 0.0, 0.0};
-    return c->slot[o] >= 0 && c->extra ? z + c->slot[o] : still;
+/* The move y (3, m) of obstacle o in z into y: zeros where it is not free; z holds a free
+ * one's sqrt(m) y, its inertia then the q's |.|^2 / (2 dt^2) of the mass-orthonormal basis. */
+static void moved(const af_contact *c, const double *z, int o, double *y) {
+    int a;
+    for (a = 0; a < 3; a++)
+        y[a] = c->slot[o] >= 0 && c->extra ? z[c->slot[o] + a] / sqrt(c->mass[o]) : 0.0;
 }
 
 void af_contact_close(af_contact *c) {
@@ -198,7 +201,7 @@ void af_contact_guess(const af_contact *c, double *y) {
     int o, a;
     for (o = 0; o < c->count; o++)
         for (a = 0; c->slot[o] >= 0 && a < 3; a++)
-            y[c->slot[o] - c->r + a] = c->velocity[3 * o + a] / sqrt(c->inertia);
+            y[c->slot[o] - c->r + a] = c->velocity[3 * o + a] * sqrt(c->mass[o] / c->inertia);
 }
 
 /* d, normal n (3) and, where H is not NULL, the Hessian of d (9) at x from obstacle o. */
@@ -310,8 +313,9 @@ static void place(af_contact *c, const double *z) {
 
 /* Node i (placed) seen from obstacle o moved by its y in z: x - y (3) into x. */
 static void relative(const af_contact *c, const double *z, int o, long i, double *x) {
-    const double *y = moved(c, z, o);
+    double y[3];
     int a;
+    moved(c, z, o, y);
     for (a = 0; a < 3; a++) x[a] = c->xs[3 * i + a] - y[a];
 }
 
@@ -434,7 +438,7 @@ static double surface_energy(af_contact *c, const double *z, int grad) {
         memset(c->g + c->r, 0, (size_t)c->extra * sizeof(double));
     }
     for (o = 0; o < c->count; o++) {
-        double *gy = grad && c->slot[o] >= 0 ? c->g + c->slot[o] : NULL;
+        double *gy = grad && c->slot[o] >= 0 ? c->g + c->slot[o] : NULL, root = sqrt(c->mass[o]);
         for (i = 0; i < c->k; i++) {
             double d, s;
             relative(c, z, o, i, x);
@@ -446,7 +450,7 @@ static double surface_energy(af_contact *c, const double *z, int grad) {
             if (grad)
                 for (a = 0; a < 3; a++) c->gs[3 * i + a] += s * n[a];
             if (gy)
-                for (a = 0; a < 3; a++) gy[a] -= s * n[a];
+                for (a = 0; a < 3; a++) gy[a] -= s * n[a] / root;
         }
     }
     for (j = 0; j < c->lagged; j++) {
@@ -458,16 +462,15 @@ static double surface_energy(af_contact *c, const double *z, int grad) {
         if (grad)
             for (a = 0; a < 3; a++) c->gs[3 * l->node + a] += f * u[a];
         if (gy)
-            for (a = 0; a < 3; a++) gy[a] -= f * u[a];
+            for (a = 0; a < 3; a++) gy[a] -= f * u[a] / sqrt(c->mass[l->obstacle]);
     }
     for (o = 0; o < c->count; o++)          /* the free obstacles' inertia */
         if (c->slot[o] >= 0 && c->extra) {
             const double *y = z + c->slot[o];
-            double w = c->mass[o] * c->inertia;
             for (a = 0; a < 3; a++) {
-                double diff = y[a] - c->hat[3 * o + a];
-                total += 0.5 * w * diff * diff;
-                if (grad) c->g[c->slot[o] + a] += w * diff;
+                double diff = y[a] - sqrt(c->mass[o]) * c->hat[3 * o + a];
+                total += 0.5 * c->inertia * diff * diff;
+                if (grad) c->g[c->slot[o] + a] += c->inertia * diff;
             }
         }
     return total;
@@ -548,24 +551,25 @@ double af_contact_terms(af_contact *c, const double *z, const double **g, const 
             for (t = 0; t < r; t++)
                 cH[s * n + t] += U[s] * w[t] + U[r + s] * w[r + t] + U[2 * r + s] * w[2 * r + t];
         if (w != W) free(w);
-        for (o = 0; o < c->count; o++) {          /* a free obstacle's: -U_i^T B_o, B_o */
+        for (o = 0; o < c->count; o++) {   /* a free obstacle's: -U_i^T B_o, B_o, over sqrt(m) */
             const double *Bo = c->blocks + 9 * o;
             long y = c->slot[o];
+            double root = y >= 0 ? sqrt(c->mass[o]) : 1.0;
             if (y < 0) continue;
             for (a = 0; a < 3; a++) {
                 for (s = 0; s < r; s++) {
-                    double v = -(U[s] * Bo[a] + U[r + s] * Bo[3 + a] + U[2 * r + s] * Bo[6 + a]);
+                    double v = -(U[s] * Bo[a] + U[r + s] * Bo[3 + a] + U[2 * r + s] * Bo[6 + a])
+                               / root;
                     cH[s * n + y + a] += v;
                     cH[(y + a) * n + s] += v;
                 }
-                for (b = 0; b < 3; b++) cH[(y + a) * n + y + b] += Bo[3 * a + b];
+                for (b = 0; b < 3; b++) cH[(y + a) * n + y + b] += Bo[3 * a + b] / c->mass[o];
             }
         }
     }
     for (o = 0; o < c->count; o++)
         if (c->slot[o] >= 0)
-            for (a = 0; a < 3; a++)
-                cH[(c->slot[o] + a) * (n + 1)] += c->mass[o] * c->inertia;
+            for (a = 0; a < 3; a++) cH[(c->slot[o] + a) * (n + 1)] += c->inertia;
     for (s = 0; s < n * n; s++) size += cH[s] * cH[s];
     *floor = largest * sqrt(size);
     *g = cg;
@@ -588,10 +592,7 @@ double af_contact_limit(af_contact *c, const double *z, const double *p) {
     place(c, z);
     for (i = 0; i < c->k; i++)
         for (a = 0; a < 3; a++) c->ds[3 * i + a] = af_dot(c->U + (3 * i + a) * r, p, r);
-    for (o = 0; o < c->count; o++) {
-        const double *y = moved(c, p, o);
-        for (a = 0; a < 3; a++) c->dy[3 * o + a] = y[a];
-    }
+    for (o = 0; o < c->count; o++) moved(c, p, o, c->dy + 3 * o);
     return share_of(c, z, c->ds, c->dy);
 }
 
@@ -631,9 +632,9 @@ void af_contact_finish(af_contact *c, const double *z, double dt) {
         add_wrench(c->wrench + 6 * l->obstacle, arm, f);
     }
     for (o = 0; o < c->count; o++) {     /* the free obstacles moved, at their new speed */
-        double *G = c->geometry + o * GEOMETRY;
-        const double *y = moved(c, z, o);
+        double *G = c->geometry + o * GEOMETRY, y[3];
         if (c->slot[o] < 0 || !c->extra) continue;
+        moved(c, z, o, y);
         for (a = 0; a < 3; a++) {
             G[a] += y[a];
             if (c->kinds[o] == CAPSULE) G[3 + a] += y[a];

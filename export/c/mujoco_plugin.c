@@ -530,10 +530,10 @@ static void account(const mjModel *m, mjData *d, soft *s, double *state, double 
     into_world(s, at, state + TOUCHED + 3, touched + 3);
     for (int k = 0; k < 3; k++)
         arm[k] = af_kind(s->model) == AF_REDUCED ? at[4 * k + 3] : 0.0;
-    mju_cross(pull + 3, arm, touched);
+    mju_cross(pull + 3, arm, touched);      /* what the soft body gave them, given back */
     for (int k = 0; k < 3; k++) {
-        pull[k] = -touched[k];
-        pull[3 + k] = -touched[3 + k] - pull[3 + k];
+        pull[k] = touched[k];
+        pull[3 + k] += touched[3 + k];
     }
     for (int i = 0; i < s->n; i++) {
         double *x = s->x + 3 * i, *v = s->v + 3 * i, v1[3], g[3], before[3], after[3];

@@ -1,8 +1,9 @@
 /* For tests/test_c_checks.py: load each file named on the command line with af_load and print
  * one line per file, "ok KIND N STEPS LOWEST" after 50 steps under the file's gravity (and
  * for a file with controls, set anew every step, " controls K reach CODE" after one af_reach
- * of vertex 0; for a file with obstacles, each moved up by 2 mm every 10 steps, " obstacles O
- * HEIGHT", HEIGHT where the first is then), or "error MESSAGE" where it cannot be loaded or
+ * of vertex 0; for a file with obstacles, each moved up by 2 mm every 10 steps and the last
+ * also free (10 g rising at 5 cm/s), " obstacles O HEIGHT", HEIGHT where the first is then),
+ * or "error MESSAGE" where it cannot be loaded or
  * stepped. Built with the sanitizers, it shows that no file, good or corrupt, reads memory it
  * should not. */
 #include <stdio.h>
@@ -29,6 +30,10 @@ int main(int argc, char **argv) {
         af_rest_state(m, state);
         for (i = 0; i < 3 * n; i++) force[i] = af_masses(m)[i / 3] * g[i % 3];
         af_set_constant_force(m, NULL);
+        if (af_obstacles(m)) {
+            double up[3] = {0.0, 0.0, 0.05}, none[3] = {0.0, 0.0, 0.0};
+            code = af_obstacle_motion(m, af_obstacles(m) - 1, 0.01, up, none);
+        }
         for (k = 0; k < 50 && code == AF_OK; k++) {
             double values[64];
             for (i = 0; i < af_controls(m) && i < 64; i++) values[i] = 0.05 * ((k + i) % 2);
