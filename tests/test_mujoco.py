@@ -225,6 +225,49 @@ def test_a_free_body_and_its_soft_body_keep_their_momentum(files, integrator, ev
     assert np.linalg.norm(soft[3:]) > 0.5 * np.linalg.norm(start[3:])
 
 
+def test_the_hinges_reaction_is_the_swinging_soft_bodys_momentum_change(files):
+    """The framed beam (40 g) on a 50 g ball hinged to the world at its centre (two connect
+    constraints on the y axis: MuJoCo's constraint solver finds the hinge's force) swings down
+    under gravity. Every step the hinge's force on the ball (qfrc_constraint) is what the ball
+    and the soft body together need: their momentum change (the soft body's from its states,
+    over the step whose pull MuJoCo applied) less their weight's impulse, within 1%, the soft
+    body's part (its momentum change less its weight) a third of the force or more."""
+    _, path = files
+    dt = 0.005
+    xml = plugin.mjcf(path, pos=(0.0, 0.0, 0.5)).replace(
+        '<plugin instance="soft"/>', '<freejoint/><geom type="sphere" size="0.02" mass="0.05" '
+        'contype="0" conaffinity="0"/><plugin instance="soft"/>').replace(
+        "</worldbody>", '</worldbody><equality><connect body1="soft" anchor="0 0.02 0"/>'
+        '<connect body1="soft" anchor="0 -0.02 0"/></equality>').replace(
+        "<worldbody>", '<option integrator="Euler"/><worldbody>')
+    model, data = compiled(xml, dt)
+    runtime = native.CModel(path)
+    half, mass = runtime.state_size // 2, runtime.masses[:, None]
+    ball, soft_mass = model.body_mass[model.body("soft").id], runtime.masses.sum()
+
+    def momentum():   # the soft body's, over its last step
+        state = data.plugin_state[plugin.HEADER:]
+        return (mass * (runtime._positions(state) - runtime._positions(state[half:]))
+                ).sum(axis=0) / dt
+
+    mujoco.mj_step(model, data)
+    soft, v = momentum(), data.qvel[:3].copy()
+    worst, shares = 0.0, []
+    for _ in range(200):
+        mujoco.mj_step(model, data)
+        hinge = data.qfrc_constraint[:3].copy()
+        soft_now, v_now = momentum(), data.qvel[:3].copy()
+        needed = (ball * (v_now - v) + soft_now - soft) / dt - (ball + soft_mass) * GRAVITY
+        worst = max(worst, np.linalg.norm(hinge - needed) / np.linalg.norm(hinge))
+        shares.append(np.linalg.norm((soft_now - soft) / dt - soft_mass * GRAVITY)
+                      / np.linalg.norm(hinge))
+        soft, v = soft_now, v_now
+    assert worst < 0.01
+    assert np.mean(shares) > 0.3
+    turned = np.degrees(np.arccos(np.clip(data.xmat[model.body("soft").id][0], -1, 1)))
+    assert turned > 10.0, f"the beam swung down {turned} degrees"
+
+
 def test_rk4_is_refused(files):
     path, _ = files
     xml = plugin.mjcf(path).replace("<worldbody>", '<option integrator="RK4"/><worldbody>')
