@@ -38,6 +38,11 @@ GRIP, SQUEEZE = 3.0e4, 0.4
 RISE, LIFT = 0.03, (0.5, 1.0)
 #: The fingers' vibration modes and the principal directions of their grip's equilibria.
 MODES, SNAPSHOTS = 4, 6
+HAND = """<joint name="lift" type="slide" axis="0 0 1"/>
+      <geom type="box" size="0.012 0.04 0.004" pos="0 0 0.096" mass="0.2" contype="0"
+            conaffinity="0"/>
+      <site name="palm" pos="0 0 0.092"/>
+      <plugin instance="fingers"/>"""
 WORLD = """
     <geom name="ground" type="plane" size="0.2 0.2 0.01" friction="0.5"/>
     <body name="carton" pos="0 0 0.02005">
@@ -60,11 +65,7 @@ def gripper_mjcf(path):
     """The MJCF: the fingers' file on the body "hand" on a vertical slide (a position servo
     "lift"), the box on the ground, the plugin actuator "grip"."""
     text = plugin.mjcf(path, body="hand", name="fingers", world=WORLD)
-    text = text.replace('<plugin instance="fingers"/>', """<joint name="lift" type="slide" axis="0 0 1"/>
-      <geom type="box" size="0.012 0.04 0.004" pos="0 0 0.096" mass="0.2" contype="0"
-            conaffinity="0"/>
-      <site name="palm" pos="0 0 0.092"/>
-      <plugin instance="fingers"/>""")
+    text = text.replace('<plugin instance="fingers"/>', HAND)
     text = text.replace("<worldbody>", '<option timestep="0.01" integrator="implicitfast"/>'
                         "\n  <worldbody>", 1)
     return text.replace("</worldbody>", """</worldbody>
