@@ -44,6 +44,7 @@ HAND = """<joint name="lift" type="slide" axis="0 0 1"/>
       <site name="palm" pos="0 0 0.092"/>
       <plugin instance="fingers"/>"""
 WORLD = """
+    <light pos="0 -0.3 0.6" dir="0 0.5 -1"/>
     <geom name="ground" type="plane" size="0.2 0.2 0.01" friction="0.5"/>
     <body name="carton" pos="0 0 0.02005">
       <freejoint/>

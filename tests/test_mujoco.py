@@ -311,24 +311,47 @@ def test_the_controls_are_mujoco_actuators(files, finger_file):
 
 
 def test_the_soft_surface_is_drawn_in_mujocos_scene(files):
-    """mjv_updateScene adds the soft surface's edges as lines (each once), at the soft body's
-    positions."""
+    """mjv_updateScene draws the soft surface as MuJoCo draws a flex: its faces (each two right
+    triangles meeting at the foot of its height, their corners soft vertices, their areas the
+    surface's, facing out) and its edges as lines (each once), at the soft body's positions;
+    without the flex switches, neither."""
     path, _ = files
     model, data = compiled(plugin.mjcf(path, pos=(0.0, 0.0, 0.3)), 0.02)
     for _ in range(20):
         mujoco.mj_step(model, data)
-    scene = mujoco.MjvScene(model, maxgeom=5000)
-    mujoco.mjv_updateScene(model, data, mujoco.MjvOption(), None, mujoco.MjvCamera(),
-                           mujoco.mjtCatBit.mjCAT_ALL, scene)
-    lines = [scene.geoms[i] for i in range(scene.ngeom)
-             if scene.geoms[i].type == mujoco.mjtGeom.mjGEOM_LINE]
     runtime = native.CModel(path)
+    x = runtime._positions(data.plugin_state[plugin.HEADER:]) + [0.0, 0.0, 0.3]
+
+    def drawn(option):
+        scene = mujoco.MjvScene(model, maxgeom=5000)
+        mujoco.mjv_updateScene(model, data, option, None, mujoco.MjvCamera(),
+                               mujoco.mjtCatBit.mjCAT_ALL, scene)
+        geoms = [scene.geoms[i] for i in range(scene.ngeom)]
+        return ([g for g in geoms if g.type == mujoco.mjtGeom.mjGEOM_LINE],
+                [g for g in geoms if g.type == mujoco.mjtGeom.mjGEOM_TRIANGLE])
+
+    def nearest(points):    # the largest distance of a point from the soft vertices
+        return np.abs(points[:, None, :] - x[None]).sum(axis=2).min(axis=1).max()
+
+    lines, triangles = drawn(mujoco.MjvOption())
     edges = {tuple(sorted(pair)) for tri in runtime.surface
              for pair in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0]))}
     assert len(lines) == len(edges)
-    x = runtime._positions(data.plugin_state[plugin.HEADER:]) + [0.0, 0.0, 0.3]
-    starts = np.array([g.pos for g in lines])
-    assert np.abs(starts[:, None, :] - x[None]).sum(axis=2).min(axis=1).max() < 1e-6
+    assert nearest(np.array([g.pos for g in lines])) < 1e-6
+    assert len(triangles) == 2 * len(runtime.surface)
+    frames = [np.array(g.mat).reshape(3, 3) for g in triangles]
+    corners = np.array([g.pos + g.size[k] * R[:, k] for g, R in zip(triangles, frames)
+                        for k in (0, 1)])
+    assert nearest(corners) < 1e-6
+    a, b, c = (x[runtime.surface[:, k]] for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
+    assert sum(0.5 * g.size[0] * g.size[1] for g in triangles) == pytest.approx(area, rel=1e-6)
+    outward = np.repeat(np.cross(b - a, c - a), 2, axis=0)    # each face's pair faces out
+    assert all(R[:, 2] @ n > 0 for R, n in zip(frames, outward))
+    option = mujoco.MjvOption()
+    for flag in ("mjVIS_FLEXEDGE", "mjVIS_FLEXSKIN", "mjVIS_FLEXFACE"):
+        option.flags[getattr(mujoco.mjtVisFlag, flag)] = 0
+    assert drawn(option) == ([], [])
 
 
 def test_a_geom_moves_the_obstacle_it_is_named_for(tmp_path):

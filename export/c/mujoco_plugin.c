@@ -34,7 +34,7 @@
  * its obstacle by the geom's translation. Where the carrier moves, the soft body pulls it
  * back by the impulse the carrier gave it (the soft body's momentum change less gravity's and
  * the obstacles' impulses). Actuator: the plugin's actuators only carry controls (they push
- * nothing). Visualize: the surface's edges as lines.
+ * nothing). Visualize: the surface, drawn as MuJoCo draws a flex (faces, edges).
  */
 #include <math.h>
 #include <stdint.h>
@@ -681,21 +681,72 @@ static void compute(const mjModel *m, mjData *d, int instance, int capability) {
     apply(m, d, s, state);
 }
 
-/* The soft body's surface edges as lines in MuJoCo's scene (as far as it has room). */
+/* A right triangle in scn (where it has room): its right angle at f, its legs from f to p
+ * and to c (f, p, c: 3 each). */
+static void right_triangle(mjvScene *scn, const double *f, const double *p, const double *c,
+                           const float *rgba) {
+    double x[3], y[3], z[3], size[3] = {0.0, 0.0, 0.0}, mat[9];
+    mjvGeom *g;
+    mju_sub3(x, p, f);
+    mju_sub3(y, c, f);
+    size[0] = mju_normalize3(x);
+    size[1] = mju_normalize3(y);
+    if (size[0] < mjMINVAL || size[1] < mjMINVAL || scn->ngeom >= scn->maxgeom)
+        return;
+    mju_cross(z, x, y);
+    for (int i = 0; i < 3; i++) {   /* the frame's columns: x, y, z */
+        mat[3 * i] = x[i];
+        mat[3 * i + 1] = y[i];
+        mat[3 * i + 2] = z[i];
+    }
+    g = scn->geoms + scn->ngeom++;
+    mjv_initGeom(g, mjGEOM_TRIANGLE, size, f, mat, rgba);
+    g->category = mjCAT_DECOR;
+}
+
+/* The soft body's surface in MuJoCo's scene (as far as it has room), as MuJoCo draws a flex:
+ * its faces with the flex skin or face switch (each triangle two right triangles, split at
+ * the foot of the height on its longest side: MuJoCo's triangle geom is a right one), its
+ * edges as lines with the flex edge switch. */
 static void visualize(const mjModel *m, mjData *d, const mjvOption *opt, mjvScene *scn,
                       int instance) {
     soft *s = (soft *)d->plugin_data[instance];
     const double *state = d->plugin_state + m->plugin_stateadr[instance];
-    static const float rgba[4] = {0.2f, 0.5f, 0.9f, 1.0f};
+    static const float face[4] = {0.45f, 0.65f, 0.9f, 1.0f}, edge[4] = {0.1f, 0.2f, 0.4f, 1.0f};
     double *x;
-    (void)opt;
+    int count;
+    const int *tri;
     if (!s)
         return;
     world_positions(m, d, s, state, x = s->scratch);
-    for (int e = 0; e < s->nedge && scn->ngeom < scn->maxgeom; e++) {
+    tri = af_surface(s->model, &count);
+    for (int t = 0; (opt->flags[mjVIS_FLEXSKIN] || opt->flags[mjVIS_FLEXFACE]) && t < count;
+         t++) {
+        double side[3], foot[3], *a, *b, *c, longest = -1.0, along, length;
+        int k = 0;
+        for (int j = 0; j < 3; j++) {          /* the longest side a-b, c across it */
+            mju_sub3(side, x + 3 * tri[3 * t + (j + 1) % 3], x + 3 * tri[3 * t + j]);
+            if (mju_dot3(side, side) > longest) {
+                longest = mju_dot3(side, side);
+                k = j;
+            }
+        }
+        a = x + 3 * tri[3 * t + k];
+        b = x + 3 * tri[3 * t + (k + 1) % 3];
+        c = x + 3 * tri[3 * t + (k + 2) % 3];
+        mju_sub3(side, b, a);
+        length = mju_dot3(side, side);
+        mju_sub3(foot, c, a);
+        along = length > 0.0 ? mju_dot3(foot, side) / length : 0.0;
+        mju_addScl3(foot, a, side, along);
+        right_triangle(scn, foot, b, c, face);  /* counter-clockwise, as the surface's */
+        right_triangle(scn, foot, c, a, face);
+    }
+    for (int e = 0; opt->flags[mjVIS_FLEXEDGE] && e < s->nedge && scn->ngeom < scn->maxgeom;
+         e++) {
         mjvGeom *g = scn->geoms + scn->ngeom++;
-        mjv_initGeom(g, mjGEOM_NONE, NULL, NULL, NULL, rgba);
-        mjv_connector(g, mjGEOM_LINE, 2.0, x + 3 * s->edges[2 * e],
+        mjv_initGeom(g, mjGEOM_NONE, NULL, NULL, NULL, edge);
+        mjv_connector(g, mjGEOM_LINE, 1.0, x + 3 * s->edges[2 * e],
                       x + 3 * s->edges[2 * e + 1]);
         g->category = mjCAT_DECOR;
     }
