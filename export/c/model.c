@@ -409,14 +409,18 @@ int af_obstacle_position(const af_model *m, int i, double *position) {
     return AF_OK;
 }
 
+/* Whether i is one of the model's obstacles; else 0 with af_error saying so (cleared). */
+static int is_obstacle(af_model *m, int i) {
+    m->error[0] = '\0';
+    if (i >= 0 && i < af_obstacles(m)) return 1;
+    af_say(m->error, ERROR_SIZE, "obstacle: %d is not one of the model's %d", i,
+           af_obstacles(m));
+    return 0;
+}
+
 int af_move_obstacle(af_model *m, int i, const double *position) {
     int a;
-    m->error[0] = '\0';
-    if (i < 0 || i >= af_obstacles(m)) {
-        af_say(m->error, ERROR_SIZE, "obstacle: %d is not one of the model's %d", i,
-               af_obstacles(m));
-        return AF_BAD_INPUT;
-    }
+    if (!is_obstacle(m, i)) return AF_BAD_INPUT;
     for (a = 0; a < 3; a++)
         if (!position || !isfinite(position[a])) {
             af_say(m->error, ERROR_SIZE, "obstacle '%s': its position must be 3 finite numbers",
@@ -430,12 +434,7 @@ int af_move_obstacle(af_model *m, int i, const double *position) {
 int af_obstacle_motion(af_model *m, int i, double mass, const double *velocity,
                        const double *acceleration) {
     int a;
-    m->error[0] = '\0';
-    if (i < 0 || i >= af_obstacles(m)) {
-        af_say(m->error, ERROR_SIZE, "obstacle: %d is not one of the model's %d", i,
-               af_obstacles(m));
-        return AF_BAD_INPUT;
-    }
+    if (!is_obstacle(m, i)) return AF_BAD_INPUT;
     if (!(mass >= 0.0) || !isfinite(mass)) {
         af_say(m->error, ERROR_SIZE, "obstacle '%s': mass must be a finite number >= 0 kg, got "
                "%g", af_obstacle_name(m, i), mass);
