@@ -430,6 +430,21 @@ def test_a_free_body_geom_is_stepped_with_the_soft_body(box_file):
     assert np.abs(c.obstacle_wrench("box")[2] - 0.005 * 9.81) < 0.05 * 0.005 * 9.81
 
 
+@pytest.mark.parametrize("geom, says", [
+    ('type="box" size="0.02 0.03 0.02"', "a box of half sizes 0.01 0.01 0.015 m, but is a box "
+                                         "of half sizes 0.02 0.02 0.03 m"),
+    ('type="sphere" size="0.01"', "a box of half sizes 0.01 0.01 0.015 m, but is a sphere "
+                                  "(MJCF sizes are half extents)")])
+def test_a_geom_of_another_shape_than_its_obstacle_is_refused(box_file, geom, says):
+    """A geom named as the file's obstacle "box" but of other sizes (full extents for half) or
+    another kind fails MuJoCo's compilation in one line saying both shapes."""
+    world = BOX_BODY.replace('type="box" size="0.01 0.015 0.01"', geom)
+    with pytest.raises(ValueError, match="anisofem.soft: geom 'box' is named as the obstacle "
+                                         "of .*beam, ") as error:
+        mujoco.MjModel.from_xml_string(plugin.mjcf(box_file, world=world))
+    assert says in str(error.value) and "\n" not in str(error.value)
+
+
 def test_a_carrier_the_soft_body_and_a_free_body_keep_their_momentum(box_file):
     """No gravity: the reduced beam (40 g) on a 100 g body free to translate (three slides),
     a 5 g box thrown down onto its tip at 0.3 m/s. The box's impulse bends the beam, the beam

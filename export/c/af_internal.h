@@ -101,6 +101,8 @@ void af_contact_close(af_contact *c);
 int af_contact_count(const af_contact *c);
 const char *af_contact_name(const af_contact *c, int i);
 void af_contact_position(const af_contact *c, int i, double *position);
+/* Obstacle i's kind (AF_PLANE ...) and its 15 numbers now (af_obstacle_shape). */
+int af_contact_shape(const af_contact *c, int i, double *geometry);
 /* Obstacle i to be at position (3) from the next step on, as far as the body lets it. */
 void af_contact_move(af_contact *c, int i, const double *position);
 /* A solve from q: the obstacles moved toward their targets, and with dt > 0 friction lagged

@@ -46,6 +46,9 @@ enum {
 /* The kinds of model (af_kind). */
 enum { AF_REDUCED = 1, AF_FRAMED = 2 };
 
+/* The kinds of obstacle (af_obstacle_shape). */
+enum { AF_PLANE = 0, AF_SPHERE = 1, AF_BOX = 2, AF_CAPSULE = 3 };
+
 typedef struct af_model af_model;
 
 /* Load PATH.json and the .bin its header names, beside it (path without extension; '/' or
@@ -126,6 +129,11 @@ AF_API int af_reach(af_model *model, const int *nodes, const double *weights, in
 AF_API int af_obstacles(const af_model *model);
 AF_API const char *af_obstacle_name(const af_model *model, int i);
 AF_API int af_obstacle_position(const af_model *model, int i, double *position);
+/* Obstacle i's kind (AF_PLANE, AF_SPHERE, AF_BOX or AF_CAPSULE; AF_BAD_INPUT out of range)
+ * and where it is now, 15 doubles, m: a plane's point and unit normal; a sphere's center and
+ * radius; a box's center, half extents and rotation (row-major, its axes the columns); a
+ * capsule's ends a and b and radius; the rest zeros. */
+AF_API int af_obstacle_shape(const af_model *model, int i, double *geometry);
 AF_API int af_move_obstacle(af_model *model, int i, const double *position);
 /* Obstacle i as a free body of `mass` kg (a box the body picks up; 0: moved only by
  * af_move_obstacle, the default): each later step solves its translation with the body's,

@@ -24,8 +24,6 @@
 #define GEOMETRY 15
 #define NOISE 1e-12      /* the share of the energy below which two values are round-off */
 
-enum { PLANE, SPHERE, BOX, CAPSULE };
-
 typedef struct {
     int node, obstacle;          /* the surface node (row of contact_rest), the obstacle */
     double weight, T[9], start[3];
@@ -115,7 +113,7 @@ af_contact *af_contact_open(const af_file *f, int r, int *failed) {
         goto fail;
     if (shape[0] != count) goto shape;
     for (i = 0; i < count; i++)
-        if (c->kinds[i] > CAPSULE) {
+        if (c->kinds[i] > AF_CAPSULE) {
             af_say(f->error, f->error_size, "%s: array obstacle_kinds: obstacle %d has kind %d, "
                    "expected 0 to 3", f->name, i, c->kinds[i]);
             goto fail;
@@ -181,6 +179,11 @@ void af_contact_position(const af_contact *c, int i, double *position) {
     memcpy(position, c->geometry + i * GEOMETRY, 3 * sizeof(double));
 }
 
+int af_contact_shape(const af_contact *c, int i, double *geometry) {
+    memcpy(geometry, c->geometry + i * GEOMETRY, GEOMETRY * sizeof(double));
+    return c->kinds[i];
+}
+
 void af_contact_move(af_contact *c, int i, const double *position) {
     memcpy(c->target + 3 * i, position, 3 * sizeof(double));
     c->moving[i] = 1;
@@ -209,7 +212,7 @@ static double distance(const af_contact *c, int o, const double *x, double *n, d
     const double *G = c->geometry + o * GEOMETRY;
     double p[3], r[3], J[9] = {0}, delta, d, radius = 0.0;
     int a, b, inside = 0;
-    if (c->kinds[o] == PLANE) {
+    if (c->kinds[o] == AF_PLANE) {
         d = 0.0;
         for (a = 0; a < 3; a++) {
             d += (x[a] - G[a]) * G[3 + a];
@@ -218,10 +221,10 @@ static double distance(const af_contact *c, int o, const double *x, double *n, d
         if (H) memset(H, 0, 9 * sizeof(double));
         return d;
     }
-    if (c->kinds[o] == SPHERE) {
+    if (c->kinds[o] == AF_SPHERE) {
         memcpy(p, G, sizeof p);
         radius = G[3];
-    } else if (c->kinds[o] == CAPSULE) {
+    } else if (c->kinds[o] == AF_CAPSULE) {
         double axis[3], length = 0.0, t = 0.0, s;
         for (a = 0; a < 3; a++) {
             axis[a] = G[3 + a] - G[a];
@@ -379,7 +382,7 @@ void af_contact_start(af_contact *c, const double *q, double dt) {
         for (a = 0; a < 3; a++) {
             G[a] += share * delta[a];
             c->shift[3 * o + a] = share * delta[a];
-            if (c->kinds[o] == CAPSULE) G[3 + a] += share * delta[a];
+            if (c->kinds[o] == AF_CAPSULE) G[3 + a] += share * delta[a];
         }
         c->moving[o] = share < 1.0;
     }
@@ -637,7 +640,7 @@ void af_contact_finish(af_contact *c, const double *z, double dt) {
         moved(c, z, o, y);
         for (a = 0; a < 3; a++) {
             G[a] += y[a];
-            if (c->kinds[o] == CAPSULE) G[3 + a] += y[a];
+            if (c->kinds[o] == AF_CAPSULE) G[3 + a] += y[a];
             c->velocity[3 * o + a] = y[a] / dt;
         }
     }

@@ -409,6 +409,11 @@ int af_obstacle_position(const af_model *m, int i, double *position) {
     return AF_OK;
 }
 
+int af_obstacle_shape(const af_model *m, int i, double *geometry) {
+    if (i < 0 || i >= af_obstacles(m) || !geometry) return AF_BAD_INPUT;
+    return af_contact_shape(af_reduced_contact(m->reduced), i, geometry);
+}
+
 /* Whether i is one of the model's obstacles; else 0 with af_error saying so (cleared). */
 static int is_obstacle(af_model *m, int i) {
     m->error[0] = '\0';

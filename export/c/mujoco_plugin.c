@@ -206,6 +206,79 @@ static int set_controls(const mjModel *m, const mjData *d, int instance, soft *s
     return any ? af_set_controls(s->model, values) : AF_OK;
 }
 
+static int by_size(const void *a, const void *b) {
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* "a box of half sizes 0.01 0.015 0.01 m" for a kind (AF_PLANE ...; -1: another) and its n
+ * sizes (0: "a box"), into text. */
+static void shape_text(int kind, const double *sizes, int n, char *text, size_t size) {
+    static const char *kinds[] = {"plane", "sphere", "box", "capsule"};
+    static const char *named[] = {"", " of radius", " of half sizes",
+                                  " of radius and half length"};
+    int at = snprintf(text, size, "a %s%s", kind >= 0 ? kinds[kind] : "shape no obstacle has",
+                      kind >= 0 && n ? named[kind] : "");
+    for (int k = 0; k < n && at > 0 && (size_t)at < size; k++)
+        at += snprintf(text + at, size - at, " %g", sizes[k]);
+    if (n && at > 0 && (size_t)at < size)
+        snprintf(text + at, size - at, " m");
+}
+
+/* Whether geom g has the shape of the model's obstacle i (its kind, and its sizes to 1e-6 of
+ * the largest); else 0 with error saying how they differ. */
+static int same_shape(const mjModel *m, int g, const af_model *model, int i, const char *file,
+                      char *error, size_t size) {
+    static const int types[] = {mjGEOM_PLANE, mjGEOM_SPHERE, mjGEOM_BOX, mjGEOM_CAPSULE};
+    double G[15], want[3] = {0.0, 0.0, 0.0}, have[3] = {0.0, 0.0, 0.0}, axis[3], largest = 0.0;
+    int kind = af_obstacle_shape(model, i, G), type = -1, n = 0, same = 1;
+    char theirs[160], ours[160];
+    for (int k = 0; k < 4; k++)
+        if (m->geom_type[g] == types[k])
+            type = k;
+    if (kind == AF_SPHERE) {
+        want[0] = G[3];
+        n = 1;
+    } else if (kind == AF_BOX) {
+        mju_copy3(want, G + 3);
+        n = 3;
+    } else if (kind == AF_CAPSULE) {
+        mju_sub3(axis, G + 3, G);
+        want[0] = G[6];
+        want[1] = 0.5 * mju_norm3(axis);
+        n = 2;
+    }
+    mju_copy(have, m->geom_size + 3 * g, n);
+    if (kind == AF_BOX) {   /* the axes may be ordered otherwise */
+        qsort(want, 3, sizeof(double), by_size);
+        qsort(have, 3, sizeof(double), by_size);
+    }
+    for (int k = 0; k < n; k++)
+        largest = mju_max(largest, mju_max(want[k], have[k]));
+    for (int k = 0; k < n; k++)
+        same &= mju_abs(want[k] - have[k]) <= 1e-6 * largest;
+    if (type == kind && same)
+        return 1;
+    shape_text(kind, want, n, ours, sizeof ours);
+    shape_text(type, have, type == kind ? n : 0, theirs, sizeof theirs);
+    snprintf(error, size, "anisofem.soft: geom '%s' is named as the obstacle of %s, %s, but is "
+             "%s (MJCF sizes are half extents): a geom named as an obstacle must have its "
+             "shape", mj_id2name(m, mjOBJ_GEOM, g), file, ours, theirs);
+    return 0;
+}
+
+/* Whether each geom named as one of the model's obstacles has its shape (same_shape). */
+static int obstacles_match(const mjModel *m, int instance, const af_model *model, char *error,
+                           size_t size) {
+    for (int i = 0; i < af_obstacles(model); i++) {
+        int g = mj_name2id(m, mjOBJ_GEOM, af_obstacle_name(model, i));
+        if (g >= 0 && !same_shape(m, g, model, i, mj_getPluginConfig(m, instance, "file"),
+                                  error, size))
+            return 0;
+    }
+    return 1;
+}
+
 /* What is wrong with the instance (its file, its body, its substeps), or "" where nothing. */
 static void check(const mjModel *m, int instance, char *error, size_t size) {
     af_model *model = load(m, instance, error, size);
@@ -224,6 +297,8 @@ static void check(const mjModel *m, int instance, char *error, size_t size) {
     else if (substeps(m, instance, error, size) < 0 || timestep(m, instance, error, size) < 0)
         ;
     else if (!controls_named(m, instance, model, error, size))
+        ;
+    else if (!obstacles_match(m, instance, model, error, size))
         ;
     else if (m->opt.integrator == mjINT_RK4)
         snprintf(error, size, "anisofem.soft: the RK4 integrator computes forces at times "
