@@ -138,8 +138,11 @@ def library(lib=None):
             "af_obstacle_position": (ctypes.c_int, [handle, ctypes.c_int, _DOUBLE_P]),
             "af_move_obstacle": (ctypes.c_int, [handle, ctypes.c_int, _DOUBLE_P]),
             "af_obstacle_motion": (ctypes.c_int, [handle, ctypes.c_int, ctypes.c_double,
-                                                  _DOUBLE_P, _DOUBLE_P]),
+                                                  _DOUBLE_P, _DOUBLE_P, _DOUBLE_P, _DOUBLE_P]),
+            "af_turn_obstacle": (ctypes.c_int, [handle, ctypes.c_int, _DOUBLE_P]),
             "af_obstacle_wrench": (ctypes.c_int, [handle, ctypes.c_int, _DOUBLE_P]),
+            "af_obstacle_center": (ctypes.c_int, [handle, ctypes.c_int, _DOUBLE_P]),
+            "af_obstacle_shape": (ctypes.c_int, [handle, ctypes.c_int, _DOUBLE_P]),
             "af_reach": (ctypes.c_int, [handle, ctypes.POINTER(ctypes.c_int), _DOUBLE_P,
                                         ctypes.c_int, _DOUBLE_P, _DOUBLE_P, _DOUBLE_P,
                                         ctypes.c_double, _DOUBLE_P, _DOUBLE_P]),
@@ -304,16 +307,46 @@ class CReducedSimulator(CModel):
         self._check(self._c.af_move_obstacle(self._handle, self._obstacle(which), _pointer(at)),
                     "af_move_obstacle")
 
-    def set_obstacle_motion(self, which, mass, velocity, acceleration):
+    def set_obstacle_motion(self, which, mass, velocity, acceleration, inertia=None,
+                            offset=None):
         """af_obstacle_motion: obstacle `which` free, of `mass` kg (0: moved only by
-        move_obstacle), from velocity (3,), m/s, under acceleration (3,), m/s^2."""
-        v, a = (np.ascontiguousarray(u, dtype=np.float64) for u in (velocity, acceleration))
-        self._check(self._c.af_obstacle_motion(self._handle, self._obstacle(which), float(mass),
-                                               _pointer(v), _pointer(a)), "af_obstacle_motion")
+        move_obstacle), from velocity (3 or 6,: its center's, m/s, then its spin, rad/s) under
+        acceleration (3 or 6,), turning where inertia (3, 3), kg m^2 about its center, is
+        given; its center offset (3,), m, from its position (None: none)."""
+        v, a = (np.zeros(6) for _ in range(2))
+        v[:len(velocity)], a[:len(acceleration)] = velocity, acceleration
+        inertia, offset = (None if u is None else np.ascontiguousarray(u, dtype=np.float64)
+                           for u in (inertia, offset))
+        self._check(self._c.af_obstacle_motion(
+            self._handle, self._obstacle(which), float(mass),
+            None if inertia is None else _pointer(inertia),
+            None if offset is None else _pointer(offset), _pointer(v), _pointer(a)),
+            "af_obstacle_motion")
+
+    def turn_obstacle(self, which, rotation):
+        """af_turn_obstacle: obstacle `which` turned by rotation (3, 3) from how the file has
+        it, at the next step's start where the body lets it."""
+        R = np.ascontiguousarray(rotation, dtype=np.float64)
+        self._check(self._c.af_turn_obstacle(self._handle, self._obstacle(which), _pointer(R)),
+                    "af_turn_obstacle")
+
+    def obstacle_shape(self, which):
+        """(kind, its 15 numbers) of obstacle `which` now (af_obstacle_shape)."""
+        out = np.zeros(15)
+        kind = self._c.af_obstacle_shape(self._handle, self._obstacle(which), _pointer(out))
+        self._check(min(kind, 0), "af_obstacle_shape")
+        return kind, out
+
+    def obstacle_center(self, which):
+        """(3,) where obstacle `which`'s center is now, m."""
+        out = np.zeros(3)
+        self._check(self._c.af_obstacle_center(self._handle, self._obstacle(which),
+                                               _pointer(out)), "af_obstacle_center")
+        return out
 
     def obstacle_wrench(self, which):
         """(6,) the force on obstacle `which` at the last step's end, N, and its moment about
-        its position, N m."""
+        its center, N m."""
         out = np.zeros(6)
         self._check(self._c.af_obstacle_wrench(self._handle, self._obstacle(which),
                                                _pointer(out)), "af_obstacle_wrench")

@@ -108,7 +108,7 @@ void af_contact_move(af_contact *c, int i, const double *position);
 /* A solve from q: the obstacles moved toward their targets, and with dt > 0 friction lagged
  * at q for a step of dt s. */
 void af_contact_start(af_contact *c, const double *q, double dt);
-/* The functions below take z: q (r) then the free obstacles' moves (af_contact_unknowns).
+/* The functions below take z: q (r) then the free obstacles' unknowns (af_contact_unknowns).
  * The barrier's and friction's energy at z (inf where a node reached an obstacle), the free
  * obstacles' inertia, their gradient (*g, n) and exact Hessian (*H, n x n) in the contact's
  * scratch, n = r + af_contact_unknowns, and
@@ -122,20 +122,32 @@ double af_contact_change(af_contact *c, const double *z, const double *step, dou
 /* The largest share in (0, 1] of the step p (n) from z keeping every node clear. */
 double af_contact_limit(af_contact *c, const double *z, const double *p);
 
-/* Obstacle i free (mass > 0, kg) or moved only by af_contact_move (0): its velocity (3, m/s)
- * at the next step's start and the acceleration all else gives it (3, m/s^2). */
-void af_contact_motion(af_contact *c, int i, double mass, const double *velocity,
+/* Obstacle i free (mass > 0, kg) or moved only by af_contact_move (0), turning where inertia
+ * (9, kg m^2 about its center) is not NULL, its center offset (3, m; NULL: zeros) from its
+ * position; its velocity and the acceleration all else gives it (6 each: its center's, then
+ * its spin's). */
+void af_contact_motion(af_contact *c, int i, double mass, const double *inertia,
+                       const double *offset, const double *velocity,
                        const double *acceleration);
-/* The unknowns a step takes beside q since af_contact_start (3 per free obstacle), and where
- * its Newton starts them into y (that many): the move at the obstacles' velocity, dt v (the
- * push a is left to the solve: a box resting on the body has gravity's). */
+/* Obstacle i to be turned by rotation (9, row-major) from how the file has it, about its
+ * position, at the next step's start where no node then comes within a tenth of its gap. */
+void af_contact_turn(af_contact *c, int i, const double *rotation);
+/* The unknowns a step takes beside q since af_contact_start (3 per free obstacle, 6 where it
+ * turns), and where its Newton starts them into y (that many): the move and turn at the
+ * obstacles' velocity, dt v (the push a is left to the solve: a box resting on the body has
+ * gravity's). */
 long af_contact_unknowns(const af_contact *c);
 void af_contact_guess(const af_contact *c, double *y);
-/* After a solve ends at z: the free obstacles moved by their part of z (their velocity its
- * share of dt; dt 0: a static solve), and each obstacle's wrench (force on it, N, and moment
- * about its position, N m) there. */
+/* A Newton iterate z (n) settled: each free obstacle's turn in z folded into its turn so far
+ * and zeroed there (the contact's derivatives are taken at settled points). */
+void af_contact_settle(af_contact *c, double *z);
+/* After a solve ends at z: the free obstacles moved and turned by their part of z (their
+ * velocity its share of dt; dt 0: a static solve), and each obstacle's wrench (force on it, N,
+ * and moment about its center, N m) there. */
 void af_contact_finish(af_contact *c, const double *z, double dt);
 const double *af_contact_wrench(const af_contact *c, int i);
+/* Where obstacle i's center is (3, m): its position, offset by af_contact_motion's offset. */
+void af_contact_center(const af_contact *c, int i, double *center);
 
 af_contact *af_reduced_contact(const af_reduced *m);
 

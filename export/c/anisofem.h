@@ -76,7 +76,8 @@ AF_API void af_rest_state(const af_model *model, double *state);
 AF_API int af_set_constant_force(af_model *model, const double *force);
 /* Newton's tolerance (relative: of the reduced gradient over the step's force size for a
  * reduced model, of the largest move over the body's size for a framed one; default 1e-8)
- * and its iteration budget (default 50). AF_OK or AF_BAD_INPUT. */
+ * and its iteration budget (default 50; 500 for a model with obstacles, whose steps can
+ * crawl where many nodes touch at once). AF_OK or AF_BAD_INPUT. */
 AF_API int af_set_solver(af_model *model, double tolerance, int max_iter);
 
 /* One backward-Euler step of dt s of state, in place, under the constant force plus nodal
@@ -136,16 +137,30 @@ AF_API int af_obstacle_position(const af_model *model, int i, double *position);
 AF_API int af_obstacle_shape(const af_model *model, int i, double *geometry);
 AF_API int af_move_obstacle(af_model *model, int i, const double *position);
 /* Obstacle i as a free body of `mass` kg (a box the body picks up; 0: moved only by
- * af_move_obstacle, the default): each later step solves its translation with the body's,
- * from its velocity (3, m/s) and under the acceleration everything but the body gives it (3,
- * m/s^2: gravity, its other contacts); it does not turn. A step sets its velocity to the
- * step's; call again to set them (an engine that moves it: every step). AF_BAD_INPUT for an
- * index out of range, a mass < 0 or a number that is not finite. */
-AF_API int af_obstacle_motion(af_model *model, int i, double mass, const double *velocity,
+ * af_move_obstacle, the default): each later step solves its move, and its turn where inertia
+ * is given, with the body's, from its velocity and under the acceleration everything but the
+ * body gives it (6 doubles each: its center's, m/s and m/s^2, then its spin's, rad/s and
+ * rad/s^2; gravity, its other contacts). Its center (its center of mass) is offset (3, m; NULL:
+ * none) from its position (af_obstacle_position) at the next step's start; inertia: 9 doubles,
+ * kg m^2, about the center, in the file's axes; NULL: it does not turn. A step sets its
+ * velocity to the step's; call again to set them (an engine that moves it: every step).
+ * AF_BAD_INPUT for an index out of range, a mass < 0, an inertia not symmetric with a positive
+ * diagonal, or a number that is not finite. */
+AF_API int af_obstacle_motion(af_model *model, int i, double mass, const double *inertia,
+                              const double *offset, const double *velocity,
                               const double *acceleration);
+/* Obstacle i to be turned by rotation (9 doubles, row-major) from how the file has it, about
+ * its position: the next step turns it there where no surface node then comes within a tenth
+ * of its gap (else a later step does, the next af_turn_obstacle's turn). AF_BAD_INPUT for a
+ * matrix that is not a rotation. */
+AF_API int af_turn_obstacle(af_model *model, int i, const double *rotation);
 /* The force the body put on obstacle i at the last step's end (3, N) and its moment about the
- * obstacle's position (3, N m): barrier and friction; what an engine applies to the body the
- * obstacle stands for. */
+ * obstacle's center (3, N m; af_obstacle_center): barrier and friction; what an engine applies
+ * to the body the obstacle stands for (for a free obstacle that turns, the moment that turns
+ * it as the step did: J_l(theta)^T M, J_l the left Jacobian of the step's turn theta; it
+ * differs from the forces' moment M by a term of the order of theta). Its center: its position offset by af_obstacle_motion's
+ * offset (its center of mass), moved and turned with it since (3, m). */
+AF_API int af_obstacle_center(const af_model *model, int i, double *center);
 AF_API int af_obstacle_wrench(const af_model *model, int i, double *wrench);
 AF_API int af_iterations(const af_model *model);
 /* Why the last af_step or af_set_* failed, "" if it did not. */

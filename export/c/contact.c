@@ -7,11 +7,15 @@
  * sphere, box or capsule as a convex core grown by a radius; af_contact_move sets where one
  * is to be, reached as far as the body lets it at the next step's start.
  *
- * A free obstacle (af_contact_motion: a mass, its velocity and the acceleration all else
- * gives it) translates with the body: a step's unknowns are z = (q, sqrt(m) y), y (3 each) a
- * free obstacle's move over the step (mass-weighted like the basis's coordinates), their
- * inertia m |y - y_hat|^2 / (2 dt^2) (y_hat = dt v + dt^2 a) a term here, and every distance
- * taken from the node to the obstacle moved by y. */
+ * A free obstacle (af_contact_motion: a mass, an inertia about a center, its velocity and the
+ * acceleration all else gives it) moves with the body: a step's unknowns are z = (q, then per
+ * free obstacle sqrt(m) y and, where it turns, s delta), y its move over the step, delta a
+ * turn about its center after the turn S it has made so far in the solve (s^2 its inertia's
+ * mean principal value: mass-weighted like the basis's coordinates). Each accepted Newton step
+ * folds delta into S (af_contact_settle), so derivatives are taken at delta = 0, exactly. A
+ * node x is seen in the obstacle's frame at the step's start: x' = center + S^T exp(-delta)
+ * (x - center - y). Their inertia m |y - y_hat|^2 / (2 dt^2) and (theta - theta_hat)^T I
+ * (theta - theta_hat) / (2 dt^2), theta = log(exp(delta) S), are terms here. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -23,11 +27,31 @@
 #define TOUCH_TOLERANCE 1e-3
 #define GEOMETRY 15
 #define NOISE 1e-12      /* the share of the energy below which two values are round-off */
+#define UNKNOWNS 6       /* a free obstacle's most unknowns: its move and its turn */
 
 typedef struct {
     int node, obstacle;          /* the surface node (row of contact_rest), the obstacle */
     double weight, T[9], start[3];
 } lag_t;
+
+/* What a free obstacle is (count of each, after the per-obstacle arrays below). */
+typedef struct {
+    double mass;                 /* kg; 0: moved only by af_contact_move */
+    double inertia[9];           /* about its center, kg m^2; zeros: it does not turn */
+    double scale;                /* sqrt of inertia's trace / 3: its turn's unknowns' weight */
+    double center[3];            /* the point it turns about, m */
+    double offset[3];            /* the center from its position when last set, m */
+    int fresh;                   /* whether center is to be set from offset */
+    double velocity[6];          /* its center's, m/s, then its spin, rad/s */
+    double push[6];              /* the acceleration all else gives it, m/s^2 and rad/s^2 */
+    double hat[6];               /* dt v + dt^2 a for this step */
+    double turned[9];            /* its turn from how the file has it (row-major) */
+    double spun[9];              /* its turn so far in this step's solve */
+    double view[9], moved[3];    /* exp(th) S and y at the point prepare was last given */
+    double target[9];            /* the turn to give it at the next step's start */
+    int turning;                 /* whether target is set */
+    int slot;                    /* its first unknown in z this step, or -1 */
+} body_t;
 
 struct af_contact {
     long k, r;
@@ -39,37 +63,26 @@ struct af_contact {
     double *target;              /* (count, 3) where each is to be */
     double *shift;               /* (count, 3) its move at this step's start */
     unsigned char *moving;       /* (count,) whether it has a target */
+    body_t *bodies;              /* (count,) */
     lag_t *lags;
     long lagged;
     char *names;                 /* the obstacles' names, each ended by a NUL */
-    double *mass;                /* (count,) kg of a free obstacle, 0 for a moved one */
-    double *velocity, *push;     /* (count, 3) its velocity, m/s, and acceleration, m/s^2 */
-    int *slot;                   /* (count,) a free obstacle's first unknown in z, else -1 */
-    long extra;                  /* this solve's unknowns beside q: 3 per free obstacle */
+    long extra;                  /* this solve's unknowns beside q */
     double inertia;              /* this step's 1 / dt^2 */
-    double *hat;                 /* (count, 3) a free obstacle's y_hat */
     double *wrench;              /* (count, 6) force on each, N, and its moment about its
                                     position, N m, at the last step's end */
-    double *xs, *gs, *ds, *dy;   /* scratch (k, 3) each, (count, 3) */
-    double *blocks;              /* scratch (count, 9): a node's Hessian from each obstacle */
+    double *xs, *gs, *ds;        /* scratch (k, 3) each */
+    double *blocks, *pulls;      /* scratch (count, 9), (count, 3): a node's Hessian and
+                                    gradient in x' from each obstacle */
     double *g, *H, *qt;          /* the terms' gradient (n), Hessian (n, n); a point (n),
-                                    n = r + 3 count at most */
+                                    n = r + UNKNOWNS count at most */
 };
-
-/* The move y (3, m) of obstacle o in z into y: zeros where it is not free; z holds a free
- * one's sqrt(m) y, its inertia then the q's |.|^2 / (2 dt^2) of the mass-orthonormal basis. */
-static void moved(const af_contact *c, const double *z, int o, double *y) {
-    int a;
-    for (a = 0; a < 3; a++)
-        y[a] = c->slot[o] >= 0 && c->extra ? z[c->slot[o] + a] / sqrt(c->mass[o]) : 0.0;
-}
 
 void af_contact_close(af_contact *c) {
     if (!c) return;
     free(c->rest); free(c->U); free(c->area); free(c->kinds); free(c->geometry);
     free(c->friction); free(c->target); free(c->shift); free(c->moving); free(c->lags);
-    free(c->xs); free(c->mass); free(c->velocity); free(c->push); free(c->slot);
-    free(c->hat); free(c->wrench); free(c->dy); free(c->blocks);
+    free(c->xs); free(c->bodies); free(c->wrench); free(c->blocks); free(c->pulls);
     free(c->gs); free(c->ds); free(c->names); free(c->g); free(c->H); free(c->qt);
     free(c);
 }
@@ -132,23 +145,22 @@ af_contact *af_contact_open(const af_file *f, int r, int *failed) {
     c->gs = (double *)malloc((size_t)k * 3 * sizeof(double) + 1);
     c->ds = (double *)malloc((size_t)k * 3 * sizeof(double) + 1);
     {
-        size_t n = (size_t)r + 3 * (size_t)count;
+        size_t n = (size_t)r + UNKNOWNS * (size_t)count;
         c->g = (double *)malloc((n + 1) * sizeof(double));
         c->H = (double *)malloc((n * n + 1) * sizeof(double));
         c->qt = (double *)malloc((n + 1) * sizeof(double));
     }
-    c->mass = (double *)calloc((size_t)count + 1, sizeof(double));
-    c->velocity = (double *)calloc((size_t)count * 3 + 1, sizeof(double));
-    c->push = (double *)calloc((size_t)count * 3 + 1, sizeof(double));
-    c->hat = (double *)calloc((size_t)count * 3 + 1, sizeof(double));
-    c->dy = (double *)calloc((size_t)count * 3 + 1, sizeof(double));
+    c->bodies = (body_t *)calloc((size_t)count + 1, sizeof(body_t));
     c->blocks = (double *)calloc((size_t)count * 9 + 1, sizeof(double));
+    c->pulls = (double *)calloc((size_t)count * 3 + 1, sizeof(double));
     c->wrench = (double *)calloc((size_t)count * 6 + 1, sizeof(double));
-    c->slot = (int *)malloc(((size_t)count + 1) * sizeof(int));
-    for (i = 0; c->slot && i < count; i++) c->slot[i] = -1;
+    for (i = 0; c->bodies && i < count; i++) {
+        c->bodies[i].slot = -1;
+        c->bodies[i].turned[0] = c->bodies[i].turned[4] = c->bodies[i].turned[8] = 1.0;
+        memcpy(c->bodies[i].center, c->geometry + i * GEOMETRY, 3 * sizeof(double));
+    }
     if (!c->target || !c->shift || !c->moving || !c->lags || !c->xs || !c->gs || !c->ds ||
-        !c->g || !c->H || !c->qt || !c->mass || !c->velocity || !c->push || !c->hat ||
-        !c->dy || !c->blocks || !c->wrench || !c->slot) {
+        !c->g || !c->H || !c->qt || !c->bodies || !c->blocks || !c->pulls || !c->wrench) {
         af_say(f->error, f->error_size, "no memory for a model's contact");
         goto fail;
     }
@@ -189,22 +201,44 @@ void af_contact_move(af_contact *c, int i, const double *position) {
     c->moving[i] = 1;
 }
 
-void af_contact_motion(af_contact *c, int i, double mass, const double *velocity,
+void af_contact_turn(af_contact *c, int i, const double *rotation) {
+    memcpy(c->bodies[i].target, rotation, 9 * sizeof(double));
+    c->bodies[i].turning = 1;
+}
+
+void af_contact_motion(af_contact *c, int i, double mass, const double *inertia,
+                       const double *offset, const double *velocity,
                        const double *acceleration) {
-    c->mass[i] = mass;
-    memcpy(c->velocity + 3 * i, velocity, 3 * sizeof(double));
-    memcpy(c->push + 3 * i, acceleration, 3 * sizeof(double));
+    body_t *b = c->bodies + i;
+    int a;
+    b->mass = mass;
+    b->scale = 0.0;
+    for (a = 0; a < 9; a++) b->inertia[a] = inertia ? inertia[a] : 0.0;
+    if (inertia) b->scale = sqrt((inertia[0] + inertia[4] + inertia[8]) / 3.0);
+    for (a = 0; a < 3; a++) b->offset[a] = offset ? offset[a] : 0.0;
+    b->fresh = 1;
+    memcpy(b->velocity, velocity, 6 * sizeof(double));
+    memcpy(b->push, acceleration, 6 * sizeof(double));
 }
 
 const double *af_contact_wrench(const af_contact *c, int i) { return c->wrench + 6 * i; }
 
 long af_contact_unknowns(const af_contact *c) { return c ? c->extra : 0; }
 
+/* Whether free obstacle b's turn is among this step's unknowns. */
+static int turns(const body_t *b) { return b->scale > 0.0; }
+
 void af_contact_guess(const af_contact *c, double *y) {
+    double dt = 1.0 / sqrt(c->inertia);
     int o, a;
-    for (o = 0; o < c->count; o++)
-        for (a = 0; c->slot[o] >= 0 && a < 3; a++)
-            y[c->slot[o] - c->r + a] = c->velocity[3 * o + a] * sqrt(c->mass[o] / c->inertia);
+    for (o = 0; o < c->count; o++) {
+        const body_t *b = c->bodies + o;
+        if (b->slot < 0) continue;
+        for (a = 0; a < 3; a++) {
+            y[b->slot - c->r + a] = dt * b->velocity[a] * sqrt(b->mass);
+            if (turns(b)) y[b->slot - c->r + 3 + a] = dt * b->velocity[3 + a] * b->scale;
+        }
+    }
 }
 
 /* d, normal n (3) and, where H is not NULL, the Hessian of d (9) at x from obstacle o. */
@@ -314,12 +348,188 @@ static void place(af_contact *c, const double *z) {
             c->xs[3 * i + a] = c->rest[3 * i + a] + af_dot(c->U + (3 * i + a) * r, z, r);
 }
 
-/* Node i (placed) seen from obstacle o moved by its y in z: x - y (3) into x. */
-static void relative(const af_contact *c, const double *z, int o, long i, double *x) {
-    double y[3];
+/* Obstacle o's move y (3, m) and turn th (3, rad, after its turn so far) in z: zeros where it
+ * is not free in this step, th zeros where it does not turn. */
+static void motion(const af_contact *c, const double *z, int o, double *y, double *th) {
+    const body_t *b = c->bodies + o;
+    int a, free_ = b->slot >= 0 && c->extra;
+    for (a = 0; a < 3; a++) {
+        y[a] = free_ ? z[b->slot + a] / sqrt(b->mass) : 0.0;
+        th[a] = free_ && turns(b) ? z[b->slot + 3 + a] / b->scale : 0.0;
+    }
+}
+
+/* The rotation exp([th]) (row-major) into R. */
+static void rotation_of(const double *th, double *R) {
+    double angle = sqrt(th[0] * th[0] + th[1] * th[1] + th[2] * th[2]), K[9], K2[9], s, q;
+    int a, b, e;
+    K[0] = 0.0; K[1] = -th[2]; K[2] = th[1];
+    K[3] = th[2]; K[4] = 0.0; K[5] = -th[0];
+    K[6] = -th[1]; K[7] = th[0]; K[8] = 0.0;
+    for (a = 0; a < 3; a++)
+        for (b = 0; b < 3; b++) {
+            K2[3 * a + b] = 0.0;
+            for (e = 0; e < 3; e++) K2[3 * a + b] += K[3 * a + e] * K[3 * e + b];
+        }
+    s = angle > 1e-4 ? sin(angle) / angle : 1.0 - angle * angle / 6.0;
+    q = angle > 1e-4 ? (1.0 - cos(angle)) / (angle * angle) : 0.5 - angle * angle / 24.0;
+    for (a = 0; a < 9; a++) R[a] = (a % 4 == 0 ? 1.0 : 0.0) + s * K[a] + q * K2[a];
+}
+
+/* M^T u (3) for a row-major 3 x 3 M, into out (not u). */
+static void transposed(const double *M, const double *u, double *out) {
     int a;
-    moved(c, z, o, y);
-    for (a = 0; a < 3; a++) x[a] = c->xs[3 * i + a] - y[a];
+    for (a = 0; a < 3; a++) out[a] = M[a] * u[0] + M[3 + a] * u[1] + M[6 + a] * u[2];
+}
+
+/* M u (3) for a row-major 3 x 3 M, into out (not u). */
+static void times(const double *M, const double *u, double *out) {
+    int a;
+    for (a = 0; a < 3; a++) out[a] = M[3 * a] * u[0] + M[3 * a + 1] * u[1] + M[3 * a + 2] * u[2];
+}
+
+/* Obstacle o's move y (3) and turn P = exp(th) S (9) at z. */
+static void frame(const af_contact *c, const double *z, int o, double *y, double *P) {
+    const double *S = c->bodies[o].spun;
+    double th[3], R[9];
+    int a, b;
+    motion(c, z, o, y, th);
+    rotation_of(th, R);
+    for (a = 0; a < 3; a++)
+        for (b = 0; b < 3; b++)
+            P[3 * a + b] = R[3 * a] * S[b] + R[3 * a + 1] * S[3 + b] + R[3 * a + 2] * S[6 + b];
+}
+
+/* Each obstacle's frame at z kept (relative then reads it). */
+static void prepare(af_contact *c, const double *z) {
+    int o;
+    for (o = 0; o < c->count; o++) frame(c, z, o, c->bodies[o].moved, c->bodies[o].view);
+}
+
+/* Point x (3) seen from obstacle o moved by y and turned by P (frame's), in its frame at the
+ * step's start: x' = center + P^T v into out, v = x - center - y into v (3); x itself where
+ * the obstacle is not free in this step. */
+static void seen(const af_contact *c, int o, const double *x, const double *y,
+                 const double *P, double *out, double *v) {
+    const body_t *b = c->bodies + o;
+    double u[3];
+    int a;
+    for (a = 0; a < 3; a++) v[a] = x[a] - b->center[a] - y[a];
+    if (b->slot < 0 || !c->extra) {
+        memcpy(out, x, 3 * sizeof(double));
+        return;
+    }
+    transposed(P, v, u);
+    for (a = 0; a < 3; a++) out[a] = b->center[a] + u[a];
+}
+
+/* Node i (placed) seen from obstacle o at the prepared point: x' into x, v into v (3 each). */
+static void relative(const af_contact *c, int o, long i, double *x, double *v) {
+    seen(c, o, c->xs + 3 * i, c->bodies[o].moved, c->bodies[o].view, x, v);
+}
+
+/* A term's gradient g (3) in x' of obstacle o, at a settled point (th = 0), as its gradients
+ * in the node, gx = S g (the obstacle's move's: -gx), and in the obstacle's turn, gt = gx x v. */
+static void carried_gradient(const af_contact *c, int o, const double *g, const double *v,
+                             double *gx, double *gt) {
+    int a;
+    if (c->bodies[o].slot >= 0 && c->extra) times(c->bodies[o].spun, g, gx);
+    else memcpy(gx, g, 3 * sizeof(double));
+    for (a = 0; a < 3; a++) gt[a] = gx[(a + 1) % 3] * v[(a + 2) % 3] - gx[(a + 2) % 3] * v[(a + 1) % 3];
+}
+
+/* gx and gt (carried_gradient's) of a term of obstacle o at node i added: to the node's
+ * gradient c->gs and to the obstacle's unknowns' in c->g. */
+static void add_gradient(af_contact *c, int o, long i, const double *g, const double *v) {
+    const body_t *b = c->bodies + o;
+    double gx[3], gt[3];
+    int a;
+    carried_gradient(c, o, g, v, gx, gt);
+    for (a = 0; a < 3; a++) c->gs[3 * i + a] += gx[a];
+    if (b->slot < 0 || !c->extra) return;
+    for (a = 0; a < 3; a++) {
+        c->g[b->slot + a] -= gx[a] / sqrt(b->mass);
+        if (turns(b)) c->g[b->slot + 3 + a] += gt[a] / b->scale;
+    }
+}
+
+/* The rotation vector log(R) (3) of a row-major rotation R. */
+static void log_of(const double *R, double *th) {
+    double cosine = 0.5 * (R[0] + R[4] + R[8] - 1.0), angle, w[3], sine, f;
+    w[0] = 0.5 * (R[7] - R[5]);
+    w[1] = 0.5 * (R[2] - R[6]);
+    w[2] = 0.5 * (R[3] - R[1]);
+    sine = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+    angle = atan2(sine, cosine < -1.0 ? -1.0 : cosine > 1.0 ? 1.0 : cosine);
+    f = sine > 1e-8 ? angle / sine : 1.0 + sine * sine / 6.0;
+    th[0] = f * w[0];
+    th[1] = f * w[1];
+    th[2] = f * w[2];
+}
+
+/* The inverse left Jacobian of log at th (3 x 3): d log(exp(delta) exp(th)) / d delta at 0. */
+static void inverse_jacobian(const double *th, double *J) {
+    double angle = sqrt(th[0] * th[0] + th[1] * th[1] + th[2] * th[2]), K[9], K2[9], q;
+    int a, b, e;
+    K[0] = 0.0; K[1] = -th[2]; K[2] = th[1];
+    K[3] = th[2]; K[4] = 0.0; K[5] = -th[0];
+    K[6] = -th[1]; K[7] = th[0]; K[8] = 0.0;
+    for (a = 0; a < 3; a++)
+        for (b = 0; b < 3; b++) {
+            K2[3 * a + b] = 0.0;
+            for (e = 0; e < 3; e++) K2[3 * a + b] += K[3 * a + e] * K[3 * e + b];
+        }
+    q = angle > 1e-4 ? 1.0 / (angle * angle) - (1.0 + cos(angle)) / (2.0 * angle * sin(angle))
+                     : 1.0 / 12.0 + angle * angle / 720.0;
+    for (a = 0; a < 9; a++) J[a] = (a % 4 == 0 ? 1.0 : 0.0) - 0.5 * K[a] + q * K2[a];
+}
+
+/* The left Jacobian of exp at th (3 x 3): the inverse of inverse_jacobian's. */
+static void left_jacobian(const double *th, double *J) {
+    double angle = sqrt(th[0] * th[0] + th[1] * th[1] + th[2] * th[2]), K[9], K2[9], p, q;
+    int a, b, e;
+    K[0] = 0.0; K[1] = -th[2]; K[2] = th[1];
+    K[3] = th[2]; K[4] = 0.0; K[5] = -th[0];
+    K[6] = -th[1]; K[7] = th[0]; K[8] = 0.0;
+    for (a = 0; a < 3; a++)
+        for (b = 0; b < 3; b++) {
+            K2[3 * a + b] = 0.0;
+            for (e = 0; e < 3; e++) K2[3 * a + b] += K[3 * a + e] * K[3 * e + b];
+        }
+    p = angle > 1e-4 ? (1.0 - cos(angle)) / (angle * angle) : 0.5 - angle * angle / 24.0;
+    q = angle > 1e-4 ? (angle - sin(angle)) / (angle * angle * angle)
+                     : 1.0 / 6.0 - angle * angle / 120.0;
+    for (a = 0; a < 9; a++) J[a] = (a % 4 == 0 ? 1.0 : 0.0) + p * K[a] + q * K2[a];
+}
+
+/* Obstacle o's whole turn in this step at z: log(exp(th) S). */
+static void whole_turn(const af_contact *c, const double *z, int o, double *turn) {
+    double y[3], th[3], R[9], M[9];
+    int a, b;
+    motion(c, z, o, y, th);
+    rotation_of(th, R);
+    for (a = 0; a < 3; a++)
+        for (b = 0; b < 3; b++)
+            M[3 * a + b] = R[3 * a] * c->bodies[o].spun[b] + R[3 * a + 1]
+                           * c->bodies[o].spun[3 + b] + R[3 * a + 2] * c->bodies[o].spun[6 + b];
+    log_of(M, turn);
+}
+
+void af_contact_settle(af_contact *c, double *z) {
+    double y[3], th[3], R[9], M[9];
+    int o, a, b;
+    for (o = 0; o < c->count; o++) {
+        body_t *bo = c->bodies + o;
+        if (bo->slot < 0 || !c->extra || !turns(bo)) continue;
+        motion(c, z, o, y, th);
+        rotation_of(th, R);
+        memcpy(M, bo->spun, sizeof M);
+        for (a = 0; a < 3; a++)
+            for (b = 0; b < 3; b++)
+                bo->spun[3 * a + b] = R[3 * a] * M[b] + R[3 * a + 1] * M[3 + b]
+                                      + R[3 * a + 2] * M[6 + b];
+        for (a = 0; a < 3; a++) z[bo->slot + 3 + a] = 0.0;
+    }
 }
 
 /* The largest s in [0, 1] keeping x + s dx above floor from obstacle o (x starts above). */
@@ -340,23 +550,105 @@ static double first_touch(const af_contact *c, int o, const double *x, const dou
     return s;
 }
 
-/* The share of the moves ds (k, 3) of the placed nodes and dy (count, 3) of the obstacles
- * from z keeping every node at KEEP of its distance. */
-static double share_of(const af_contact *c, const double *z, const double *ds,
-                       const double *dy) {
-    double share = 1.0, n[3], x[3], d3[3];
+/* The share of the step p (n) from z (nodes placed; z + p in c->qt, the nodes' moves in c->ds)
+ * keeping every node at KEEP of its distance from each obstacle, along the straight line
+ * between where it is seen from the obstacle before and after. */
+static double share_of(const af_contact *c, const double *z) {
+    double share = 1.0, n[3], x0[3], x1[3], d3[3], v[3], y0[3], P0[9], y1[3], P1[9], moved[3];
     long i;
     int o, a;
-    for (o = 0; o < c->count; o++)
+    for (o = 0; o < c->count; o++) {
+        frame(c, z, o, y0, P0);
+        frame(c, c->qt, o, y1, P1);
         for (i = 0; i < c->k; i++) {
             double s;
-            for (a = 0; a < 3; a++) d3[a] = ds[3 * i + a] - dy[3 * o + a];
+            for (a = 0; a < 3; a++) moved[a] = c->xs[3 * i + a] + c->ds[3 * i + a];
+            seen(c, o, c->xs + 3 * i, y0, P0, x0, v);
+            seen(c, o, moved, y1, P1, x1, v);
+            for (a = 0; a < 3; a++) d3[a] = x1[a] - x0[a];
             if (d3[0] * d3[0] + d3[1] * d3[1] + d3[2] * d3[2] <= 0.0) continue;
-            relative(c, z, o, i, x);
-            s = first_touch(c, o, x, d3, KEEP * distance(c, o, x, n, NULL));
+            s = first_touch(c, o, x0, d3, KEEP * distance(c, o, x0, n, NULL));
             if (s < share) share = s;
         }
+    }
     return share;
+}
+
+/* M (3 x 3, row-major) made a rotation again: its columns Gram-Schmidt orthonormalized (turns
+ * compose without their round-off growing). */
+static void orthonormal(double *M) {
+    int a, b, e;
+    for (b = 0; b < 3; b++) {
+        double size = 0.0;
+        for (e = 0; e < b; e++) {
+            double d = M[e] * M[b] + M[3 + e] * M[3 + b] + M[6 + e] * M[6 + b];
+            for (a = 0; a < 3; a++) M[3 * a + b] -= d * M[3 * a + e];
+        }
+        for (a = 0; a < 3; a++) size += M[3 * a + b] * M[3 * a + b];
+        size = sqrt(size);
+        for (a = 0; a < 3; a++) M[3 * a + b] /= size;
+    }
+}
+
+/* Obstacle o turned by R (row-major) about the point at (3) and moved by y: its geometry's
+ * points and directions, its center and its turn from the file's. */
+static void carry(af_contact *c, int o, const double *at, const double *y, const double *R) {
+    double *G = c->geometry + o * GEOMETRY, *points[3], p[3], M[9], pin[3];
+    int a, b, e, kind = c->kinds[o], count = 0;
+    memcpy(pin, at, sizeof pin);                   /* at may be one of the points */
+    points[count++] = c->bodies[o].center;
+    points[count++] = G;                           /* a center, a plane's point, an end */
+    if (kind == AF_CAPSULE) points[count++] = G + 3;
+    for (e = 0; e < count; e++) {
+        for (a = 0; a < 3; a++) p[a] = points[e][a] - pin[a];
+        for (a = 0; a < 3; a++)
+            points[e][a] = pin[a] + y[a] + R[3 * a] * p[0] + R[3 * a + 1] * p[1]
+                           + R[3 * a + 2] * p[2];
+    }
+    if (kind == AF_PLANE) {                        /* its normal turns */
+        for (a = 0; a < 3; a++) p[a] = G[3 + a];
+        for (a = 0; a < 3; a++)
+            G[3 + a] = R[3 * a] * p[0] + R[3 * a + 1] * p[1] + R[3 * a + 2] * p[2];
+    }
+    if (kind == AF_BOX) {                          /* its axes turn */
+        memcpy(M, G + 6, sizeof M);
+        for (a = 0; a < 3; a++)
+            for (b = 0; b < 3; b++)
+                G[6 + 3 * a + b] = R[3 * a] * M[b] + R[3 * a + 1] * M[3 + b]
+                                   + R[3 * a + 2] * M[6 + b];
+        orthonormal(G + 6);
+    }
+    memcpy(M, c->bodies[o].turned, sizeof M);
+    for (a = 0; a < 3; a++)
+        for (b = 0; b < 3; b++)
+            c->bodies[o].turned[3 * a + b] = R[3 * a] * M[b] + R[3 * a + 1] * M[3 + b]
+                                              + R[3 * a + 2] * M[6 + b];
+    orthonormal(c->bodies[o].turned);
+}
+
+/* Obstacle o turned to its target (af_contact_turn) about its position where no node then
+ * comes within KEEP of its distance from it (else it waits for a later step's target). */
+static void turn_to_target(af_contact *c, int o) {
+    body_t *b = c->bodies + o;
+    double R[9], G[GEOMETRY], turned[9], center[3], still[3] = {0.0, 0.0, 0.0}, n[3];
+    long i;
+    int a, e, clear = 1;
+    b->turning = 0;
+    for (a = 0; a < 3; a++)                /* R = target turned^T */
+        for (e = 0; e < 3; e++)
+            R[3 * a + e] = b->target[3 * a] * b->turned[3 * e] + b->target[3 * a + 1]
+                           * b->turned[3 * e + 1] + b->target[3 * a + 2] * b->turned[3 * e + 2];
+    memcpy(G, c->geometry + o * GEOMETRY, sizeof G);
+    memcpy(turned, b->turned, sizeof turned);
+    memcpy(center, b->center, sizeof center);
+    for (i = 0; i < c->k; i++) c->ds[i] = distance(c, o, c->xs + 3 * i, n, NULL);
+    carry(c, o, G, still, R);
+    for (i = 0; i < c->k && clear; i++)
+        clear = distance(c, o, c->xs + 3 * i, n, NULL) > KEEP * c->ds[i];
+    if (clear) return;
+    memcpy(c->geometry + o * GEOMETRY, G, sizeof G);
+    memcpy(b->turned, turned, sizeof turned);
+    memcpy(b->center, center, sizeof center);
 }
 
 void af_contact_start(af_contact *c, const double *q, double dt) {
@@ -367,8 +659,11 @@ void af_contact_start(af_contact *c, const double *q, double dt) {
     place(c, q);
     for (o = 0; o < c->count; o++) {   /* obstacles toward their targets, the body held */
         double *G = c->geometry + o * GEOMETRY, delta[3], share;
-        c->slot[o] = -1;
+        body_t *b = c->bodies + o;
+        b->slot = -1;
+        for (a = 0; a < 9; a++) b->spun[a] = a % 4 == 0 ? 1.0 : 0.0;
         for (a = 0; a < 3; a++) c->shift[3 * o + a] = 0.0;
+        if (b->turning) turn_to_target(c, o);
         if (!c->moving[o]) continue;
         for (a = 0; a < 3; a++) delta[a] = c->target[3 * o + a] - G[a];
         for (i = 0; i < c->k; i++)
@@ -383,20 +678,27 @@ void af_contact_start(af_contact *c, const double *q, double dt) {
             G[a] += share * delta[a];
             c->shift[3 * o + a] = share * delta[a];
             if (c->kinds[o] == AF_CAPSULE) G[3 + a] += share * delta[a];
+            b->center[a] += share * delta[a];
         }
         c->moving[o] = share < 1.0;
+    }
+    for (o = 0; o < c->count; o++) {     /* a center set anew: from where it is now */
+        body_t *b = c->bodies + o;
+        for (a = 0; b->fresh && a < 3; a++)
+            b->center[a] = c->geometry[o * GEOMETRY + a] + b->offset[a];
+        b->fresh = 0;
     }
     c->lagged = 0;
     c->eps = c->smoothing * dt;
     c->inertia = dt > 0.0 ? 1.0 / (dt * dt) : 0.0;
     if (!(dt > 0.0)) return;
-    for (o = 0; o < c->count; o++)       /* the free obstacles' unknowns and predictions */
-        if (c->mass[o] > 0.0) {
-            c->slot[o] = (int)(c->r + c->extra);
-            c->extra += 3;
-            for (a = 0; a < 3; a++)
-                c->hat[3 * o + a] = dt * c->velocity[3 * o + a] + dt * dt * c->push[3 * o + a];
-        }
+    for (o = 0; o < c->count; o++) {     /* the free obstacles' unknowns and predictions */
+        body_t *b = c->bodies + o;
+        if (!(b->mass > 0.0)) continue;
+        b->slot = (int)(c->r + c->extra);
+        c->extra += turns(b) ? 6 : 3;
+        for (a = 0; a < 6; a++) b->hat[a] = dt * b->velocity[a] + dt * dt * b->push[a];
+    }
     for (o = 0; o < c->count; o++) {
         double mu = c->friction[o] < 0.0 ? c->mu : c->friction[o];
         if (mu <= 0.0) continue;
@@ -417,11 +719,12 @@ void af_contact_start(af_contact *c, const double *q, double dt) {
     }
 }
 
-/* Lag l's tangential slip u (3) at z (nodes placed), returning its length. */
-static double slip(const af_contact *c, const lag_t *l, const double *z, double *u) {
+/* Lag l's tangential slip u (3) at z (nodes placed), returning its length; the node seen from
+ * its obstacle's v into v. */
+static double slip(const af_contact *c, const lag_t *l, double *u, double *v) {
     double x[3], y = 0.0;
     int a, b;
-    relative(c, z, l->obstacle, l->node, x);
+    relative(c, l->obstacle, l->node, x, v);
     for (a = 0; a < 3; a++) {
         u[a] = 0.0;
         for (b = 0; b < 3; b++) u[a] += l->T[3 * a + b] * (x[b] - l->start[b]);
@@ -431,51 +734,56 @@ static double slip(const af_contact *c, const lag_t *l, const double *z, double 
 }
 
 /* The energy at z (nodes placed), inf where a node reached an obstacle; with grad, its
- * gradient in the nodes into c->gs and in the free obstacles' moves into c->g[r:]. */
+ * gradient in the nodes into c->gs and in the free obstacles' unknowns into c->g[r:]. */
 static double surface_energy(af_contact *c, const double *z, int grad) {
-    double total = 0.0, n[3], x[3];
+    double total = 0.0, n[3], x[3], v[3], f[3];
     long i, j;
     int o, a;
-    if (grad) {
+    if (grad) {   /* at a settled point: a turn's derivatives are taken at delta = 0 */
         memset(c->gs, 0, (size_t)c->k * 3 * sizeof(double));
         memset(c->g + c->r, 0, (size_t)c->extra * sizeof(double));
     }
+    prepare(c, z);
     for (o = 0; o < c->count; o++) {
-        double *gy = grad && c->slot[o] >= 0 ? c->g + c->slot[o] : NULL, root = sqrt(c->mass[o]);
         for (i = 0; i < c->k; i++) {
             double d, s;
-            relative(c, z, o, i, x);
+            relative(c, o, i, x, v);
             d = distance(c, o, x, n, NULL);
             if (d <= 0.0) return INFINITY;
             if (d >= c->dhat) continue;
             total += c->kappa * c->area[i] * barrier(d, c->dhat);
             s = c->kappa * c->area[i] * barrier_slope(d, c->dhat);
-            if (grad)
-                for (a = 0; a < 3; a++) c->gs[3 * i + a] += s * n[a];
-            if (gy)
-                for (a = 0; a < 3; a++) gy[a] -= s * n[a] / root;
+            for (a = 0; a < 3; a++) f[a] = s * n[a];
+            if (grad) add_gradient(c, o, i, f, v);
         }
     }
     for (j = 0; j < c->lagged; j++) {
         const lag_t *l = c->lags + j;
-        double u[3], e = c->eps, y = slip(c, l, z, u), f;
-        double *gy = grad && c->slot[l->obstacle] >= 0 ? c->g + c->slot[l->obstacle] : NULL;
-        total += l->weight * (y < e ? -y * y * y / (3 * e * e) + y * y / e + e / 3.0 : y);
-        f = l->weight * friction_slope(y, e);
-        if (grad)
-            for (a = 0; a < 3; a++) c->gs[3 * l->node + a] += f * u[a];
-        if (gy)
-            for (a = 0; a < 3; a++) gy[a] -= f * u[a] / sqrt(c->mass[l->obstacle]);
+        double u[3], e = c->eps, s = slip(c, l, u, v), w;
+        total += l->weight * (s < e ? -s * s * s / (3 * e * e) + s * s / e + e / 3.0 : s);
+        w = l->weight * friction_slope(s, e);
+        for (a = 0; a < 3; a++) f[a] = w * u[a];
+        if (grad) add_gradient(c, l->obstacle, l->node, f, v);
     }
-    for (o = 0; o < c->count; o++)          /* the free obstacles' inertia */
-        if (c->slot[o] >= 0 && c->extra) {
-            const double *y = z + c->slot[o];
-            for (a = 0; a < 3; a++) {
-                double diff = y[a] - sqrt(c->mass[o]) * c->hat[3 * o + a];
-                total += 0.5 * c->inertia * diff * diff;
-                if (grad) c->g[c->slot[o] + a] += c->inertia * diff;
-            }
+    for (o = 0; o < c->count; o++) {        /* the free obstacles' inertia */
+        const body_t *b = c->bodies + o;
+        double diff[3], turn[3], J[9], Id[3];
+        if (b->slot < 0 || !c->extra) continue;
+        for (a = 0; a < 3; a++) {
+            diff[a] = z[b->slot + a] - sqrt(b->mass) * b->hat[a];
+            total += 0.5 * c->inertia * diff[a] * diff[a];
+            if (grad) c->g[b->slot + a] += c->inertia * diff[a];
         }
+        if (!turns(b)) continue;
+        whole_turn(c, z, o, turn);              /* (theta - theta_hat)^T I (...) / (2 dt^2) */
+        for (a = 0; a < 3; a++) diff[a] = turn[a] - b->hat[3 + a];
+        times(b->inertia, diff, Id);
+        total += 0.5 * c->inertia * (diff[0] * Id[0] + diff[1] * Id[1] + diff[2] * Id[2]);
+        if (!grad) continue;
+        inverse_jacobian(turn, J);              /* its gradient in delta: J^T I (...) */
+        transposed(J, Id, diff);
+        for (a = 0; a < 3; a++) c->g[b->slot + 3 + a] += c->inertia * diff[a] / b->scale;
+    }
     return total;
 }
 
@@ -484,43 +792,87 @@ double af_contact_energy(af_contact *c, const double *z) {
     return surface_energy(c, z, 0);
 }
 
-/* Node i's Hessian from each obstacle (barrier and friction) into c->blocks (count, 9) and
- * their sum into B (9); 0 where no term touches it. */
-static int node_blocks(af_contact *c, const double *z, long i, double *B) {
-    double n[3], curvature[9], x[3];
+/* Node i's Hessian (barrier and friction) and gradient in x' from each obstacle, at the point
+ * prepare was last given, into c->blocks (count, 9) and c->pulls (count, 3); 0 where no term
+ * touches it. */
+static int node_blocks(af_contact *c, long i) {
+    double n[3], curvature[9], x[3], v[3];
     long j;
     int o, a, b, live = 0;
     memset(c->blocks, 0, (size_t)c->count * 9 * sizeof(double));
+    memset(c->pulls, 0, (size_t)c->count * 3 * sizeof(double));
     for (o = 0; o < c->count; o++) {
         double d, b1, b2, ka, *Bo = c->blocks + 9 * o;
-        relative(c, z, o, i, x);
+        relative(c, o, i, x, v);
         d = distance(c, o, x, n, curvature);
         if (!(d > 0.0 && d < c->dhat)) continue;
         b1 = barrier_slope(d, c->dhat);
         b2 = barrier_curvature(d, c->dhat);
         ka = c->kappa * c->area[i];
-        for (a = 0; a < 3; a++)
+        for (a = 0; a < 3; a++) {
+            c->pulls[3 * o + a] += ka * b1 * n[a];
             for (b = 0; b < 3; b++)
                 Bo[3 * a + b] += ka * (b2 * n[a] * n[b] + b1 * curvature[3 * a + b]);
+        }
         live = 1;
     }
     for (j = 0; j < c->lagged; j++) {
         const lag_t *l = c->lags + j;
         double u[3], unit[3], y, e = c->eps, along, f1, *Bo = c->blocks + 9 * l->obstacle;
         if (l->node != i) continue;
-        y = slip(c, l, z, u);
+        y = slip(c, l, u, v);
         for (a = 0; a < 3; a++) unit[a] = u[a] / (y > 1e-300 ? y : 1e-300);
         along = y < e ? -y / (e * e) : -1.0 / (y > 1e-300 ? y : 1e-300);
         f1 = friction_slope(y, e);
-        for (a = 0; a < 3; a++)
+        for (a = 0; a < 3; a++) {
+            c->pulls[3 * l->obstacle + a] += l->weight * f1 * u[a];
             for (b = 0; b < 3; b++)
                 Bo[3 * a + b] += l->weight * (f1 * l->T[3 * a + b] + along * unit[a] * unit[b]);
+        }
         live = 1;
     }
-    memset(B, 0, 9 * sizeof(double));
-    for (o = 0; live && o < c->count; o++)
-        for (a = 0; a < 9; a++) B[a] += c->blocks[9 * o + a];
     return live;
+}
+
+/* C (3 x 3) = A^T B C' for 3 x 3 row-major A, B, C'. */
+static void sandwich(const double *A, const double *B, const double *Cp, double *C) {
+    double BC[9];
+    int a, b, e;
+    for (a = 0; a < 3; a++)
+        for (b = 0; b < 3; b++) {
+            BC[3 * a + b] = 0.0;
+            for (e = 0; e < 3; e++) BC[3 * a + b] += B[3 * a + e] * Cp[3 * e + b];
+        }
+    for (a = 0; a < 3; a++)
+        for (b = 0; b < 3; b++) {
+            C[3 * a + b] = 0.0;
+            for (e = 0; e < 3; e++) C[3 * a + b] += A[3 * e + a] * BC[3 * e + b];
+        }
+}
+
+/* [w] (row-major): [w] u = w x u. */
+static void cross_matrix(const double *w, double *W) {
+    W[0] = 0.0; W[1] = -w[2]; W[2] = w[1];
+    W[3] = w[2]; W[4] = 0.0; W[5] = -w[0];
+    W[6] = -w[1]; W[7] = w[0]; W[8] = 0.0;
+}
+
+/* Obstacle o's block B (9) and gradient g (3) in x' as the node's: S B S^T and S g where it
+ * is free in this step (S its turn so far), else themselves. */
+static void node_view(const af_contact *c, int o, const double *B, const double *g,
+                      double *Bx, double *gx) {
+    const body_t *b = c->bodies + o;
+    double St[9];
+    int a, e;
+    if (b->slot < 0 || !c->extra) {
+        memcpy(Bx, B, 9 * sizeof(double));
+        memcpy(gx, g, 3 * sizeof(double));
+        return;
+    }
+    for (a = 0; a < 3; a++)
+        for (e = 0; e < 3; e++) St[3 * a + e] = b->spun[3 * e + a];
+    sandwich(St, B, St, Bx);
+    times(b->spun, g, gx);
 }
 
 double af_contact_terms(af_contact *c, const double *z, const double **g, const double **H,
@@ -541,9 +893,14 @@ double af_contact_terms(af_contact *c, const double *z, const double **g, const 
                 for (s = 0; s < r; s++) cg[s] += v * row[s];
         }
     for (i = 0; i < c->k; i++) {
-        double B[9], W[3 * 64], *w;
+        static const double identity[9] = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+        double B[9] = {0}, W[3 * 64], *w, Bx[9], gx[3], Hxt[9], Htt[9], Jt[9], G[9], x[3], v[3];
         const double *U = c->U + 3 * i * r;
-        if (!node_blocks(c, z, i, B)) continue;
+        if (!node_blocks(c, i)) continue;
+        for (o = 0; o < c->count; o++) {          /* the node's block: the sum of its views */
+            node_view(c, o, c->blocks + 9 * o, c->pulls + 3 * o, Bx, gx);
+            for (a = 0; a < 9; a++) B[a] += Bx[a];
+        }
         w = r <= 64 ? W : (double *)malloc((size_t)(3 * r) * sizeof(double));
         if (!w) continue;
         for (a = 0; a < 3; a++)                   /* w = B U_i (3 x r) */
@@ -554,25 +911,62 @@ double af_contact_terms(af_contact *c, const double *z, const double **g, const 
             for (t = 0; t < r; t++)
                 cH[s * n + t] += U[s] * w[t] + U[r + s] * w[r + t] + U[2 * r + s] * w[2 * r + t];
         if (w != W) free(w);
-        for (o = 0; o < c->count; o++) {   /* a free obstacle's: -U_i^T B_o, B_o, over sqrt(m) */
-            const double *Bo = c->blocks + 9 * o;
-            long y = c->slot[o];
-            double root = y >= 0 ? sqrt(c->mass[o]) : 1.0;
-            if (y < 0) continue;
-            for (a = 0; a < 3; a++) {
+        for (o = 0; o < c->count; o++) {          /* a free obstacle's blocks */
+            const body_t *bo = c->bodies + o;
+            long m = bo->slot;
+            double root = sqrt(bo->mass), scale = bo->scale, gv;
+            if (m < 0 || !c->extra) continue;
+            node_view(c, o, c->blocks + 9 * o, c->pulls + 3 * o, Bx, gx);
+            for (a = 0; a < 3; a++) {             /* q-move -U^T Bx / sqrt(m), move-move */
                 for (s = 0; s < r; s++) {
-                    double v = -(U[s] * Bo[a] + U[r + s] * Bo[3 + a] + U[2 * r + s] * Bo[6 + a])
-                               / root;
-                    cH[s * n + y + a] += v;
-                    cH[(y + a) * n + s] += v;
+                    double e = -(U[s] * Bx[a] + U[r + s] * Bx[3 + a]
+                                 + U[2 * r + s] * Bx[6 + a]) / root;
+                    cH[s * n + m + a] += e;
+                    cH[(m + a) * n + s] += e;
                 }
-                for (b = 0; b < 3; b++) cH[(y + a) * n + y + b] += Bo[3 * a + b] / c->mass[o];
+                for (b = 0; b < 3; b++) cH[(m + a) * n + m + b] += Bx[3 * a + b] / bo->mass;
+            }
+            if (!turns(bo)) continue;
+            relative(c, o, i, x, v);           /* Hxt = Bx [v] - [gx] */
+            cross_matrix(v, Jt);
+            cross_matrix(gx, G);
+            sandwich(identity, Bx, Jt, Hxt);
+            for (a = 0; a < 9; a++) Hxt[a] -= G[a];
+            sandwich(Jt, Bx, Jt, Htt);            /* Htt = [v]^T Bx [v] + the turn's curvature */
+            gv = gx[0] * v[0] + gx[1] * v[1] + gx[2] * v[2];
+            for (a = 0; a < 3; a++)
+                for (b = 0; b < 3; b++)
+                    Htt[3 * a + b] += 0.5 * (gx[a] * v[b] + v[a] * gx[b]) - (a == b) * gv;
+            for (a = 0; a < 3; a++) {
+                for (s = 0; s < r; s++) {         /* q-turn U^T Hxt / s */
+                    double e = (U[s] * Hxt[a] + U[r + s] * Hxt[3 + a]
+                                + U[2 * r + s] * Hxt[6 + a]) / scale;
+                    cH[s * n + m + 3 + a] += e;
+                    cH[(m + 3 + a) * n + s] += e;
+                }
+                for (b = 0; b < 3; b++) {          /* move-turn -Hxt, turn-turn Htt */
+                    double e = -Hxt[3 * a + b] / (root * scale);
+                    cH[(m + a) * n + m + 3 + b] += e;
+                    cH[(m + 3 + b) * n + m + a] += e;
+                    cH[(m + 3 + a) * n + m + 3 + b] += Htt[3 * a + b] / (scale * scale);
+                }
             }
         }
     }
-    for (o = 0; o < c->count; o++)
-        if (c->slot[o] >= 0)
-            for (a = 0; a < 3; a++) cH[(c->slot[o] + a) * (n + 1)] += c->inertia;
+    for (o = 0; o < c->count; o++) {             /* their inertia */
+        const body_t *bo = c->bodies + o;
+        double turn[3], J[9], IJ[9];
+        if (bo->slot < 0 || !c->extra) continue;
+        for (a = 0; a < 3; a++) cH[(bo->slot + a) * (n + 1)] += c->inertia;
+        if (!turns(bo)) continue;
+        whole_turn(c, z, o, turn);                /* J^T I J (Gauss-Newton in the turn) */
+        inverse_jacobian(turn, J);
+        sandwich(J, bo->inertia, J, IJ);
+        for (a = 0; a < 3; a++)
+            for (b = 0; b < 3; b++)
+                cH[(bo->slot + 3 + a) * n + bo->slot + 3 + b] +=
+                    c->inertia * IJ[3 * a + b] / (bo->scale * bo->scale);
+    }
     for (s = 0; s < n * n; s++) size += cH[s] * cH[s];
     *floor = largest * sqrt(size);
     *g = cg;
@@ -585,63 +979,74 @@ double af_contact_change(af_contact *c, const double *z, const double *step, dou
     double after, linear = af_dot(c->g, step, n), big;
     for (i = 0; i < n; i++) c->qt[i] = z[i] + step[i];
     after = af_contact_energy(c, c->qt);
+    if (!isfinite(after)) return after;     /* a node reached an obstacle */
     big = fabs(after) > fabs(energy) ? fabs(after) : fabs(energy);
     return fabs(after - energy - linear) <= NOISE * big ? linear : after - energy;
 }
 
 double af_contact_limit(af_contact *c, const double *z, const double *p) {
-    long i, a, r = c->r;
-    int o;
+    long i, a, r = c->r, n = r + c->extra;
+    for (i = 0; i < n; i++) c->qt[i] = z[i] + p[i];
     place(c, z);
     for (i = 0; i < c->k; i++)
         for (a = 0; a < 3; a++) c->ds[3 * i + a] = af_dot(c->U + (3 * i + a) * r, p, r);
-    for (o = 0; o < c->count; o++) moved(c, p, o, c->dy + 3 * o);
-    return share_of(c, z, c->ds, c->dy);
+    return share_of(c, z);
 }
 
-/* wrench (6) += the force f (3) at arm (3) from the point it is taken about. */
-static void add_wrench(double *wrench, const double *arm, const double *f) {
-    wrench[0] += f[0]; wrench[1] += f[1]; wrench[2] += f[2];
-    wrench[3] += arm[1] * f[2] - arm[2] * f[1];
-    wrench[4] += arm[2] * f[0] - arm[0] * f[2];
-    wrench[5] += arm[0] * f[1] - arm[1] * f[0];
+/* A term's gradient g (3) in x' at a node of obstacle o (v: from its center) added to the
+ * obstacle's wrench about its center: the force gx, the moment v x gx. */
+static void push_on(af_contact *c, int o, const double *g, const double *v) {
+    double gx[3], gt[3];
+    int a;
+    carried_gradient(c, o, g, v, gx, gt);
+    for (a = 0; a < 3; a++) {
+        c->wrench[6 * o + a] += gx[a];
+        c->wrench[6 * o + 3 + a] -= gt[a];
+    }
 }
 
 void af_contact_finish(af_contact *c, const double *z, double dt) {
-    double n[3], x[3], arm[3];
+    double n[3], x[3], v[3], f[3], y[3], th[3];
     long i, j;
     int o, a;
     place(c, z);
+    prepare(c, z);
     memset(c->wrench, 0, (size_t)c->count * 6 * sizeof(double));
     for (o = 0; o < c->count; o++)         /* each one's push on the nodes, reversed */
         for (i = 0; i < c->k; i++) {
-            double d, s, f[3];
-            relative(c, z, o, i, x);
+            double d, s;
+            relative(c, o, i, x, v);
             d = distance(c, o, x, n, NULL);
             if (!(d > 0.0 && d < c->dhat)) continue;
             s = c->kappa * c->area[i] * barrier_slope(d, c->dhat);
             for (a = 0; a < 3; a++) f[a] = s * n[a];
-            for (a = 0; a < 3; a++) arm[a] = x[a] - c->geometry[o * GEOMETRY + a];
-            add_wrench(c->wrench + 6 * o, arm, f);
+            push_on(c, o, f, v);
         }
     for (j = 0; j < c->lagged; j++) {
         const lag_t *l = c->lags + j;
-        double u[3], f[3], y = slip(c, l, z, u), w = l->weight * friction_slope(y, c->eps);
-        relative(c, z, l->obstacle, l->node, x);
-        for (a = 0; a < 3; a++) {
-            f[a] = w * u[a];
-            arm[a] = x[a] - c->geometry[l->obstacle * GEOMETRY + a];
-        }
-        add_wrench(c->wrench + 6 * l->obstacle, arm, f);
+        double u[3], s = slip(c, l, u, v), w = l->weight * friction_slope(s, c->eps);
+        for (a = 0; a < 3; a++) f[a] = w * u[a];
+        push_on(c, l->obstacle, f, v);
     }
-    for (o = 0; o < c->count; o++) {     /* the free obstacles moved, at their new speed */
-        double *G = c->geometry + o * GEOMETRY, y[3];
-        if (c->slot[o] < 0 || !c->extra) continue;
-        moved(c, z, o, y);
+    for (o = 0; o < c->count; o++) {     /* the free ones moved and turned, at their speed */
+        body_t *b = c->bodies + o;
+        double turn[3], J[9], *M = c->wrench + 6 * o + 3;
+        if (b->slot < 0 || !c->extra) continue;
+        motion(c, z, o, y, th);
+        whole_turn(c, z, o, turn);
+        if (turns(b)) {  /* the moment that turns it as the step did: J_l(turn)^T M */
+            left_jacobian(turn, J);
+            transposed(J, M, x);
+            memcpy(M, x, 3 * sizeof(double));
+        }
+        carry(c, o, b->center, y, b->spun);
         for (a = 0; a < 3; a++) {
-            G[a] += y[a];
-            if (c->kinds[o] == AF_CAPSULE) G[3 + a] += y[a];
-            c->velocity[3 * o + a] = y[a] / dt;
+            b->velocity[a] = y[a] / dt;
+            b->velocity[3 + a] = turns(b) ? turn[a] / dt : 0.0;
         }
     }
+}
+
+void af_contact_center(const af_contact *c, int i, double *center) {
+    memcpy(center, c->bodies[i].center, 3 * sizeof(double));
 }

@@ -9,6 +9,10 @@
 
 #include "af_internal.h"
 
+/* Newton's default iteration budget, with obstacles as the library's reduced model's. */
+#define MAX_ITER 50
+#define CONTACT_MAX_ITER 500
+
 #define ERROR_SIZE 320
 
 struct af_model {
@@ -220,7 +224,7 @@ af_model *af_load_named(const char *header, size_t header_size, const void *bin,
         }
     }
     m->tolerance = 1e-8;
-    m->max_iter = 50;
+    m->max_iter = af_obstacles(m) ? CONTACT_MAX_ITER : MAX_ITER;
     free(json);
     return m;
 fail:
@@ -436,7 +440,8 @@ int af_move_obstacle(af_model *m, int i, const double *position) {
     return AF_OK;
 }
 
-int af_obstacle_motion(af_model *m, int i, double mass, const double *velocity,
+int af_obstacle_motion(af_model *m, int i, double mass, const double *inertia,
+                       const double *offset, const double *velocity,
                        const double *acceleration) {
     int a;
     if (!is_obstacle(m, i)) return AF_BAD_INPUT;
@@ -445,13 +450,48 @@ int af_obstacle_motion(af_model *m, int i, double mass, const double *velocity,
                "%g", af_obstacle_name(m, i), mass);
         return AF_BAD_INPUT;
     }
-    for (a = 0; a < 3; a++)
-        if (!velocity || !acceleration || !isfinite(velocity[a]) || !isfinite(acceleration[a])) {
+    for (a = 0; a < 6; a++)
+        if (!velocity || !acceleration || !isfinite(velocity[a]) || !isfinite(acceleration[a])
+            || (offset && a < 3 && !isfinite(offset[a]))) {
             af_say(m->error, ERROR_SIZE, "obstacle '%s': its velocity and acceleration must be "
-                   "3 finite numbers each", af_obstacle_name(m, i));
+                   "6 finite numbers each, its center's offset 3 or NULL",
+                   af_obstacle_name(m, i));
             return AF_BAD_INPUT;
         }
-    af_contact_motion(af_reduced_contact(m->reduced), i, mass, velocity, acceleration);
+    if (inertia) {
+        double trace = inertia[0] + inertia[4] + inertia[8];
+        for (a = 0; a < 9; a++)
+            if (!isfinite(inertia[a]) || fabs(inertia[a] - inertia[3 * (a % 3) + a / 3])
+                                         > 1e-9 * fabs(trace))
+                break;
+        if (a < 9 || !(inertia[0] > 0.0 && inertia[4] > 0.0 && inertia[8] > 0.0)) {
+            af_say(m->error, ERROR_SIZE, "obstacle '%s': inertia must be a symmetric 3 x 3 "
+                   "matrix of finite numbers, its diagonal > 0 kg m^2, or NULL",
+                   af_obstacle_name(m, i));
+            return AF_BAD_INPUT;
+        }
+    }
+    af_contact_motion(af_reduced_contact(m->reduced), i, mass, inertia, offset, velocity,
+                      acceleration);
+    return AF_OK;
+}
+
+int af_turn_obstacle(af_model *m, int i, const double *rotation) {
+    double R[12] = {0.0};
+    if (!is_obstacle(m, i)) return AF_BAD_INPUT;
+    if (rotation) memcpy(R, rotation, 9 * sizeof(double));
+    if (!rotation || !af_rigid(R)) {
+        af_say(m->error, ERROR_SIZE, "obstacle '%s': the turn must be a rotation (9 numbers, "
+               "row-major, orthonormal to 1e-9, determinant 1)", af_obstacle_name(m, i));
+        return AF_BAD_INPUT;
+    }
+    af_contact_turn(af_reduced_contact(m->reduced), i, rotation);
+    return AF_OK;
+}
+
+int af_obstacle_center(const af_model *m, int i, double *center) {
+    if (i < 0 || i >= af_obstacles(m) || !center) return AF_BAD_INPUT;
+    af_contact_center(af_reduced_contact(m->reduced), i, center);
     return AF_OK;
 }
 

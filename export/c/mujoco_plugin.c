@@ -52,10 +52,10 @@
  * where the carrier was at the last step's start and its velocity there (m, m/s), the
  * obstacles' impulse on the soft body over the last step (in the file's coordinates: N s, and
  * its moment about the file's origin, N m s), then the runtime's state, then per obstacle its
- * geom's velocity at the last step's start (m/s; NAN before one) and the soft body's force on
- * it now (N). */
+ * body's velocity at the last step's start (its center of mass's, m/s, NAN before one; its
+ * spin, rad/s) and the soft body's force (N) and moment about that center (N m) on it now. */
 enum { AT = 0, STEP = 1, PULL = 2, CARRIED = 8, TOUCHED = 14, HEADER = 20 };
-enum { OBSTACLE = 6 };
+enum { OBSTACLE = 12, FROM = 15 };
 #define UNPLACED (-1.0)
 
 typedef struct {
@@ -70,8 +70,8 @@ typedef struct {
     int *edges;
     int *geom;     /* per obstacle of the file, the geom named as it (-1: none) */
     int *owner;    /* per obstacle, the free body its geom is on (-1: none) */
-    double *from;  /* per obstacle: where it was, in the file, and its geom in the world,
-                      when the soft body was placed (6 each) */
+    double *from;  /* per obstacle: where it was, in the file, and its geom in the world
+                      (position, then rotation) when the soft body was placed (FROM each) */
     double placed[3]; /* where the carrier was then */
     double *scratch, *values; /* room for n positions, and for the controls */
 } soft;
@@ -443,7 +443,7 @@ static int init(const mjModel *m, mjData *d, int instance) {
     s->v = calloc(3 * (size_t)s->n, sizeof(double));
     s->geom = malloc(((size_t)obstacles + 1) * sizeof(int));
     s->owner = malloc(((size_t)obstacles + 1) * sizeof(int));
-    s->from = malloc((6 * (size_t)obstacles + 1) * sizeof(double));
+    s->from = malloc((FROM * (size_t)obstacles + 1) * sizeof(double));
     s->scratch = malloc(3 * (size_t)s->n * sizeof(double));
     s->values = malloc(((size_t)af_controls(s->model) + 1) * sizeof(double));
     for (int i = 0; s->geom && s->owner && i < obstacles; i++) {
@@ -485,7 +485,7 @@ static void copy(mjData *dest, const mjModel *m, const mjData *src, int instance
     to = (soft *)dest->plugin_data[instance];
     memcpy(to->x, from->x, 3 * (size_t)from->n * sizeof(double));
     memcpy(to->v, from->v, 3 * (size_t)from->n * sizeof(double));
-    memcpy(to->from, from->from, 6 * (size_t)af_obstacles(from->model) * sizeof(double));
+    memcpy(to->from, from->from, FROM * (size_t)af_obstacles(from->model) * sizeof(double));
     mju_copy3(to->placed, from->placed);
     if (state_placed(m, dest, instance))
         set_gravity(m, dest, to);
@@ -516,9 +516,11 @@ static int place(const mjModel *m, mjData *d, soft *s, double *state, const doub
         world_positions(m, d, s, state, s->x);
     memset(s->v, 0, 3 * (size_t)s->n * sizeof(double));
     for (int i = 0; i < af_obstacles(s->model); i++) {
-        af_obstacle_position(s->model, i, s->from + 6 * i);
-        if (s->geom[i] >= 0)
-            mju_copy3(s->from + 6 * i + 3, d->geom_xpos + 3 * s->geom[i]);
+        af_obstacle_position(s->model, i, s->from + FROM * i);
+        if (s->geom[i] >= 0) {
+            mju_copy3(s->from + FROM * i + 3, d->geom_xpos + 3 * s->geom[i]);
+            mju_copy(s->from + FROM * i + 6, d->geom_xmat + 9 * s->geom[i], 9);
+        }
         mju_zero(blocks + OBSTACLE * i, OBSTACLE);
         blocks[OBSTACLE * i] = NAN;
     }
@@ -550,41 +552,86 @@ static void into_world(const soft *s, const double *at, const double *a, double 
         out[k] = at[4 * k] * a[0] + at[4 * k + 1] * a[1] + at[4 * k + 2] * a[2];
 }
 
+/* A (3 x 3, row-major) in the world's axes into the file's (into_file): R^T A R. */
+static void matrix_into_file(const soft *s, const double *at, const double *A, double *out) {
+    double R[9], T[9];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            R[3 * i + j] = af_kind(s->model) == AF_FRAMED ? (i == j) : at[4 * i + j];
+    mju_mulMatMat(T, A, R, 3, 3, 3);
+    mju_mulMatTMat(out, R, T, 3, 3, 3);
+}
+
+/* ximat diag(d) ximat^T of body b (3 x 3): its inertia (d: body_inertia) in the world. */
+static void world_inertia(const mjData *d, int b, const double *diag, double *out) {
+    const double *X = d->ximat + 9 * b;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            out[3 * i + j] = X[3 * i] * diag[0] * X[3 * j] + X[3 * i + 1] * diag[1]
+                             * X[3 * j + 1] + X[3 * i + 2] * diag[2] * X[3 * j + 2];
+}
+
+/* Obstacle i's free body b (a geom on it is named as the obstacle): its mass, inertia, center
+ * of mass (offset from the geom's center), turn since the soft body was placed, velocity and
+ * the acceleration all but the soft body gave it over the last step, relative to the carrier
+ * (its velocity and acceleration: carrier, 6), in the file's axes. */
+static int free_motion(const mjModel *m, const mjData *d, soft *s, int i, int b,
+                       const double *at, const double *carrier, double h, double *block) {
+    double velocity[6], push[6], v[6], a[6], I[9], If[9], inverse[3], Iinv[9], offset[3], w[3];
+    double Rg[9], turn[9];
+    int g = s->geom[i];
+    mj_objectVelocity(m, d, mjOBJ_BODY, b, velocity, 0);     /* spin, then its COM's */
+    world_inertia(d, b, m->body_inertia + 3 * b, I);
+    for (int k = 0; k < 3; k++)
+        inverse[k] = 1.0 / m->body_inertia[3 * b + k];
+    world_inertia(d, b, inverse, Iinv);
+    mju_mulMatVec(w, Iinv, block + 9, 3, 3);
+    for (int k = 0; k < 3; k++) {
+        int first = isnan(block[0]) || !(h > 0.0);
+        push[k] = first ? m->opt.gravity[k]
+                  : (velocity[3 + k] - block[k]) / h - block[6 + k] / m->body_mass[b];
+        push[3 + k] = first ? 0.0 : (velocity[k] - block[3 + k]) / h - w[k];
+        block[k] = velocity[3 + k];
+        block[3 + k] = velocity[k];
+        velocity[3 + k] -= carrier[k];
+        push[k] -= carrier[3 + k];
+    }
+    into_file(s, at, velocity + 3, v);
+    into_file(s, at, velocity, v + 3);
+    into_file(s, at, push, a);
+    into_file(s, at, push + 3, a + 3);
+    matrix_into_file(s, at, I, If);
+    mju_sub3(w, d->xipos + 3 * b, d->geom_xpos + 3 * g);
+    into_file(s, at, w, offset);
+    mju_mulMatMatT(Rg, d->geom_xmat + 9 * g, s->from + FROM * i + 6, 3, 3, 3);
+    matrix_into_file(s, at, Rg, turn);
+    if (af_turn_obstacle(s->model, i, turn) != AF_OK)
+        return AF_BAD_INPUT;
+    return af_obstacle_motion(s->model, i, m->body_mass[b], If, offset, v, a);
+}
+
 /* Each obstacle of the file a geom is named for, moved by the geom's translation since the
  * soft body was placed, less its carrier's where that is a reduced model's (whose file
- * coordinates are its body's); a free one's velocity and the acceleration all but the soft
- * body gave it over the last step, relative to the carrier (carrier: its velocity and
- * acceleration, m/s and m/s^2). */
+ * coordinates are its body's); a free one also turned as the geom has turned, with its motion
+ * (free_motion). */
 static int move_obstacles(const mjModel *m, const mjData *d, soft *s, double *state,
                           const double *carrier) {
     double at[12], *blocks = obstacle_state(s, state), h = state[STEP];
     pose(m, d, s->body, at);
     for (int i = 0; i < af_obstacles(s->model); i++) {
-        double shift[3], target[3], velocity[6], push[3], *block = blocks + OBSTACLE * i;
-        int b = s->owner[i];
+        double shift[3], target[3];
         if (s->geom[i] < 0)
             continue;
         for (int k = 0; k < 3; k++)
-            shift[k] = d->geom_xpos[3 * s->geom[i] + k] - s->from[6 * i + 3 + k]
+            shift[k] = d->geom_xpos[3 * s->geom[i] + k] - s->from[FROM * i + 3 + k]
                        - (af_kind(s->model) == AF_REDUCED ? at[4 * k + 3] - s->placed[k] : 0.0);
         into_file(s, at, shift, target);
         for (int k = 0; k < 3; k++)
-            target[k] += s->from[6 * i + k];
+            target[k] += s->from[FROM * i + k];
         if (af_move_obstacle(s->model, i, target) != AF_OK)
             return AF_BAD_INPUT;
-        if (b < 0)
-            continue;
-        mj_objectVelocity(m, d, mjOBJ_GEOM, s->geom[i], velocity, 0);
-        for (int k = 0; k < 3; k++) {
-            push[k] = isnan(block[0]) || !(h > 0.0) ? m->opt.gravity[k]
-                      : (velocity[3 + k] - block[k]) / h - block[3 + k] / m->body_subtreemass[b];
-            block[k] = velocity[3 + k];
-            velocity[3 + k] -= carrier[k];
-            push[k] -= carrier[3 + k];
-        }
-        into_file(s, at, velocity + 3, shift);
-        into_file(s, at, push, target);
-        if (af_obstacle_motion(s->model, i, m->body_subtreemass[b], shift, target) != AF_OK)
+        if (s->owner[i] >= 0 && free_motion(m, d, s, i, s->owner[i], at, carrier, h,
+                                             blocks + OBSTACLE * i) != AF_OK)
             return AF_BAD_INPUT;
     }
     return AF_OK;
@@ -666,26 +713,28 @@ static int advance(const mjModel *m, mjData *d, int instance, soft *s, double *s
     }
     mju_zero(state + TOUCHED, 6);
     for (int i = 0; i < af_obstacles(s->model); i++)
-        mju_zero(blocks + OBSTACLE * i + 3, 3);
+        mju_zero(blocks + OBSTACLE * i + 6, 6);
     for (int j = 0; j < s->substeps; j++) {
         if ((code = af_step(s->model, state + HEADER, force, base, h / s->substeps)) != AF_OK)
             return code;
         for (int i = 0; i < af_obstacles(s->model); i++) {   /* its impulse, about the origin */
-            double wrench[6], position[3], moment[3], *mean = blocks + OBSTACLE * i + 3;
+            double wrench[6], center[3], moment[3], *mean = blocks + OBSTACLE * i + 6;
             af_obstacle_wrench(s->model, i, wrench);
-            af_obstacle_position(s->model, i, position);
-            mju_cross(moment, position, wrench);
+            af_obstacle_center(s->model, i, center);
+            mju_cross(moment, center, wrench);
             for (int k = 0; k < 3; k++) {
                 state[TOUCHED + k] += wrench[k] * h / s->substeps;
                 state[TOUCHED + 3 + k] += (moment[k] + wrench[3 + k]) * h / s->substeps;
-                mean[k] += wrench[k] / s->substeps;
             }
+            for (int k = 0; k < 6; k++)
+                mean[k] += wrench[k] / s->substeps;
         }
     }
-    for (int i = 0; i < af_obstacles(s->model); i++) {   /* the step's mean force on each */
-        double mean[3];
-        mju_copy3(mean, blocks + OBSTACLE * i + 3);
-        into_world(s, at, mean, blocks + OBSTACLE * i + 3);
+    for (int i = 0; i < af_obstacles(s->model); i++) {   /* the step's mean wrench on each */
+        double mean[6];
+        mju_copy(mean, blocks + OBSTACLE * i + 6, 6);
+        into_world(s, at, mean, blocks + OBSTACLE * i + 6);
+        into_world(s, at, mean + 3, blocks + OBSTACLE * i + 9);
     }
     state[STEP] = h;
     return AF_OK;
@@ -695,7 +744,7 @@ static int advance(const mjModel *m, mjData *d, int instance, soft *s, double *s
  * passive forces. */
 static void apply(const mjModel *m, mjData *d, const soft *s, const double *state) {
     const double *pull = state + PULL, *blocks = obstacle_state(s, (double *)state);
-    double force[3], moment[3], at[3], zero[3] = {0.0, 0.0, 0.0};
+    double force[3], moment[3], at[3];
     const double *point = d->xipos + 3 * s->body;
     mju_scl3(force, pull, -1.0);
     mju_cross(at, point, force);
@@ -706,8 +755,8 @@ static void apply(const mjModel *m, mjData *d, const soft *s, const double *stat
     for (int i = 0; i < af_obstacles(s->model); i++) {
         int b = s->owner[i];
         if (b >= 0)
-            mj_applyFT(m, d, blocks + OBSTACLE * i + 3, zero, d->xipos + 3 * b, b,
-                       d->qfrc_passive);
+            mj_applyFT(m, d, blocks + OBSTACLE * i + 6, blocks + OBSTACLE * i + 9,
+                       d->xipos + 3 * b, b, d->qfrc_passive);
     }
 }
 

@@ -31,7 +31,7 @@ struct af_reduced {
     double *work;                /* scratch for a step, cut into the named parts below */
     double *A, *Ap;              /* (T,) W4 at the iterate and along the step */
     double *X, *Y, *H;           /* (r, r): the quartic's and cubic's contractions, Hessian */
-    double *L, *V, *J, *cH;      /* (N, N), N = r + 3 obstacles: the whole Hessian's */
+    double *L, *V, *J, *cH;      /* (N, N), N = r + 6 obstacles: the whole Hessian's */
     double *g, *p, *x, *t1, *cg, *ts, *load, *terms, *q_hat; /* (N,) */
     double *lam;                 /* (2 N,) */
     int controls, pressures;     /* k controls, the first `pressures` of them pressures */
@@ -176,10 +176,10 @@ int af_reduced_set_controls(af_reduced *m, const double *values, const char *nam
     return AF_OK;
 }
 
-/* m->work allocated and cut into its parts (N = r + 3 per obstacle: a step's unknowns at
+/* m->work allocated and cut into its parts (N = r + 6 per obstacle: a step's unknowns at
  * most); 0 where out of memory. */
 static int cut_work(af_reduced *m) {
-    long r = m->r, N = r + 3L * af_contact_count(m->contact), T = m->triples;
+    long r = m->r, N = r + 6L * af_contact_count(m->contact), T = m->triples;
     double *w = m->work = (double *)malloc((size_t)(2 * T + 3 * r * r + 4 * N * N + 12 * N + 1)
                                            * sizeof(double));
     if (!w) return 0;
@@ -500,6 +500,7 @@ static int minimize(af_reduced *m, double *x, const double *q_hat, double inerti
         }
         if (step < SMALLEST_STEP) break;
         for (k = 0; k < n; k++) x[k] += step * p[k];
+        if (m->contact) af_contact_settle(m->contact, x);
         for (k = 0; k < m->triples; k++) A[k] += step * Ap[k];
     }
     af_say(error, error_size, "step: Newton stopped at |g| = %.3g, its tolerance %.3g, after "
@@ -526,7 +527,14 @@ int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force,
         for (k = r; k < n; k++) z[k] = 0.0;
         af_contact_guess(m->contact, x + r);
         share = af_contact_limit(m->contact, z, x);
-        for (k = 0; k < n; k++) x[k] = z[k] + share * x[k];
+        for (k = 0; k < n; k++) x[k] *= share;
+        for (;;) {     /* a turn's test is along a chord: the start checked, halved */
+            for (k = 0; k < n; k++) m->p[k] = z[k] + x[k];
+            if (isfinite(af_contact_energy(m->contact, m->p)) || af_dot(x, x, n) == 0.0) break;
+            for (k = 0; k < n; k++) x[k] = af_dot(x, x, n) > 1e-60 ? 0.5 * x[k] : 0.0;
+        }
+        memcpy(x, m->p, (size_t)n * sizeof(double));
+        af_contact_settle(m->contact, x);
     }
     result = minimize(m, x, q_hat, 1.0 / (dt * dt),
                       load, rtol * (sqrt(af_dot(load, load, r)) + sqrt(af_dot(w, w, r)) / dt),

@@ -2,7 +2,8 @@
  * one line per file, "ok KIND N STEPS LOWEST" after 50 steps under the file's gravity (and
  * for a file with controls, set anew every step, " controls K reach CODE" after one af_reach
  * of vertex 0; for a file with obstacles, each moved up by 2 mm every 10 steps and the last
- * also free (10 g rising at 5 cm/s), " obstacles O HEIGHT", HEIGHT where the first is then),
+ * also free and turning (10 g rising at 5 cm/s), " obstacles O HEIGHT", HEIGHT where the first
+ * is then),
  * or "error MESSAGE" where it cannot be loaded or
  * stepped. Built with the sanitizers, it shows that no file, good or corrupt, reads memory it
  * should not. */
@@ -31,8 +32,12 @@ int main(int argc, char **argv) {
         for (i = 0; i < 3 * n; i++) force[i] = af_masses(m)[i / 3] * g[i % 3];
         af_set_constant_force(m, NULL);
         if (af_obstacles(m)) {
-            double up[3] = {0.0, 0.0, 0.05}, none[3] = {0.0, 0.0, 0.0};
-            code = af_obstacle_motion(m, af_obstacles(m) - 1, 0.01, up, none);
+            double up[6] = {0.0, 0.0, 0.05, 0.0, 0.0, 0.0}, none[6] = {0.0}, shape[15];
+            double inertia[9] = {1e-5, 0.0, 0.0, 0.0, 1e-5, 0.0, 0.0, 0.0, 1e-5}, middle[3];
+            int last = af_obstacles(m) - 1, kind = af_obstacle_shape(m, last, shape);
+            for (i = 0; i < 3; i++)      /* a capsule turns about its middle */
+                middle[i] = kind == AF_CAPSULE ? 0.5 * (shape[3 + i] - shape[i]) : 0.0;
+            code = af_obstacle_motion(m, last, 0.01, inertia, middle, up, none);
         }
         for (k = 0; k < 50 && code == AF_OK; k++) {
             double values[64];
