@@ -651,6 +651,48 @@ def test_a_free_obstacle_falls_onto_the_body_and_rests_on_it(tmp_path):
         c.set_obstacle_motion("box", -1.0, (0.0, 0.0, 0.0), g)
 
 
+def test_a_free_obstacle_that_turns_tips_over_the_tip(tmp_path):
+    """A 2 cm cube of 5 g, free and turning (af_obstacle_motion with its inertia), dropped with
+    its center over the end of a stiff held beam: it tips over the edge and falls off. Every
+    step its momentum changes by gravity's impulse and the wrench's force (1e-6 N s, Newton's
+    tolerance at the landing) and its angular momentum by the wrench's moment (1e-9 N m s),
+    the turns read from its orientation (af_obstacle_shape); no beam node is ever inside it."""
+    from scipy.spatial.transform import Rotation
+    from anisofem.reduced import ReducedModel
+    from export import native
+    from export.writers.reduced import write
+    if native.compiler() is None:
+        pytest.skip("no C compiler")
+    g, dt, mass = np.array([0.0, 0.0, -9.81]), 0.01, 0.005
+    inertia = mass * 0.02 ** 2 / 6
+    beam = af.box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
+    cube = af.Box((0.1, 0.0, 0.0205), (0.01, 0.01, 0.01), name="cube")
+    scene = af.Scene(beam, af.Material(1e7, 0.45, 1000.0), gravity=g,
+                     fixed=beam.vertices[:, 0] <= 1e-9, contact=af.Contact([cube], friction=0.5))
+    path = str(tmp_path / "beam")
+    write(ReducedModel(scene, modes=6, snapshots=8, validate=False), path)
+    c = native.CReducedSimulator(path)
+    c.set_constant_force(c.masses[:, None] * g)
+    q, w = c.rest_state()
+    c.set_obstacle_motion("cube", mass, np.zeros(6), np.r_[g, 0, 0, 0],
+                          inertia=inertia * np.eye(3))
+    nodes = ContactTerm(scene).nodes
+    p, v, R, spin = c.obstacle_position("cube"), np.zeros(3), np.eye(3), np.zeros(3)
+    most = 0.0
+    for _ in range(60):
+        c.step(q, w, None, dt, max_iter=500)
+        p1, push = c.obstacle_position("cube"), c.obstacle_wrench("cube")
+        R1 = c.obstacle_shape("cube")[1][6:15].reshape(3, 3)
+        v1, spin1 = (p1 - p) / dt, Rotation.from_matrix(R1 @ R.T).as_rotvec() / dt
+        assert np.abs(mass * (v1 - v) - dt * (push[:3] + mass * g)).max() < 1e-6
+        assert np.abs(inertia * (spin1 - spin) - dt * push[3:]).max() < 1e-9
+        assert af.Box(p1, (0.01, 0.01, 0.01), R1).distance(c.positions(q)[nodes])[0].min() > 0
+        p, v, R, spin = p1, v1, R1, spin1
+        most = max(most, np.degrees(Rotation.from_matrix(R).magnitude()))
+    assert most > 90.0, "it tipped over"
+    assert p[2] < -0.2, "it fell off"
+
+
 def test_under_the_sanitizers_a_file_with_obstacles_steps(contact_file, tmp_path):
     """The C runtime steps the file with its four obstacles, each moved every 10 steps, under
     AddressSanitizer and UndefinedBehaviorSanitizer."""

@@ -405,29 +405,55 @@ BOX_BODY = ('<body name="carton" pos="0.09 0 0.0205"><freejoint/><geom name="box
             'size="0.01 0.015 0.01" mass="0.005" contype="0" conaffinity="0"/></body>')
 
 
-def test_a_free_body_geom_is_stepped_with_the_soft_body(box_file):
-    """A 5 g MuJoCo box (a free joint, its geom named as the file's obstacle) falls onto the
-    beam held on a fixed body: each soft step solves its translation with the beam's and
-    MuJoCo moves it by the soft body's force over the same step, so the beam and the box
-    follow the C runtime's free obstacle stepped alone (af_obstacle_motion) to 1e-9 m over
-    300 steps, the box coming to rest on the tip."""
-    model, data = compiled(plugin.mjcf(box_file, world=BOX_BODY), 0.01)
+def cube_file(folder, x):
+    """A stiff 0.1 m beam held at x = 0 with a 2 cm cube (the file's obstacle "box") 0.5 mm over
+    it, centred at x (m), its reduced model written in folder; returns its path."""
+    beam = af.box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
+    cube = af.Box((x, 0.0, 0.0205), (0.01, 0.01, 0.01), name="box")
+    scene = af.Scene(beam, af.Material(1e7, 0.45, 1000.0), gravity=GRAVITY,
+                     fixed=beam.vertices[:, 0] <= 1e-9, contact=af.Contact([cube], friction=0.5))
+    path = str(folder / f"cube{x}")
+    writer.write(ReducedModel(scene, modes=6, snapshots=8, validate=False), path)
+    return path
+
+
+def cube_body(x):
+    """A 5 g MuJoCo cube on a free joint whose geom is named as the file's obstacle "box"."""
+    return (f'<body name="carton" pos="{x} 0 0.0205"><freejoint/><geom name="box" type="box" '
+            'size="0.01 0.01 0.01" mass="0.005" contype="0" conaffinity="0"/></body>')
+
+
+def test_a_free_body_geom_is_stepped_with_the_soft_body(tmp_path):
+    """A 5 g MuJoCo cube on a free joint (its geom named as the file's obstacle) dropped onto a
+    held beam: each soft step solves its move and turn with the beam's and MuJoCo moves it by
+    the soft body's force and moment over the same step. Dropped mid-beam it lands and rests
+    upright, pushed up by its weight (0.1%), within 0.1 mm of where the C runtime's free
+    obstacle stepped alone (af_obstacle_motion, the same inertia) rests (how far it slides as
+    it lands follows Newton's tolerance there: 30 um apart); dropped with its center over the
+    beam's end it tips over the edge and falls off."""
+    rest, edge = (cube_file(tmp_path, x) for x in (0.07, 0.1))
+    model, data = compiled(plugin.mjcf(rest, world=cube_body(0.07)), 0.01)
     box = model.jnt_qposadr[model.body("carton").jntadr[0]]
-    c = native.CReducedSimulator(box_file)
+    c = native.CReducedSimulator(rest)
     c.set_constant_force(c.masses[:, None] * GRAVITY)
     q, w = c.rest_state()
-    c.set_obstacle_motion("box", 0.005, (0.0, 0.0, 0.0), GRAVITY)
-    worst = 0.0
-    for _ in range(300):
+    c.set_obstacle_motion("box", 0.005, np.zeros(6), np.r_[GRAVITY, 0, 0, 0],
+                          inertia=0.005 * 0.02 ** 2 / 6 * np.eye(3))
+    for _ in range(200):
         mujoco.mj_step(model, data)
-        c.step(q, w, None, 0.01)
-        x = c._positions(data.plugin_state[plugin.HEADER:])
-        worst = max(worst, np.abs(x - c.positions(q)).max(),
-                    np.abs(data.qpos[box:box + 3] - c.obstacle_position("box")).max())
-    assert worst < 1e-9
-    assert data.qpos[box + 2] < 0.0205 - 1e-3, "the box pushed the tip down"
-    assert np.abs(data.qvel[:3]).max() < 1e-3
-    assert np.abs(c.obstacle_wrench("box")[2] - 0.005 * 9.81) < 0.05 * 0.005 * 9.81
+        c.step(q, w, None, 0.01, max_iter=500)
+    x = c._positions(data.plugin_state[plugin.HEADER:])
+    assert np.abs(x - c.positions(q)).max() < 1e-4
+    assert np.abs(data.qpos[box:box + 3] - c.obstacle_position("box")).max() < 1e-4
+    assert data.qpos[box + 3] > np.cos(np.radians(0.5) / 2), "it rests upright"
+    assert np.abs(data.qvel[:6]).max() < 1e-3
+    assert c.obstacle_wrench("box")[2] == pytest.approx(0.005 * 9.81, rel=1e-3)
+    model, data = compiled(plugin.mjcf(edge, world=cube_body(0.1)), 0.01)
+    turned = 0.0
+    for _ in range(60):
+        mujoco.mj_step(model, data)
+        turned = max(turned, 2 * np.degrees(np.arccos(min(1.0, abs(data.qpos[box + 3])))))
+    assert turned > 90.0 and data.qpos[box + 2] < -0.1, "it tipped over the edge and fell"
 
 
 @pytest.mark.parametrize("geom, says", [

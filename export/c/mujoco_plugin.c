@@ -28,10 +28,10 @@
  * `timestep` whenever MuJoCo's time reaches its state's, so that the forces it puts on the
  * bodies it touches act over the same MuJoCo steps. Its controls are its actuators' ctrl, and
  * each obstacle of the file a geom is named for follows the geom: a geom on a free body (a
- * free joint) is a free obstacle, its translation solved with the soft step from the body's
- * velocity and what else pushed it over the last step, and the soft body's force on it
- * applied through its centre of mass over the step (it does not turn it); any other geom moves
- * its obstacle by the geom's translation. Where the carrier moves, the soft body pulls it
+ * free joint) is a free obstacle, its move and turn solved with the soft step from the body's
+ * velocity and what else pushed it over the last step, and the soft body's force and moment
+ * on it applied at its centre of mass over the step; any other geom moves its obstacle by the
+ * geom's translation. Where the carrier moves, the soft body pulls it
  * back by the impulse the carrier gave it (the soft body's momentum change less gravity's and
  * the obstacles' impulses). Actuator: the plugin's actuators only carry controls (they push
  * nothing). Visualize: the surface, drawn as MuJoCo draws a flex (faces, edges).
