@@ -677,8 +677,8 @@ class ReducedSimulator:
                 if contact is not None:
                     after = contact.energy(contact.positions(x + t * p), friction, smooth)[0]
                     linear = t * float(contact_g @ p)
-                    total += (linear if abs(after - touch - linear) <= CONTACT_NOISE * max(
-                        abs(after), abs(touch)) else after - touch)
+                    total += (linear if np.isfinite(after) and abs(after - touch - linear)
+                              <= CONTACT_NOISE * max(abs(after), abs(touch)) else after - touch)
                 return total
             if contact is not None:
                 t = min(1.0, contact.limit(xs, contact.U @ p))

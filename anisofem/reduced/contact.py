@@ -152,8 +152,8 @@ class Touching:
             energy, slope = self.energy(q), None
         after = self.energy(q + step)
         linear = None if slope is None else float(slope @ step)
-        if linear is not None and abs(after - energy - linear) <= NOISE * max(abs(after),
-                                                                               abs(energy)):
+        if (linear is not None and np.isfinite(after)      # inf: the step reached an obstacle
+                and abs(after - energy - linear) <= NOISE * max(abs(after), abs(energy))):
             return linear
         return after - energy
 
