@@ -605,26 +605,36 @@ def test_the_runtimes_step_contact_like_the_library(contact_file):
         c.move_obstacle("wall", (0.0, 0.0, 0.0))
 
 
+def held_beam_under(tmp_path, young, obstacle):
+    """The 0.1 m beam held at x = 0 (Young's modulus young, Pa) under gravity with one obstacle
+    (friction 0.5), its reduced model written and loaded in the C runtime with gravity set:
+    (scene, CReducedSimulator), or a skip without a C compiler."""
+    from anisofem.reduced import ReducedModel
+    from export import native
+    from export.writers.reduced import write
+    if native.compiler() is None:
+        pytest.skip("no C compiler")
+    beam = af.box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
+    scene = af.Scene(beam, af.Material(young, 0.45, 1000.0), gravity=(0.0, 0.0, -9.81),
+                     fixed=beam.vertices[:, 0] <= 1e-9,
+                     contact=af.Contact([obstacle], friction=0.5))
+    path = str(tmp_path / "beam")
+    write(ReducedModel(scene, modes=6, snapshots=8, validate=False), path)
+    c = native.CReducedSimulator(path)
+    c.set_constant_force(c.masses[:, None] * scene.gravity)
+    return scene, c
+
+
 def test_a_free_obstacle_falls_onto_the_body_and_rests_on_it(tmp_path):
     """A 5 g box, free (af_obstacle_motion), dropped from 0.5 mm over the held beam's tip: every
     step its momentum changes by the impulse of gravity and of the beam's push on it
     (af_obstacle_wrench, summed from the nodes' barrier and friction) to 1e-9 N s, it never
     enters the beam, and after 4 s it rests there, the beam pushing it up by its weight
     (0.1%) and sagging under it."""
-    from anisofem.reduced import ReducedModel
     from export import native
-    from export.writers.reduced import write
-    if native.compiler() is None:
-        pytest.skip("no C compiler")
     g, dt, mass = np.array([0.0, 0.0, -9.81]), 0.01, 0.005
-    beam = af.box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
-    box = af.Box((0.09, 0.0, 0.0205), (0.01, 0.015, 0.01), name="box")
-    scene = af.Scene(beam, af.Material(1e5, 0.45, 1000.0), gravity=g,
-                     fixed=beam.vertices[:, 0] <= 1e-9, contact=af.Contact([box], friction=0.5))
-    path = str(tmp_path / "beam")
-    write(ReducedModel(scene, modes=6, snapshots=8, validate=False), path)
-    c = native.CReducedSimulator(path)
-    c.set_constant_force(c.masses[:, None] * g)
+    scene, c = held_beam_under(tmp_path, 1e5,
+                               af.Box((0.09, 0.0, 0.0205), (0.01, 0.015, 0.01), name="box"))
     q, w = c.rest_state()
     c.set_obstacle_motion("box", mass, (0.0, 0.0, 0.0), g)
     term = ContactTerm(scene)
@@ -641,11 +651,11 @@ def test_a_free_obstacle_falls_onto_the_body_and_rests_on_it(tmp_path):
     assert push[2] == pytest.approx(mass * 9.81, rel=1e-3)
     c.set_obstacle_motion("box", 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
     q0, w0 = c.rest_state()
-    alone = native.CReducedSimulator(path)
+    alone = native.CReducedSimulator(str(tmp_path / "beam"))
     alone.set_constant_force(alone.masses[:, None] * g)
     for _ in range(400):
         alone.step(q0, w0, None, dt)
-    tip = beam.vertices[:, 0] >= 0.1 - 1e-9
+    tip = scene.mesh.vertices[:, 0] >= 0.1 - 1e-9
     assert c.positions(q)[tip, 2].mean() < alone.positions(q0)[tip, 2].mean() - 1e-4
     with pytest.raises(RuntimeError, match="obstacle 'box': mass must be a finite number >= 0"):
         c.set_obstacle_motion("box", -1.0, (0.0, 0.0, 0.0), g)
@@ -659,21 +669,10 @@ def test_a_free_obstacle_that_turns_tips_over_the_tip(tmp_path):
     moment (1e-12 N m s), the turns read from its orientation (af_obstacle_shape); no beam
     node is ever inside it."""
     from scipy.spatial.transform import Rotation
-    from anisofem.reduced import ReducedModel
-    from export import native
-    from export.writers.reduced import write
-    if native.compiler() is None:
-        pytest.skip("no C compiler")
     g, dt, mass = np.array([0.0, 0.0, -9.81]), 0.01, 0.005
     inertia = mass * 0.02 ** 2 / 6
-    beam = af.box_beam(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
-    cube = af.Box((0.1, 0.0, 0.0205), (0.01, 0.01, 0.01), name="cube")
-    scene = af.Scene(beam, af.Material(1e7, 0.45, 1000.0), gravity=g,
-                     fixed=beam.vertices[:, 0] <= 1e-9, contact=af.Contact([cube], friction=0.5))
-    path = str(tmp_path / "beam")
-    write(ReducedModel(scene, modes=6, snapshots=8, validate=False), path)
-    c = native.CReducedSimulator(path)
-    c.set_constant_force(c.masses[:, None] * g)
+    scene, c = held_beam_under(tmp_path, 1e7,
+                               af.Box((0.1, 0.0, 0.0205), (0.01, 0.01, 0.01), name="cube"))
     q, w = c.rest_state()
     c.set_obstacle_motion("cube", mass, np.zeros(6), np.r_[g, 0, 0, 0],
                           inertia=inertia * np.eye(3))

@@ -359,21 +359,33 @@ static void motion(const af_contact *c, const double *z, int o, double *y, doubl
     }
 }
 
-/* The rotation exp([th]) (row-major) into R. */
-static void rotation_of(const double *th, double *R) {
-    double angle = sqrt(th[0] * th[0] + th[1] * th[1] + th[2] * th[2]), K[9], K2[9], s, q;
+/* [w] (row-major): [w] u = w x u. */
+static void cross_matrix(const double *w, double *W) {
+    W[0] = 0.0; W[1] = -w[2]; W[2] = w[1];
+    W[3] = w[2]; W[4] = 0.0; W[5] = -w[0];
+    W[6] = -w[1]; W[7] = w[0]; W[8] = 0.0;
+}
+
+/* I + p [th] + q [th]^2 (3 x 3, row-major) into M: exp's series and its Jacobians' forms. */
+static void series(const double *th, double p, double q, double *M) {
+    double K[9];
     int a, b, e;
-    K[0] = 0.0; K[1] = -th[2]; K[2] = th[1];
-    K[3] = th[2]; K[4] = 0.0; K[5] = -th[0];
-    K[6] = -th[1]; K[7] = th[0]; K[8] = 0.0;
+    cross_matrix(th, K);
     for (a = 0; a < 3; a++)
         for (b = 0; b < 3; b++) {
-            K2[3 * a + b] = 0.0;
-            for (e = 0; e < 3; e++) K2[3 * a + b] += K[3 * a + e] * K[3 * e + b];
+            double K2 = 0.0;
+            for (e = 0; e < 3; e++) K2 += K[3 * a + e] * K[3 * e + b];
+            M[3 * a + b] = (a == b ? 1.0 : 0.0) + p * K[3 * a + b] + q * K2;
         }
-    s = angle > 1e-4 ? sin(angle) / angle : 1.0 - angle * angle / 6.0;
-    q = angle > 1e-4 ? (1.0 - cos(angle)) / (angle * angle) : 0.5 - angle * angle / 24.0;
-    for (a = 0; a < 9; a++) R[a] = (a % 4 == 0 ? 1.0 : 0.0) + s * K[a] + q * K2[a];
+}
+
+static double norm3(const double *u) { return sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]); }
+
+/* The rotation exp([th]) (row-major) into R. */
+static void rotation_of(const double *th, double *R) {
+    double angle = norm3(th);
+    series(th, angle > 1e-4 ? sin(angle) / angle : 1.0 - angle * angle / 6.0,
+           angle > 1e-4 ? (1.0 - cos(angle)) / (angle * angle) : 0.5 - angle * angle / 24.0, R);
 }
 
 /* M^T u (3) for a row-major 3 x 3 M, into out (not u). */
@@ -469,37 +481,18 @@ static void log_of(const double *R, double *th) {
 
 /* The inverse left Jacobian of log at th (3 x 3): d log(exp(delta) exp(th)) / d delta at 0. */
 static void inverse_jacobian(const double *th, double *J) {
-    double angle = sqrt(th[0] * th[0] + th[1] * th[1] + th[2] * th[2]), K[9], K2[9], q;
-    int a, b, e;
-    K[0] = 0.0; K[1] = -th[2]; K[2] = th[1];
-    K[3] = th[2]; K[4] = 0.0; K[5] = -th[0];
-    K[6] = -th[1]; K[7] = th[0]; K[8] = 0.0;
-    for (a = 0; a < 3; a++)
-        for (b = 0; b < 3; b++) {
-            K2[3 * a + b] = 0.0;
-            for (e = 0; e < 3; e++) K2[3 * a + b] += K[3 * a + e] * K[3 * e + b];
-        }
-    q = angle > 1e-4 ? 1.0 / (angle * angle) - (1.0 + cos(angle)) / (2.0 * angle * sin(angle))
-                     : 1.0 / 12.0 + angle * angle / 720.0;
-    for (a = 0; a < 9; a++) J[a] = (a % 4 == 0 ? 1.0 : 0.0) - 0.5 * K[a] + q * K2[a];
+    double angle = norm3(th);
+    series(th, -0.5, angle > 1e-4 ? 1.0 / (angle * angle) - (1.0 + cos(angle))
+                                      / (2.0 * angle * sin(angle))
+                                  : 1.0 / 12.0 + angle * angle / 720.0, J);
 }
 
 /* The left Jacobian of exp at th (3 x 3): the inverse of inverse_jacobian's. */
 static void left_jacobian(const double *th, double *J) {
-    double angle = sqrt(th[0] * th[0] + th[1] * th[1] + th[2] * th[2]), K[9], K2[9], p, q;
-    int a, b, e;
-    K[0] = 0.0; K[1] = -th[2]; K[2] = th[1];
-    K[3] = th[2]; K[4] = 0.0; K[5] = -th[0];
-    K[6] = -th[1]; K[7] = th[0]; K[8] = 0.0;
-    for (a = 0; a < 3; a++)
-        for (b = 0; b < 3; b++) {
-            K2[3 * a + b] = 0.0;
-            for (e = 0; e < 3; e++) K2[3 * a + b] += K[3 * a + e] * K[3 * e + b];
-        }
-    p = angle > 1e-4 ? (1.0 - cos(angle)) / (angle * angle) : 0.5 - angle * angle / 24.0;
-    q = angle > 1e-4 ? (angle - sin(angle)) / (angle * angle * angle)
-                     : 1.0 / 6.0 - angle * angle / 120.0;
-    for (a = 0; a < 9; a++) J[a] = (a % 4 == 0 ? 1.0 : 0.0) + p * K[a] + q * K2[a];
+    double angle = norm3(th);
+    series(th, angle > 1e-4 ? (1.0 - cos(angle)) / (angle * angle) : 0.5 - angle * angle / 24.0,
+           angle > 1e-4 ? (angle - sin(angle)) / (angle * angle * angle)
+                        : 1.0 / 6.0 - angle * angle / 120.0, J);
 }
 
 /* Obstacle o's whole turn in this step at z: log(exp(th) S). */
@@ -850,12 +843,6 @@ static void sandwich(const double *A, const double *B, const double *Cp, double 
         }
 }
 
-/* [w] (row-major): [w] u = w x u. */
-static void cross_matrix(const double *w, double *W) {
-    W[0] = 0.0; W[1] = -w[2]; W[2] = w[1];
-    W[3] = w[2]; W[4] = 0.0; W[5] = -w[0];
-    W[6] = -w[1]; W[7] = w[0]; W[8] = 0.0;
-}
 
 /* Obstacle o's block B (9) and gradient g (3) in x' as the node's: S B S^T and S g where it
  * is free in this step (S its turn so far), else themselves. */
