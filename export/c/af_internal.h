@@ -141,6 +141,9 @@ void af_contact_guess(const af_contact *c, double *y);
 /* A Newton iterate z (n) settled: each free obstacle's turn in z folded into its turn so far
  * and zeroed there (the contact's derivatives are taken at settled points). */
 void af_contact_settle(af_contact *c, double *z);
+/* Whether a free obstacle turns in this step (a step's collision test along a turn is along
+ * its chord: its start is to be checked). */
+int af_contact_turning(const af_contact *c);
 /* After a solve ends at z: the free obstacles moved and turned by their part of z (their
  * velocity its share of dt; dt 0: a static solve), and each obstacle's wrench (force on it, N,
  * and moment about its center, N m) there. */

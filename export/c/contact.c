@@ -228,6 +228,16 @@ long af_contact_unknowns(const af_contact *c) { return c ? c->extra : 0; }
 /* Whether free obstacle b's turn is among this step's unknowns. */
 static int turns(const body_t *b) { return b->scale > 0.0; }
 
+/* Whether obstacle o is free in this step (its move among the unknowns). */
+static int is_free(const af_contact *c, int o) { return c->bodies[o].slot >= 0 && c->extra; }
+
+int af_contact_turning(const af_contact *c) {
+    int o;
+    for (o = 0; c && o < c->count; o++)
+        if (is_free(c, o) && turns(c->bodies + o)) return 1;
+    return 0;
+}
+
 void af_contact_guess(const af_contact *c, double *y) {
     double dt = 1.0 / sqrt(c->inertia);
     int o, a;
@@ -352,7 +362,7 @@ static void place(af_contact *c, const double *z) {
  * is not free in this step, th zeros where it does not turn. */
 static void motion(const af_contact *c, const double *z, int o, double *y, double *th) {
     const body_t *b = c->bodies + o;
-    int a, free_ = b->slot >= 0 && c->extra;
+    int a, free_ = is_free(c, o);
     for (a = 0; a < 3; a++) {
         y[a] = free_ ? z[b->slot + a] / sqrt(b->mass) : 0.0;
         th[a] = free_ && turns(b) ? z[b->slot + 3 + a] / b->scale : 0.0;
@@ -465,6 +475,18 @@ static void add_gradient(af_contact *c, int o, long i, const double *g, const do
     }
 }
 
+/* A term's gradient g (3) in x' at a node of obstacle o (v: from its center) added to the
+ * obstacle's wrench about its center: the force gx, the moment v x gx. */
+static void push_on(af_contact *c, int o, const double *g, const double *v) {
+    double gx[3], gt[3];
+    int a;
+    carried_gradient(c, o, g, v, gx, gt);
+    for (a = 0; a < 3; a++) {
+        c->wrench[6 * o + a] += gx[a];
+        c->wrench[6 * o + 3 + a] -= gt[a];
+    }
+}
+
 /* The rotation vector log(R) (3) of a row-major rotation R. */
 static void log_of(const double *R, double *th) {
     double cosine = 0.5 * (R[0] + R[4] + R[8] - 1.0), angle, w[3], sine, f;
@@ -555,10 +577,15 @@ static double share_of(const af_contact *c, const double *z) {
         frame(c, c->qt, o, y1, P1);
         for (i = 0; i < c->k; i++) {
             double s;
-            for (a = 0; a < 3; a++) moved[a] = c->xs[3 * i + a] + c->ds[3 * i + a];
-            seen(c, o, c->xs + 3 * i, y0, P0, x0, v);
-            seen(c, o, moved, y1, P1, x1, v);
-            for (a = 0; a < 3; a++) d3[a] = x1[a] - x0[a];
+            if (is_free(c, o)) {
+                for (a = 0; a < 3; a++) moved[a] = c->xs[3 * i + a] + c->ds[3 * i + a];
+                seen(c, o, c->xs + 3 * i, y0, P0, x0, v);
+                seen(c, o, moved, y1, P1, x1, v);
+                for (a = 0; a < 3; a++) d3[a] = x1[a] - x0[a];
+            } else {
+                memcpy(x0, c->xs + 3 * i, sizeof x0);
+                memcpy(d3, c->ds + 3 * i, sizeof d3);
+            }
             if (d3[0] * d3[0] + d3[1] * d3[1] + d3[2] * d3[2] <= 0.0) continue;
             s = first_touch(c, o, x0, d3, KEEP * distance(c, o, x0, n, NULL));
             if (s < share) share = s;
@@ -735,19 +762,30 @@ static double surface_energy(af_contact *c, const double *z, int grad) {
     if (grad) {   /* at a settled point: a turn's derivatives are taken at delta = 0 */
         memset(c->gs, 0, (size_t)c->k * 3 * sizeof(double));
         memset(c->g + c->r, 0, (size_t)c->extra * sizeof(double));
+        memset(c->wrench, 0, (size_t)c->count * 6 * sizeof(double));
     }
     prepare(c, z);
     for (o = 0; o < c->count; o++) {
+        int still = !is_free(c, o);        /* the node as it is, its gradient as it is */
         for (i = 0; i < c->k; i++) {
             double d, s;
-            relative(c, o, i, x, v);
+            if (still) memcpy(x, c->xs + 3 * i, sizeof x);
+            else relative(c, o, i, x, v);
             d = distance(c, o, x, n, NULL);
             if (d <= 0.0) return INFINITY;
             if (d >= c->dhat) continue;
             total += c->kappa * c->area[i] * barrier(d, c->dhat);
+            if (!grad) continue;
             s = c->kappa * c->area[i] * barrier_slope(d, c->dhat);
             for (a = 0; a < 3; a++) f[a] = s * n[a];
-            if (grad) add_gradient(c, o, i, f, v);
+            if (still)
+                for (a = 0; a < 3; a++) {
+                    c->gs[3 * i + a] += f[a];
+                    v[a] = x[a] - c->bodies[o].center[a];
+                }
+            else
+                add_gradient(c, o, i, f, v);
+            push_on(c, o, f, v);
         }
     }
     for (j = 0; j < c->lagged; j++) {
@@ -756,7 +794,9 @@ static double surface_energy(af_contact *c, const double *z, int grad) {
         total += l->weight * (s < e ? -s * s * s / (3 * e * e) + s * s / e + e / 3.0 : s);
         w = l->weight * friction_slope(s, e);
         for (a = 0; a < 3; a++) f[a] = w * u[a];
-        if (grad) add_gradient(c, l->obstacle, l->node, f, v);
+        if (!grad) continue;
+        add_gradient(c, l->obstacle, l->node, f, v);
+        push_on(c, l->obstacle, f, v);
     }
     for (o = 0; o < c->count; o++) {        /* the free obstacles' inertia */
         const body_t *b = c->bodies + o;
@@ -885,7 +925,8 @@ double af_contact_terms(af_contact *c, const double *z, const double **g, const 
         const double *U = c->U + 3 * i * r;
         if (!node_blocks(c, i)) continue;
         for (o = 0; o < c->count; o++) {          /* the node's block: the sum of its views */
-            node_view(c, o, c->blocks + 9 * o, c->pulls + 3 * o, Bx, gx);
+            if (is_free(c, o)) node_view(c, o, c->blocks + 9 * o, c->pulls + 3 * o, Bx, gx);
+            else memcpy(Bx, c->blocks + 9 * o, sizeof Bx);
             for (a = 0; a < 9; a++) B[a] += Bx[a];
         }
         w = r <= 64 ? W : (double *)malloc((size_t)(3 * r) * sizeof(double));
@@ -980,41 +1021,11 @@ double af_contact_limit(af_contact *c, const double *z, const double *p) {
     return share_of(c, z);
 }
 
-/* A term's gradient g (3) in x' at a node of obstacle o (v: from its center) added to the
- * obstacle's wrench about its center: the force gx, the moment v x gx. */
-static void push_on(af_contact *c, int o, const double *g, const double *v) {
-    double gx[3], gt[3];
-    int a;
-    carried_gradient(c, o, g, v, gx, gt);
-    for (a = 0; a < 3; a++) {
-        c->wrench[6 * o + a] += gx[a];
-        c->wrench[6 * o + 3 + a] -= gt[a];
-    }
-}
-
 void af_contact_finish(af_contact *c, const double *z, double dt) {
-    double n[3], x[3], v[3], f[3], y[3], th[3];
-    long i, j;
+    double x[3], y[3], th[3];
     int o, a;
-    place(c, z);
+    place(c, z);                 /* the wrench: from the gradient's last evaluation, at z */
     prepare(c, z);
-    memset(c->wrench, 0, (size_t)c->count * 6 * sizeof(double));
-    for (o = 0; o < c->count; o++)         /* each one's push on the nodes, reversed */
-        for (i = 0; i < c->k; i++) {
-            double d, s;
-            relative(c, o, i, x, v);
-            d = distance(c, o, x, n, NULL);
-            if (!(d > 0.0 && d < c->dhat)) continue;
-            s = c->kappa * c->area[i] * barrier_slope(d, c->dhat);
-            for (a = 0; a < 3; a++) f[a] = s * n[a];
-            push_on(c, o, f, v);
-        }
-    for (j = 0; j < c->lagged; j++) {
-        const lag_t *l = c->lags + j;
-        double u[3], s = slip(c, l, u, v), w = l->weight * friction_slope(s, c->eps);
-        for (a = 0; a < 3; a++) f[a] = w * u[a];
-        push_on(c, l->obstacle, f, v);
-    }
     for (o = 0; o < c->count; o++) {     /* the free ones moved and turned, at their speed */
         body_t *b = c->bodies + o;
         double turn[3], J[9], *M = c->wrench + 6 * o + 3;

@@ -528,12 +528,13 @@ int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force,
         af_contact_guess(m->contact, x + r);
         share = af_contact_limit(m->contact, z, x);
         for (k = 0; k < n; k++) x[k] *= share;
-        for (;;) {     /* a turn's test is along a chord: the start checked, halved */
+        while (af_contact_turning(m->contact)) {   /* a turn's test is along a chord: the
+                                                       start checked, halved */
             for (k = 0; k < n; k++) m->p[k] = z[k] + x[k];
             if (isfinite(af_contact_energy(m->contact, m->p)) || af_dot(x, x, n) == 0.0) break;
             for (k = 0; k < n; k++) x[k] = af_dot(x, x, n) > 1e-60 ? 0.5 * x[k] : 0.0;
         }
-        memcpy(x, m->p, (size_t)n * sizeof(double));
+        for (k = 0; k < n; k++) x[k] += z[k];
         af_contact_settle(m->contact, x);
     }
     result = minimize(m, x, q_hat, 1.0 / (dt * dt),
