@@ -183,7 +183,7 @@ class CModel:
         g = np.zeros(3)
         self.gravity = g if c.af_gravity(h, _pointer(g)) else None
         self.time_step = c.af_time_step(h) or None
-        self._solver = (1e-8, 50)
+        self._solver = None      # the model's own until set
         self._force_buffer = None
         self.controls = tuple(c.af_control_name(h, i).decode() for i in range(c.af_controls(h)))
 
