@@ -422,10 +422,11 @@ static void frame(const af_contact *c, const double *z, int o, double *y, double
             P[3 * a + b] = R[3 * a] * S[b] + R[3 * a + 1] * S[3 + b] + R[3 * a + 2] * S[6 + b];
 }
 
-/* Each obstacle's frame at z kept (relative then reads it). */
+/* Each free obstacle's frame at z kept (relative then reads it). */
 static void prepare(af_contact *c, const double *z) {
     int o;
-    for (o = 0; o < c->count; o++) frame(c, z, o, c->bodies[o].moved, c->bodies[o].view);
+    for (o = 0; o < c->count; o++)
+        if (is_free(c, o)) frame(c, z, o, c->bodies[o].moved, c->bodies[o].view);
 }
 
 /* Point x (3) seen from obstacle o moved by y and turned by P (frame's), in its frame at the
@@ -447,7 +448,13 @@ static void seen(const af_contact *c, int o, const double *x, const double *y,
 
 /* Node i (placed) seen from obstacle o at the prepared point: x' into x, v into v (3 each). */
 static void relative(const af_contact *c, int o, long i, double *x, double *v) {
-    seen(c, o, c->xs + 3 * i, c->bodies[o].moved, c->bodies[o].view, x, v);
+    const double *at = c->xs + 3 * i, *center = c->bodies[o].center;
+    if (is_free(c, o)) {
+        seen(c, o, at, c->bodies[o].moved, c->bodies[o].view, x, v);
+        return;
+    }
+    x[0] = at[0]; x[1] = at[1]; x[2] = at[2];
+    v[0] = at[0] - center[0]; v[1] = at[1] - center[1]; v[2] = at[2] - center[2];
 }
 
 /* A term's gradient g (3) in x' of obstacle o, at a settled point (th = 0), as its gradients
