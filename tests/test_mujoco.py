@@ -456,6 +456,32 @@ def test_a_free_body_geom_is_stepped_with_the_soft_body(tmp_path):
     assert turned > 90.0 and data.qpos[box + 2] < -0.1, "it tipped over the edge and fell"
 
 
+def test_a_free_capsule_rests_along_the_beam(tmp_path):
+    """A 10 g MuJoCo capsule on a free joint (the file's obstacle "rod": its position is its
+    end, MuJoCo's geom its middle) dropped along the top of the stiff held beam rests on its
+    surface nodes (between two rows of them: 0.5 mm), its axis still along the beam (within 1
+    degree), pushed up by its weight (0.1%)."""
+    beam = af.box_beam(size=(0.1, 0.02, 0.02), cells=(10, 4, 4))
+    rod = af.Capsule((0.04, 0.0, 0.0205), (0.08, 0.0, 0.0205), 0.01, name="rod")
+    scene = af.Scene(beam, af.Material(1e7, 0.45, 1000.0), gravity=GRAVITY,
+                     fixed=beam.vertices[:, 0] <= 1e-9, contact=af.Contact([rod], friction=0.5))
+    path = str(tmp_path / "rod")
+    writer.write(ReducedModel(scene, modes=6, snapshots=8, validate=False), path)
+    body = ('<body name="stick" pos="0.06 0 0.0205"><freejoint/><geom name="rod" type="capsule" '
+            'fromto="-0.02 0 0 0.02 0 0" size="0.01" mass="0.01" contype="0" '
+            'conaffinity="0"/></body>')
+    model, data = compiled(plugin.mjcf(path, world=body), 0.01)
+    stick = model.body("stick").id
+    for _ in range(200):
+        mujoco.mj_step(model, data)
+    assert np.abs(data.qvel[:6]).max() < 1e-3
+    axis = data.xmat[stick].reshape(3, 3)[:, 0]
+    assert axis[0] > np.cos(np.radians(1.0)), "it lies along the beam"
+    assert 0.0195 < data.xipos[stick, 2] < 0.0202, "on the beam (its surface nodes), not in it"
+    touched = data.plugin_state[plugin.TOUCHED + 2] / 0.01
+    assert touched == pytest.approx(0.01 * 9.81, rel=1e-3), "the beam holds its weight"
+
+
 @pytest.mark.parametrize("geom, says", [
     ('type="box" size="0.02 0.03 0.02"', "a box of half sizes 0.01 0.01 0.015 m, but is a box "
                                          "of half sizes 0.02 0.02 0.03 m"),

@@ -578,7 +578,7 @@ static void world_inertia(const mjData *d, int b, const double *diag, double *ou
 static int free_motion(const mjModel *m, const mjData *d, soft *s, int i, int b,
                        const double *at, const double *carrier, double h, double *block) {
     double velocity[6], push[6], v[6], a[6], I[9], If[9], inverse[3], Iinv[9], offset[3], w[3];
-    double Rg[9], turn[9];
+    double Rg[9], turn[9], shape[15];
     int g = s->geom[i];
     mj_objectVelocity(m, d, mjOBJ_BODY, b, velocity, 0);     /* spin, then its COM's */
     world_inertia(d, b, m->body_inertia + 3 * b, I);
@@ -603,6 +603,9 @@ static int free_motion(const mjModel *m, const mjData *d, soft *s, int i, int b,
     matrix_into_file(s, at, I, If);
     mju_sub3(w, d->xipos + 3 * b, d->geom_xpos + 3 * g);
     into_file(s, at, w, offset);
+    if (af_obstacle_shape(s->model, i, shape) == AF_CAPSULE)   /* its position: its end a */
+        for (int k = 0; k < 3; k++)
+            offset[k] += 0.5 * (shape[3 + k] - shape[k]);
     mju_mulMatMatT(Rg, d->geom_xmat + 9 * g, s->from + FROM * i + 6, 3, 3, 3);
     matrix_into_file(s, at, Rg, turn);
     if (af_turn_obstacle(s->model, i, turn) != AF_OK)
