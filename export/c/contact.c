@@ -34,7 +34,7 @@ typedef struct {
     double weight, T[9], start[3];
 } lag_t;
 
-/* What a free obstacle is (count of each, after the per-obstacle arrays below). */
+/* An obstacle's motion: free (a mass), or moved only by af_contact_move. */
 typedef struct {
     double mass;                 /* kg; 0: moved only by af_contact_move */
     double inertia[9];           /* about its center, kg m^2; zeros: it does not turn */
@@ -70,7 +70,7 @@ struct af_contact {
     long extra;                  /* this solve's unknowns beside q */
     double inertia;              /* this step's 1 / dt^2 */
     double *wrench;              /* (count, 6) force on each, N, and its moment about its
-                                    position, N m, at the last step's end */
+                                    center, N m, at the last step's end */
     double *xs, *gs, *ds;        /* scratch (k, 3) each */
     double *blocks, *pulls;      /* scratch (count, 9), (count, 3): a node's Hessian and
                                     gradient in x' from each obstacle */
@@ -410,16 +410,47 @@ static void times(const double *M, const double *u, double *out) {
     for (a = 0; a < 3; a++) out[a] = M[3 * a] * u[0] + M[3 * a + 1] * u[1] + M[3 * a + 2] * u[2];
 }
 
+/* M (3 x 3, row-major) made a rotation again: its columns Gram-Schmidt orthonormalized (turns
+ * compose without their round-off growing). */
+static void orthonormal(double *M) {
+    int a, b, e;
+    for (b = 0; b < 3; b++) {
+        double size = 0.0;
+        for (e = 0; e < b; e++) {
+            double d = M[e] * M[b] + M[3 + e] * M[3 + b] + M[6 + e] * M[6 + b];
+            for (a = 0; a < 3; a++) M[3 * a + b] -= d * M[3 * a + e];
+        }
+        for (a = 0; a < 3; a++) size += M[3 * a + b] * M[3 * a + b];
+        size = sqrt(size);
+        for (a = 0; a < 3; a++) M[3 * a + b] /= size;
+    }
+}
+
+/* A B (3 x 3, row-major) into out; transpose_b: A B^T. out may be neither. */
+static void product(const double *A, const double *B, int transpose_b, double *out) {
+    int a, b, e;
+    for (a = 0; a < 3; a++)
+        for (b = 0; b < 3; b++) {
+            out[3 * a + b] = 0.0;
+            for (e = 0; e < 3; e++)
+                out[3 * a + b] += A[3 * a + e] * (transpose_b ? B[3 * b + e] : B[3 * e + b]);
+        }
+}
+
+/* R M into M (3 x 3, row-major), kept a rotation (orthonormal). */
+static void turn_by(const double *R, double *M) {
+    double copy[9];
+    memcpy(copy, M, sizeof copy);
+    product(R, copy, 0, M);
+    orthonormal(M);
+}
+
 /* Obstacle o's move y (3) and turn P = exp(th) S (9) at z. */
 static void frame(const af_contact *c, const double *z, int o, double *y, double *P) {
-    const double *S = c->bodies[o].spun;
     double th[3], R[9];
-    int a, b;
     motion(c, z, o, y, th);
     rotation_of(th, R);
-    for (a = 0; a < 3; a++)
-        for (b = 0; b < 3; b++)
-            P[3 * a + b] = R[3 * a] * S[b] + R[3 * a + 1] * S[3 + b] + R[3 * a + 2] * S[6 + b];
+    product(R, c->bodies[o].spun, 0, P);
 }
 
 /* Each free obstacle's frame at z kept (relative then reads it). */
@@ -429,19 +460,14 @@ static void prepare(af_contact *c, const double *z) {
         if (is_free(c, o)) frame(c, z, o, c->bodies[o].moved, c->bodies[o].view);
 }
 
-/* Point x (3) seen from obstacle o moved by y and turned by P (frame's), in its frame at the
- * step's start: x' = center + P^T v into out, v = x - center - y into v (3); x itself where
- * the obstacle is not free in this step. */
+/* Point x (3) seen from free obstacle o moved by y and turned by P (frame's), in its frame at
+ * the step's start: x' = center + P^T v into out, v = x - center - y into v (3). */
 static void seen(const af_contact *c, int o, const double *x, const double *y,
                  const double *P, double *out, double *v) {
     const body_t *b = c->bodies + o;
     double u[3];
     int a;
     for (a = 0; a < 3; a++) v[a] = x[a] - b->center[a] - y[a];
-    if (b->slot < 0 || !c->extra) {
-        memcpy(out, x, 3 * sizeof(double));
-        return;
-    }
     transposed(P, v, u);
     for (a = 0; a < 3; a++) out[a] = b->center[a] + u[a];
 }
@@ -462,7 +488,7 @@ static void relative(const af_contact *c, int o, long i, double *x, double *v) {
 static void carried_gradient(const af_contact *c, int o, const double *g, const double *v,
                              double *gx, double *gt) {
     int a;
-    if (c->bodies[o].slot >= 0 && c->extra) times(c->bodies[o].spun, g, gx);
+    if (is_free(c, o)) times(c->bodies[o].spun, g, gx);
     else memcpy(gx, g, 3 * sizeof(double));
     for (a = 0; a < 3; a++) gt[a] = gx[(a + 1) % 3] * v[(a + 2) % 3] - gx[(a + 2) % 3] * v[(a + 1) % 3];
 }
@@ -475,7 +501,7 @@ static void add_gradient(af_contact *c, int o, long i, const double *g, const do
     int a;
     carried_gradient(c, o, g, v, gx, gt);
     for (a = 0; a < 3; a++) c->gs[3 * i + a] += gx[a];
-    if (b->slot < 0 || !c->extra) return;
+    if (!is_free(c, o)) return;
     for (a = 0; a < 3; a++) {
         c->g[b->slot + a] -= gx[a] / sqrt(b->mass);
         if (turns(b)) c->g[b->slot + 3 + a] += gt[a] / b->scale;
@@ -500,7 +526,7 @@ static void log_of(const double *R, double *th) {
     w[0] = 0.5 * (R[7] - R[5]);
     w[1] = 0.5 * (R[2] - R[6]);
     w[2] = 0.5 * (R[3] - R[1]);
-    sine = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+    sine = norm3(w);
     angle = atan2(sine, cosine < -1.0 ? -1.0 : cosine > 1.0 ? 1.0 : cosine);
     f = sine > 1e-8 ? angle / sine : 1.0 + sine * sine / 6.0;
     th[0] = f * w[0];
@@ -526,31 +552,20 @@ static void left_jacobian(const double *th, double *J) {
 
 /* Obstacle o's whole turn in this step at z: log(exp(th) S). */
 static void whole_turn(const af_contact *c, const double *z, int o, double *turn) {
-    double y[3], th[3], R[9], M[9];
-    int a, b;
-    motion(c, z, o, y, th);
-    rotation_of(th, R);
-    for (a = 0; a < 3; a++)
-        for (b = 0; b < 3; b++)
-            M[3 * a + b] = R[3 * a] * c->bodies[o].spun[b] + R[3 * a + 1]
-                           * c->bodies[o].spun[3 + b] + R[3 * a + 2] * c->bodies[o].spun[6 + b];
-    log_of(M, turn);
+    double y[3], P[9];
+    frame(c, z, o, y, P);
+    log_of(P, turn);
 }
 
 void af_contact_settle(af_contact *c, double *z) {
-    double y[3], th[3], R[9], M[9];
-    int o, a, b;
+    double y[3], P[9];
+    int o, a;
     for (o = 0; o < c->count; o++) {
-        body_t *bo = c->bodies + o;
-        if (bo->slot < 0 || !c->extra || !turns(bo)) continue;
-        motion(c, z, o, y, th);
-        rotation_of(th, R);
-        memcpy(M, bo->spun, sizeof M);
-        for (a = 0; a < 3; a++)
-            for (b = 0; b < 3; b++)
-                bo->spun[3 * a + b] = R[3 * a] * M[b] + R[3 * a + 1] * M[3 + b]
-                                      + R[3 * a + 2] * M[6 + b];
-        for (a = 0; a < 3; a++) z[bo->slot + 3 + a] = 0.0;
+        body_t *b = c->bodies + o;
+        if (!is_free(c, o) || !turns(b)) continue;
+        frame(c, z, o, y, P);
+        memcpy(b->spun, P, sizeof P);
+        for (a = 0; a < 3; a++) z[b->slot + 3 + a] = 0.0;
     }
 }
 
@@ -601,56 +616,26 @@ static double share_of(const af_contact *c, const double *z) {
     return share;
 }
 
-/* M (3 x 3, row-major) made a rotation again: its columns Gram-Schmidt orthonormalized (turns
- * compose without their round-off growing). */
-static void orthonormal(double *M) {
-    int a, b, e;
-    for (b = 0; b < 3; b++) {
-        double size = 0.0;
-        for (e = 0; e < b; e++) {
-            double d = M[e] * M[b] + M[3 + e] * M[3 + b] + M[6 + e] * M[6 + b];
-            for (a = 0; a < 3; a++) M[3 * a + b] -= d * M[3 * a + e];
-        }
-        for (a = 0; a < 3; a++) size += M[3 * a + b] * M[3 * a + b];
-        size = sqrt(size);
-        for (a = 0; a < 3; a++) M[3 * a + b] /= size;
-    }
-}
-
 /* Obstacle o turned by R (row-major) about the point at (3) and moved by y: its geometry's
  * points and directions, its center and its turn from the file's. */
 static void carry(af_contact *c, int o, const double *at, const double *y, const double *R) {
-    double *G = c->geometry + o * GEOMETRY, *points[3], p[3], M[9], pin[3];
-    int a, b, e, kind = c->kinds[o], count = 0;
+    double *G = c->geometry + o * GEOMETRY, *points[3], p[3], pin[3];
+    int a, e, kind = c->kinds[o], count = 0;
     memcpy(pin, at, sizeof pin);                   /* at may be one of the points */
     points[count++] = c->bodies[o].center;
     points[count++] = G;                           /* a center, a plane's point, an end */
     if (kind == AF_CAPSULE) points[count++] = G + 3;
     for (e = 0; e < count; e++) {
         for (a = 0; a < 3; a++) p[a] = points[e][a] - pin[a];
-        for (a = 0; a < 3; a++)
-            points[e][a] = pin[a] + y[a] + R[3 * a] * p[0] + R[3 * a + 1] * p[1]
-                           + R[3 * a + 2] * p[2];
+        times(R, p, points[e]);
+        for (a = 0; a < 3; a++) points[e][a] += pin[a] + y[a];
     }
     if (kind == AF_PLANE) {                        /* its normal turns */
-        for (a = 0; a < 3; a++) p[a] = G[3 + a];
-        for (a = 0; a < 3; a++)
-            G[3 + a] = R[3 * a] * p[0] + R[3 * a + 1] * p[1] + R[3 * a + 2] * p[2];
+        memcpy(p, G + 3, sizeof p);
+        times(R, p, G + 3);
     }
-    if (kind == AF_BOX) {                          /* its axes turn */
-        memcpy(M, G + 6, sizeof M);
-        for (a = 0; a < 3; a++)
-            for (b = 0; b < 3; b++)
-                G[6 + 3 * a + b] = R[3 * a] * M[b] + R[3 * a + 1] * M[3 + b]
-                                   + R[3 * a + 2] * M[6 + b];
-        orthonormal(G + 6);
-    }
-    memcpy(M, c->bodies[o].turned, sizeof M);
-    for (a = 0; a < 3; a++)
-        for (b = 0; b < 3; b++)
-            c->bodies[o].turned[3 * a + b] = R[3 * a] * M[b] + R[3 * a + 1] * M[3 + b]
-                                              + R[3 * a + 2] * M[6 + b];
-    orthonormal(c->bodies[o].turned);
+    if (kind == AF_BOX) turn_by(R, G + 6);         /* its axes turn */
+    turn_by(R, c->bodies[o].turned);
 }
 
 /* Obstacle o turned to its target (af_contact_turn) about its position where no node then
@@ -659,12 +644,9 @@ static void turn_to_target(af_contact *c, int o) {
     body_t *b = c->bodies + o;
     double R[9], G[GEOMETRY], turned[9], center[3], still[3] = {0.0, 0.0, 0.0}, n[3];
     long i;
-    int a, e, clear = 1;
+    int clear = 1;
     b->turning = 0;
-    for (a = 0; a < 3; a++)                /* R = target turned^T */
-        for (e = 0; e < 3; e++)
-            R[3 * a + e] = b->target[3 * a] * b->turned[3 * e] + b->target[3 * a + 1]
-                           * b->turned[3 * e + 1] + b->target[3 * a + 2] * b->turned[3 * e + 2];
+    product(b->target, b->turned, 1, R);   /* R = target turned^T */
     memcpy(G, c->geometry + o * GEOMETRY, sizeof G);
     memcpy(turned, b->turned, sizeof turned);
     memcpy(center, b->center, sizeof center);
@@ -808,7 +790,7 @@ static double surface_energy(af_contact *c, const double *z, int grad) {
     for (o = 0; o < c->count; o++) {        /* the free obstacles' inertia */
         const body_t *b = c->bodies + o;
         double diff[3], turn[3], J[9], Id[3];
-        if (b->slot < 0 || !c->extra) continue;
+        if (!is_free(c, o)) continue;
         for (a = 0; a < 3; a++) {
             diff[a] = z[b->slot + a] - sqrt(b->mass) * b->hat[a];
             total += 0.5 * c->inertia * diff[a] * diff[a];
@@ -891,22 +873,15 @@ static void sandwich(const double *A, const double *B, const double *Cp, double 
 }
 
 
-/* Obstacle o's block B (9) and gradient g (3) in x' as the node's: S B S^T and S g where it
- * is free in this step (S its turn so far), else themselves. */
+/* Free obstacle o's block B (9) and gradient g (3) in x' as the node's: S B S^T and S g (S its
+ * turn so far). */
 static void node_view(const af_contact *c, int o, const double *B, const double *g,
                       double *Bx, double *gx) {
-    const body_t *b = c->bodies + o;
-    double St[9];
-    int a, e;
-    if (b->slot < 0 || !c->extra) {
-        memcpy(Bx, B, 9 * sizeof(double));
-        memcpy(gx, g, 3 * sizeof(double));
-        return;
-    }
-    for (a = 0; a < 3; a++)
-        for (e = 0; e < 3; e++) St[3 * a + e] = b->spun[3 * e + a];
-    sandwich(St, B, St, Bx);
-    times(b->spun, g, gx);
+    const double *S = c->bodies[o].spun;
+    double SB[9];
+    product(S, B, 0, SB);
+    product(SB, S, 1, Bx);
+    times(S, g, gx);
 }
 
 double af_contact_terms(af_contact *c, const double *z, const double **g, const double **H,
@@ -991,7 +966,7 @@ double af_contact_terms(af_contact *c, const double *z, const double **g, const 
     for (o = 0; o < c->count; o++) {             /* their inertia */
         const body_t *bo = c->bodies + o;
         double turn[3], J[9], IJ[9];
-        if (bo->slot < 0 || !c->extra) continue;
+        if (!is_free(c, o)) continue;
         for (a = 0; a < 3; a++) cH[(bo->slot + a) * (n + 1)] += c->inertia;
         if (!turns(bo)) continue;
         whole_turn(c, z, o, turn);                /* J^T I J (Gauss-Newton in the turn) */
@@ -1036,7 +1011,7 @@ void af_contact_finish(af_contact *c, const double *z, double dt) {
     for (o = 0; o < c->count; o++) {     /* the free ones moved and turned, at their speed */
         body_t *b = c->bodies + o;
         double turn[3], J[9], *M = c->wrench + 6 * o + 3;
-        if (b->slot < 0 || !c->extra) continue;
+        if (!is_free(c, o)) continue;
         motion(c, z, o, y, th);
         whole_turn(c, z, o, turn);
         if (turns(b)) {  /* the moment that turns it as the step did: J_l(turn)^T M */

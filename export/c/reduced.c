@@ -518,6 +518,7 @@ int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force,
     for (k = 0; k < r; k++) x[k] = q_hat[k] = q[k] + dt * w[k];
     if (m->contact) {      /* friction lagged at q; the start clear of the obstacles */
         double share, *z = m->ts;
+        int halved;
         af_contact_start(m->contact, q, dt);
         n = r + af_contact_unknowns(m->contact);
         for (k = 0; k < r; k++) {
@@ -528,13 +529,13 @@ int af_reduced_advance(af_reduced *m, double *q, double *w, const double *force,
         af_contact_guess(m->contact, x + r);
         share = af_contact_limit(m->contact, z, x);
         for (k = 0; k < n; k++) x[k] *= share;
-        while (af_contact_turning(m->contact)) {   /* a turn's test is along a chord: the
-                                                       start checked, halved */
+        /* a turn's collision test is along a chord: the start checked, halved */
+        for (halved = 0; halved < 60 && af_contact_turning(m->contact); halved++) {
             for (k = 0; k < n; k++) m->p[k] = z[k] + x[k];
-            if (isfinite(af_contact_energy(m->contact, m->p)) || af_dot(x, x, n) == 0.0) break;
-            for (k = 0; k < n; k++) x[k] = af_dot(x, x, n) > 1e-60 ? 0.5 * x[k] : 0.0;
+            if (isfinite(af_contact_energy(m->contact, m->p))) break;
+            for (k = 0; k < n; k++) x[k] *= 0.5;
         }
-        for (k = 0; k < n; k++) x[k] += z[k];
+        for (k = 0; k < n; k++) x[k] = halved == 60 ? z[k] : z[k] + x[k];
         af_contact_settle(m->contact, x);
     }
     result = minimize(m, x, q_hat, 1.0 / (dt * dt),
